@@ -1,0 +1,1 @@
+"""Rasterization backends: each maps (Projected, TileBins) to a final PixelState image."""

@@ -1,0 +1,65 @@
+"""Per-pixel front-to-back compositing, exactly as conventions.md "Compositing" defines it.
+
+For each pixel, over Gaussians in (depth, index) order:
+    d = mean2d − pixel_centre;  power = −½(a·dx² + c·dy²) − b·dx·dy
+    skip if power > 0;  α = min(cap, o·exp(power));  skip if α < 1/255
+    test_T = T·(1 − α);  if test_T < 1e-4 (<= in the gsplat convention): pixel done, not blended
+    else C += rgb·α·T;  D += z·α·T;  T = test_T
+Output: image = C + T·background, alpha = 1 − T, depth = D.
+
+This module is the readable reference that every backend's blending is tested against.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from .config import ALPHA_MIN, T_STOP, RasterConfig
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class PixelState:
+    """Running compositing state of a set of P pixels."""
+
+    color: Any  # (P, 3) accumulated Σ rgb·α·T
+    trans: Any  # (P,) transmittance T
+    depth: Any  # (P,) accumulated Σ z·α·T
+    done: Any  # (P,) bool: the stop test fired
+
+    @classmethod
+    def empty(cls, num_pixels: int, dtype) -> "PixelState":
+        return cls(color=jnp.zeros((num_pixels, 3), dtype), trans=jnp.ones((num_pixels,), dtype),
+                   depth=jnp.zeros((num_pixels,), dtype), done=jnp.zeros((num_pixels,), bool))
+
+
+def gaussian_alpha(mean2d, conic, opacity, px, py, cap):
+    """(power, α) of one Gaussian at pixel centres (px, py), in the 3DGS difference form."""
+    dx, dy = mean2d[0] - px, mean2d[1] - py
+    power = -0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) - conic[1] * dx * dy
+    alpha = jnp.minimum(cap, opacity * jnp.exp(power))
+    return power, alpha
+
+
+def blend(state: PixelState, mean2d, conic, opacity, rgb, depth, active, px, py,
+          config: RasterConfig) -> PixelState:
+    """Composite one Gaussian over pixels (px, py); `active` (scalar bool) gates it entirely."""
+    dt = state.trans.dtype
+    power, alpha = gaussian_alpha(mean2d, conic, opacity, px, py, jnp.asarray(config.alpha_cap, dt))
+    hit = active & ~state.done & (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+    test_t = state.trans * (1 - alpha)
+    t_stop = jnp.asarray(T_STOP, dt)
+    stop = (test_t <= t_stop) if config.stop_inclusive else (test_t < t_stop)
+    take = hit & ~stop
+    w = jnp.where(take, alpha * state.trans, 0)
+    return PixelState(color=state.color + w[:, None] * rgb, trans=jnp.where(take, test_t, state.trans),
+                      depth=state.depth + w * depth, done=state.done | (hit & stop))
+
+
+def finish(state: PixelState, background):
+    """(image, alpha, depth) from a final state: image = C + T·background, alpha = 1 − T."""
+    return state.color + state.trans[:, None] * background, 1 - state.trans, state.depth

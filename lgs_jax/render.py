@@ -1,0 +1,209 @@
+"""The public entry point: `render(gaussians, camera, ...) -> RenderOutput`.
+
+Pipeline: validate -> project (lgs_jax.projection) -> bin into 16x16 tiles (lgs_jax.binning)
+-> rasterize with the chosen backend -> image, alpha, depth and stats.
+
+Capacity: tile–Gaussian pairs live in a static buffer of `capacity` pairs. An eager call with
+`capacity=None` counts the pairs first and rounds up to a power of two (few recompiles). Under
+`jit`/`vmap` the caller passes `capacity` and reads `stats.overflow` / `stats.pairs_required`
+(`render_growing` does that loop). An eager call never returns a truncated image: it raises
+`CapacityError`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import binning
+from .backends import brute, reference
+from .composite import finish
+from .config import RasterConfig
+from .projection import Projected, project
+from .scene import Camera, Gaussians, validate_camera, validate_gaussians
+
+BACKENDS = ("brute", "reference")
+
+
+class CapacityError(ValueError):
+    """The pair buffer is too small (or the scene needs more than 2^31 − 1 pairs)."""
+
+    def __init__(self, required: int, capacity: int):
+        self.required, self.capacity = required, capacity
+        if required >= binning.MAX_PAIRS:
+            msg = "the scene needs at least 2^31 - 1 tile-Gaussian pairs, more than int32 indexes"
+        else:
+            msg = (f"capacity={capacity} holds fewer than the {required} tile-Gaussian pairs this "
+                   f"render needs; pass capacity >= {required} (e.g. {next_pow2(required)})")
+        super().__init__(msg)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class RenderStats:
+    """Counts that describe a render (int32 / bool arrays; batched under vmap).
+
+    Attributes:
+      n_valid: Gaussians that can reach the image (valid and opacity >= 1/255).
+      n_invalid: Gaussians the contract calls invalid (skipped, never in the image).
+      n_transparent: valid Gaussians culled because opacity < 1/255.
+      n_unbounded: Gaussians whose float rounding could not be bounded, binned to every tile.
+      pairs_required: tile–Gaussian pairs the scene needs (saturates at 2^31 − 1).
+      capacity: size of the pair buffer used.
+      overflow: pairs_required > capacity (the image lacks the farthest pairs).
+      backend: name of the backend that rendered (static).
+    """
+
+    n_valid: Any
+    n_invalid: Any
+    n_transparent: Any
+    n_unbounded: Any
+    pairs_required: Any
+    capacity: Any
+    overflow: Any
+    backend: str = dataclasses.field(metadata=dict(static=True))
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class RenderOutput:
+    """image (H, W, 3) = C + T·background; alpha (H, W) = 1 − T; depth (H, W) = Σ z·α·T."""
+
+    image: Any
+    alpha: Any
+    depth: Any
+    stats: RenderStats
+
+
+def next_pow2(n: int) -> int:
+    """Smallest power of two >= n (at least 1), capped at 2^31 − 1."""
+    return min(1 << max(int(n) - 1, 0).bit_length(), binning.MAX_PAIRS)
+
+
+def _is_traced(tree) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
+
+
+@functools.partial(jax.jit, static_argnames=("width", "height"))
+def _count(g: Gaussians, cam: Camera, width: int, height: int):
+    return binning.count_pairs(project(g, cam), width, height)[0]
+
+
+def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None) -> RenderStats:
+    i32 = functools.partial(jnp.sum, dtype=jnp.int32)
+    zero = jnp.int32(0)
+    return RenderStats(
+        n_valid=i32(p.valid), n_invalid=i32(p.invalid), n_transparent=i32(~p.valid & ~p.invalid),
+        n_unbounded=bins.n_unbounded if bins else zero,
+        pairs_required=bins.pairs_required if bins else zero,
+        capacity=jnp.int32(capacity), overflow=bins.overflow if bins else jnp.bool_(False),
+        backend=backend)
+
+
+@functools.partial(jax.jit, static_argnames=("backend", "config", "capacity"))
+def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
+            capacity: int) -> RenderOutput:
+    width, height = cam.width, cam.height
+    p = project(g, cam)
+    bins = None
+    if backend == "brute":
+        state = brute.rasterize(p, width, height, config)
+    else:
+        bins = binning.bin_gaussians(p, width, height, capacity)
+        state = reference.rasterize(p, bins, width, height, config)
+    image, alpha, depth = finish(state, background)
+    return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
+                        depth=depth.reshape(height, width), stats=_stats(p, backend, capacity, bins))
+
+
+def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
+    h, w = cam.height, cam.width
+    zero = jnp.int32(0)
+    stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
+                        pairs_required=zero, capacity=zero, overflow=jnp.bool_(False),
+                        backend=backend)
+    return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
+                        alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
+                        stats=stats)
+
+
+def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: str = "reference",
+           config: RasterConfig | None = None, capacity: int | None = None) -> RenderOutput:
+    """Render `gaussians` through `camera` (conventions.md is the contract every backend meets).
+
+    Args:
+      gaussians: the scene; its dtype (float32 or float64) is the precision of the whole render.
+      camera: a `Camera`; batch cameras with `jax.vmap` (then pass `capacity`).
+      background: (3,) colour behind the scene, black by default.
+      backend: "reference" (16x16 tiles, per-pixel semantics) or "brute" (all Gaussians for every
+        pixel, no tiles: for small scenes).
+      config: a `RasterConfig` (static), default `RasterConfig()`.
+      capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up to a
+        power of two. Under jit/vmap pass an int and check `stats.overflow`.
+
+    Raises:
+      ValueError: a bad argument (the message names it).
+      CapacityError: eager call whose pairs overflow `capacity` or exceed 2^31 − 1.
+    """
+    validate_gaussians(gaussians)
+    validate_camera(camera)
+    config = RasterConfig() if config is None else config
+    if not isinstance(config, RasterConfig):
+        raise ValueError(f"config: expected RasterConfig, got {type(config).__name__}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    dt = gaussians.dtype
+    if background is None:
+        background = jnp.zeros((3,), dt)
+    if np.shape(background) != (3,):
+        raise ValueError(f"background: expected shape (3,), got {np.shape(background)}")
+    background = jnp.asarray(background, dt)
+    if capacity is not None and (not isinstance(capacity, (int, np.integer))
+                                 or not 0 < capacity <= binning.MAX_PAIRS):
+        raise ValueError(f"capacity: expected an int in [1, 2^31 - 1] or None, got {capacity!r}")
+    if gaussians.num == 0:
+        return _empty_render(camera, background, dt, backend)
+    traced = _is_traced((gaussians, camera, background))
+    if backend == "brute":
+        capacity = 0  # no pair buffer
+    elif capacity is None:
+        if traced:
+            raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an eager "
+                             "render's stats.capacity), then check stats.overflow and "
+                             "stats.pairs_required, or use lgs_jax.render_growing")
+        required = int(_count(gaussians, camera, camera.width, camera.height))
+        if required >= binning.MAX_PAIRS:
+            raise CapacityError(required, 0)
+        capacity = next_pow2(max(required, 1))
+    out = _render(gaussians, camera, background, backend, config, int(capacity))
+    if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):
+        raise CapacityError(int(out.stats.pairs_required), int(capacity))
+    return out
+
+
+def render_growing(render_fn: Callable[..., Any], *args, capacity: int, **kwargs):
+    """Call `render_fn(*args, capacity=capacity, **kwargs)`, growing capacity until nothing drops.
+
+    `render_fn` is typically a jitted function that calls `render` (and may vmap it) and returns
+    either a `RenderOutput` or a pytree containing exactly one `RenderStats`. When any stats report
+    overflow, capacity grows to the next power of two above the largest `pairs_required` and the
+    call is repeated (one recompile). Returns (result, capacity): keep the capacity for the next
+    step so a training loop settles on a fixed size.
+    """
+    while True:
+        result = render_fn(*args, capacity=capacity, **kwargs)
+        stats = [x for x in jax.tree.leaves(result, is_leaf=lambda x: isinstance(x, RenderStats))
+                 if isinstance(x, RenderStats)]
+        if not stats:
+            raise ValueError("render_fn: its result holds no RenderStats to check for overflow")
+        required = max(int(np.max(np.asarray(s.pairs_required))) for s in stats)
+        if not any(bool(np.any(np.asarray(s.overflow))) for s in stats):
+            return result, capacity
+        if required >= binning.MAX_PAIRS:
+            raise CapacityError(required, capacity)
+        capacity = next_pow2(required)

@@ -1,0 +1,157 @@
+"""Scene and camera pytrees (the rendering contract's parameters, `conventions.md`).
+
+Both are registered dataclass pytrees: every array field is a leaf, so scenes and cameras pass
+through `jit`, `vmap` and `grad`. `Camera.width` / `Camera.height` are static (pytree metadata):
+a new camera pose or intrinsics never recompiles, a new image size does.
+
+Validation lives in `validate_gaussians` / `validate_camera` (called by `render`), not in
+`__post_init__`: JAX rebuilds pytrees with placeholder leaves (vmap axis specs, tracers), which a
+constructor must accept unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+SH_BASES = (1, 4, 9, 16)  # K = (degree + 1)^2 for degrees 0..3
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class Gaussians:
+    """3D Gaussians in stored (pre-activation) form, as in INRIA PLY files.
+
+    Attributes:
+      means: (N, 3) world-space centres.
+      quats: (N, 4) rotations as w, x, y, z; need not be unit length (normalised on use).
+      log_scales: (N, 3) per-axis log standard deviations; scale = exp(log_scales).
+      logit_opacities: (N,) opacity = sigmoid(logit); +inf is a valid, fully opaque Gaussian.
+      sh: (N, K, 3) spherical-harmonic colour coefficients, K = (degree + 1)^2 in {1, 4, 9, 16}.
+    """
+
+    means: Any
+    quats: Any
+    log_scales: Any
+    logit_opacities: Any
+    sh: Any
+
+    @property
+    def num(self) -> int:
+        return int(np.shape(self.means)[0])
+
+    @property
+    def sh_degree(self) -> int:
+        return SH_BASES.index(int(np.shape(self.sh)[1]))
+
+    @property
+    def dtype(self):
+        return jnp.result_type(self.means)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class Camera:
+    """A pinhole camera with OpenCV axes (x right, y down, z forward).
+
+    Attributes:
+      viewmat: (4, 4) world-to-camera matrix.
+      fx, fy, cx, cy: intrinsics in pixels; pixel (i, j) has its centre at (j + 0.5, i + 0.5).
+      width, height: image size in pixels (static: part of the pytree structure).
+      near, far: a Gaussian is rendered only if near < camera-space z < far.
+    """
+
+    viewmat: Any
+    fx: Any
+    fy: Any
+    cx: Any
+    cy: Any
+    width: int = dataclasses.field(metadata=dict(static=True))
+    height: int = dataclasses.field(metadata=dict(static=True))
+    near: Any = 0.01
+    far: Any = 1e10
+
+    def scaled(self, width: int, height: int) -> "Camera":
+        """The same view at another resolution (intrinsics scaled per axis)."""
+        sx, sy = width / self.width, height / self.height
+        return dataclasses.replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx,
+                                   cy=self.cy * sy, width=int(width), height=int(height))
+
+
+def stack_cameras(cameras: list[Camera]) -> Camera:
+    """Stack same-size cameras into one batched `Camera` for `jax.vmap`."""
+    sizes = {(c.width, c.height) for c in cameras}
+    if len(sizes) != 1:
+        raise ValueError(f"cameras: stacking needs one image size, got {sorted(sizes)}")
+    return jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *cameras)
+
+
+def _is_concrete(x) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+def validate_gaussians(g: Gaussians) -> None:
+    """Raise `ValueError` naming the field if shapes or dtypes break the contract."""
+    if not isinstance(g, Gaussians):
+        raise ValueError(f"gaussians: expected lgs_jax.Gaussians, got {type(g).__name__}")
+    shapes = {f.name: np.shape(getattr(g, f.name)) for f in dataclasses.fields(g)}
+    n = shapes["means"][0] if len(shapes["means"]) == 2 else None
+    want = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "logit_opacities": (n,)}
+    for name, shape in want.items():
+        if n is None or shapes[name] != shape:
+            raise ValueError(f"gaussians.{name}: expected shape {('N',) + shape[1:]} with N "
+                             f"shared by all fields, got {shapes[name]}")
+    sh = shapes["sh"]
+    if len(sh) != 3 or sh[0] != n or sh[2] != 3:
+        raise ValueError(f"gaussians.sh: expected shape (N, K, 3), got {sh}")
+    if sh[1] not in SH_BASES:
+        raise ValueError(f"gaussians.sh: K = {sh[1]} is not (degree+1)^2 for degree 0..3")
+    dtypes = {f.name: jnp.result_type(getattr(g, f.name)) for f in dataclasses.fields(g)}
+    for name, dt in dtypes.items():
+        if not jnp.issubdtype(dt, jnp.floating):
+            raise ValueError(f"gaussians.{name}: expected a floating dtype, got {dt}")
+        if dt != dtypes["means"]:
+            raise ValueError(f"gaussians.{name}: dtype {dt} differs from means' {dtypes['means']}"
+                             " (all fields must share one precision)")
+    if dtypes["means"] not in (jnp.float32, jnp.float64):
+        raise ValueError(f"gaussians.means: dtype {dtypes['means']} unsupported; use float32 "
+                         "or float64 (render low precision by casting up)")
+    if dtypes["means"] == jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("gaussians.means: float64 needs jax_enable_x64")
+
+
+def validate_camera(cam: Camera) -> None:
+    """Raise `ValueError` naming the argument for bad camera shapes or (when concrete) values."""
+    if not isinstance(cam, Camera):
+        raise ValueError(f"camera: expected lgs_jax.Camera, got {type(cam).__name__}")
+    for name in ("width", "height"):
+        v = getattr(cam, name)
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v <= 0:
+            raise ValueError(f"camera.{name}: expected a positive int, got {v!r}")
+    if math.ceil(cam.width / 16) * math.ceil(cam.height / 16) >= 2**24:
+        raise ValueError(f"camera: {cam.width}x{cam.height} has too many 16x16 tiles")
+    if np.shape(cam.viewmat) != (4, 4):
+        raise ValueError(f"camera.viewmat: expected shape (4, 4), got {np.shape(cam.viewmat)}")
+    for name in ("fx", "fy", "cx", "cy", "near", "far"):
+        if np.shape(getattr(cam, name)) != ():
+            raise ValueError(f"camera.{name}: expected a scalar, got shape "
+                             f"{np.shape(getattr(cam, name))} (vmap to batch cameras)")
+    leaves = {n: getattr(cam, n) for n in ("viewmat", "fx", "fy", "cx", "cy", "near", "far")}
+    if not all(_is_concrete(v) for v in leaves.values()):
+        return
+    vals = {n: np.asarray(v, dtype=np.float64) for n, v in leaves.items()}
+    for name in ("viewmat", "fx", "fy", "cx", "cy", "near"):
+        if not np.all(np.isfinite(vals[name])):
+            raise ValueError(f"camera.{name}: must be finite, got {vals[name]}")
+    for name in ("fx", "fy"):
+        if vals[name] <= 0:
+            raise ValueError(f"camera.{name}: must be > 0, got {vals[name]}")
+    if not vals["near"] > 0:
+        raise ValueError(f"camera.near: must be > 0, got {vals['near']}")
+    if np.isnan(vals["far"]) or not vals["near"] < vals["far"]:
+        raise ValueError(f"camera.near/far: need 0 < near < far, got {vals['near']}, {vals['far']}")

@@ -1,0 +1,45 @@
+"""Real spherical harmonics up to degree 3, with the 3DGS / gsplat basis constants."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+C0 = 0.28209479177387814
+C1 = 0.4886025119029199
+C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
+      0.5462742152960396)
+C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+      -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+
+
+def sh_basis(dirs, num_bases: int):
+    """The first `num_bases` real SH basis functions at unit directions `dirs` (..., 3).
+
+    Returns (..., num_bases), ordered as the INRIA coefficients (degree-major).
+    """
+    x, y, z = dirs[..., 0], dirs[..., 1], dirs[..., 2]
+    one = jnp.ones_like(x)
+    out = [C0 * one]
+    if num_bases > 1:
+        out += [-C1 * y, C1 * z, -C1 * x]
+    if num_bases > 4:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        out += [C2[0] * xy, C2[1] * yz, C2[2] * (2.0 * zz - xx - yy), C2[3] * xz,
+                C2[4] * (xx - yy)]
+    if num_bases > 9:
+        out += [C3[0] * y * (3.0 * xx - yy), C3[1] * xy * z, C3[2] * y * (4.0 * zz - xx - yy),
+                C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy), C3[4] * x * (4.0 * zz - xx - yy),
+                C3[5] * z * (xx - yy), C3[6] * x * (xx - 3.0 * yy)]
+    return jnp.stack(out, axis=-1).astype(dirs.dtype)
+
+
+def sh_to_rgb(sh, dirs):
+    """Colour = max(Σ_k basis_k(dir)·sh_k + 0.5, 0) (conventions.md, "Colour").
+
+    Args:
+      sh: (N, K, 3) coefficients.
+      dirs: (N, 3) unit view directions (Gaussian centre minus camera centre).
+    """
+    basis = sh_basis(dirs, sh.shape[1])
+    rgb = jnp.sum(basis[:, :, None] * sh, axis=1)  # explicit multiply-adds: no TF32 on GPUs
+    return jnp.maximum(rgb + 0.5, 0.0)
