@@ -5,9 +5,11 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)  # float64 ground truth; float32 tests pass float32
-if os.environ.get("LGS_JAX_CACHE"):
-    jax.config.update("jax_compilation_cache_dir", os.environ["LGS_JAX_CACHE"])
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+# Persistent compilation cache: pytest-xdist workers (and reruns) share compiled kernels.
+_CACHE = os.environ.get("LGS_JAX_CACHE",
+                        os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
+jax.config.update("jax_compilation_cache_dir", os.path.abspath(_CACHE))
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 settings.register_profile("ci", max_examples=25, deadline=None, derandomize=True,
                           suppress_health_check=[HealthCheck.too_slow])

@@ -85,7 +85,8 @@ def load_ply(path) -> Gaussians:
     ftype = np.result_type(*[dtype[n] for n in required])
     col = lambda *ns: np.stack([v[n] for n in ns], axis=-1).astype(ftype)
     k = n_rest // 3 + 1
-    rest = col(*[f"f_rest_{i}" for i in range(n_rest)]).reshape(count, 3, k - 1)
+    rest = np.stack([v[f"f_rest_{i}"] for i in range(n_rest)] or [np.zeros((count, 0))], -1)
+    rest = rest.astype(ftype).reshape(count, 3, k - 1)
     sh = np.concatenate([col("f_dc_0", "f_dc_1", "f_dc_2")[:, None, :],
                          rest.transpose(0, 2, 1)], axis=1)
     return Gaussians(means=col("x", "y", "z"), quats=col("rot_0", "rot_1", "rot_2", "rot_3"),

@@ -1,0 +1,143 @@
+"""Public API behaviour: jit / vmap, capacity rules, precision, and bad-input errors."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lgs_jax
+from tests import scenes
+
+
+@pytest.fixture(scope="module")
+def scene32():
+    return scenes.cast(scenes.scene(2, kinds=("normal", "opaque", "layers", "huge_far")),
+                       np.float32)
+
+
+def test_jit_and_vmap_over_cameras_match_single_renders(scene32):
+    cams = [scenes.camera(yaw=y) for y in (-0.2, 0.0, 0.3)]
+    batch = lgs_jax.stack_cameras(cams)
+    cap = 1024
+    # The scene is an argument, not a closed-over constant: XLA would constant-fold its
+    # projection with different rounding than the eager render.
+    f = jax.jit(jax.vmap(lambda g, c: lgs_jax.render(g, c, capacity=cap), in_axes=(None, 0)))
+    out = f(scene32, batch)
+    assert out.image.shape == (3, scenes.H, scenes.W, 3)
+    for i, c in enumerate(cams):
+        one = lgs_jax.render(scene32, c, capacity=cap)
+        np.testing.assert_array_equal(out.image[i], one.image)  # bit-identical
+        assert int(out.stats.pairs_required[i]) == int(one.stats.pairs_required)
+
+
+def test_new_camera_pose_does_not_recompile(scene32):
+    f = jax.jit(lambda c: lgs_jax.render(scene32, c, capacity=1024).image)
+    f(scenes.camera(yaw=0.1))
+    size = f._cache_size()
+    f(scenes.camera(yaw=-0.3))
+    assert f._cache_size() == size
+
+
+def test_capacity_none_under_jit_raises(scene32):
+    with pytest.raises(ValueError, match="capacity"):
+        jax.jit(lambda c: lgs_jax.render(scene32, c).image)(scenes.camera())
+
+
+def test_eager_overflow_raises_with_required_size(scene32):
+    with pytest.raises(lgs_jax.CapacityError, match="pass capacity >=") as err:
+        lgs_jax.render(scene32, scenes.camera(), capacity=4)
+    assert err.value.required > 4
+
+
+def test_render_growing_settles_on_enough_capacity(scene32):
+    f = jax.jit(lambda g, c, capacity: lgs_jax.render(g, c, capacity=capacity),
+                static_argnames="capacity")
+    out, cap = lgs_jax.render_growing(f, scene32, scenes.camera(), capacity=2)
+    assert not bool(out.stats.overflow) and cap >= int(out.stats.pairs_required)
+    np.testing.assert_array_equal(out.image, lgs_jax.render(scene32, scenes.camera()).image)
+
+
+def test_float32_stays_float32_with_x64_and_float64_is_float64(scene32):
+    assert jax.config.jax_enable_x64
+    out = lgs_jax.render(scene32, scenes.camera(dtype=np.float64))
+    assert out.image.dtype == out.alpha.dtype == out.depth.dtype == jnp.float32
+    out64 = lgs_jax.render(scenes.cast(scene32, np.float64), scenes.camera())
+    assert out64.image.dtype == jnp.float64
+
+
+def test_empty_scene_renders_background():
+    g = scenes.cast(scenes.scene(0), np.float32)
+    empty = jax.tree.map(lambda x: x[:0], g)
+    out = lgs_jax.render(empty, scenes.camera(), background=np.array([0.1, 0.2, 0.3]))
+    np.testing.assert_allclose(out.image, np.broadcast_to([0.1, 0.2, 0.3], out.image.shape),
+                               rtol=1e-7)
+    assert np.all(np.asarray(out.alpha) == 0)
+
+
+def test_invalid_gaussians_never_reach_the_image():
+    g = scenes.cast(scenes.scene(4, kinds=("invalid", "behind")), np.float32)
+    out = lgs_jax.render(g, scenes.camera(), background=np.ones(3))
+    assert np.all(np.isfinite(np.asarray(out.image)))
+    assert int(out.stats.n_invalid) == scenes.N and int(out.stats.n_valid) == 0
+    np.testing.assert_array_equal(out.image, np.ones_like(out.image))
+
+
+def test_repeated_renders_are_bit_identical(scene32):
+    a = lgs_jax.render(scene32, scenes.camera(yaw=0.2))
+    b = lgs_jax.render(scene32, scenes.camera(yaw=0.2))
+    np.testing.assert_array_equal(a.image, b.image)
+    np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def _replace(obj, **kw):
+    return dataclasses.replace(obj, **kw)
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("means", np.zeros((3, 2), np.float32), "gaussians.means"),
+    ("quats", np.zeros((scenes.N, 3), np.float32), "gaussians.quats"),
+    ("logit_opacities", np.zeros((scenes.N, 1), np.float32), "gaussians.logit_opacities"),
+    ("sh", np.zeros((scenes.N, 5, 3), np.float32), "gaussians.sh"),
+    ("sh", np.zeros((scenes.N, 4), np.float32), "gaussians.sh"),
+    ("log_scales", np.zeros((scenes.N, 3), np.int32), "gaussians.log_scales"),
+    ("log_scales", np.zeros((scenes.N, 3), np.float64), "gaussians.log_scales"),
+    ("means", np.zeros((scenes.N, 3), np.float16), "gaussians"),
+])
+def test_bad_gaussians_raise_naming_the_field(scene32, field, value, match):
+    with pytest.raises(ValueError, match=match):
+        lgs_jax.render(_replace(scene32, **{field: value}), scenes.camera())
+
+
+@pytest.mark.parametrize("change,match", [
+    (dict(width=0), "camera.width"), (dict(height=-3), "camera.height"),
+    (dict(width=10.5), "camera.width"), (dict(viewmat=np.eye(3)), "camera.viewmat"),
+    (dict(fx=-1.0), "camera.fx"), (dict(fy=np.nan), "camera.fy"),
+    (dict(viewmat=np.full((4, 4), np.inf)), "camera.viewmat"),
+    (dict(near=2.0, far=1.0), "near"), (dict(near=0.0), "camera.near"),
+    (dict(cx=np.array([1.0, 2.0])), "camera.cx"),
+])
+def test_bad_cameras_raise_naming_the_argument(scene32, change, match):
+    with pytest.raises(ValueError, match=match):
+        lgs_jax.render(scene32, _replace(scenes.camera(), **change))
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(background=np.zeros(4)), "background"), (dict(backend="cuda"), "backend"),
+    (dict(capacity=0), "capacity"), (dict(capacity=2.5), "capacity"),
+    (dict(config="3dgs"), "config"),
+])
+def test_bad_arguments_raise(scene32, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        lgs_jax.render(scene32, scenes.camera(), **kwargs)
+
+
+def test_bad_convention_raises():
+    with pytest.raises(ValueError, match="config.convention"):
+        lgs_jax.RasterConfig(convention="cuda")
+
+
+def test_stack_cameras_needs_one_size():
+    with pytest.raises(ValueError, match="cameras"):
+        lgs_jax.stack_cameras([scenes.camera(), scenes.camera(width=32)])
