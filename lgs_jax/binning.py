@@ -41,28 +41,47 @@ def tile_grid(width: int, height: int) -> tuple[int, int]:
     return -(-width // TILE), -(-height // TILE)
 
 
-def pixel_box(p: Projected, width: int, height: int, gamma_ulps: float = 16.0):
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class PaddedEllipse:
+    """Per-Gaussian ellipse q(d) <= tau_pad that holds every pixel whose rounded alpha test (in
+    the difference form) can pass; `det_lo` is a lower bound of det(Q) > 0 (where bounded)."""
+
+    tau: Any  # 2 ln(255·o), the exact threshold
+    tau_pad: Any
+    det_lo: Any
+    unbounded: Any  # valid Gaussians whose rounding cannot be bounded: bin to the whole image
+
+
+def padded_ellipse(p: Projected, gamma_ulps: float = 16.0) -> PaddedEllipse:
+    """τ_pad = (τ + 2δ) / (1 − 2γK) of the module docstring, with its unbounded cases."""
+    dt = p.mean2d.dtype
+    u = jnp.finfo(dt).eps / 2
+    a, b, c = p.conic[:, 0], p.conic[:, 1], p.conic[:, 2]
+    tau = 2.0 * jnp.log(jnp.maximum(255.0 * p.opacity, 1.0))
+    tau_slack = tau * (1 + 4 * u) + 128 * u  # rounding of tau itself and the 2δ slack
+    det = a * c - b * b
+    det_lo = det - 4 * u * (a * c + b * b)
+    k = (a + c) ** 2 / jnp.where(det_lo > 0, det_lo, 1.0)
+    shrink = 1.0 - 2.0 * gamma_ulps * u * k
+    unbounded = p.valid & ((det_lo <= 0) | (shrink < 0.5))
+    return PaddedEllipse(tau=tau, tau_pad=tau_slack / jnp.where(unbounded, 1.0, shrink),
+                         det_lo=jnp.where(unbounded | (det_lo <= 0), 1.0, det_lo),
+                         unbounded=unbounded)
+
+
+def pixel_box(p: Projected, width: int, height: int):
     """Inclusive pixel ranges that hold every pixel where the rounded alpha test can pass.
 
     Returns (x0, x1, y0, y1, unbounded), int32 pixel indices clipped to the image (empty when
     x0 > x1 or y0 > y1; invalid Gaussians are empty), and a bool for Gaussians whose rounding
     bound failed (binned to the whole image).
     """
-    dt = p.mean2d.dtype
-    u = jnp.finfo(dt).eps / 2
-    a, b, c = p.conic[:, 0], p.conic[:, 1], p.conic[:, 2]
-    o = p.opacity
-    tau = 2.0 * jnp.log(jnp.maximum(255.0 * o, 1.0))
-    tau = tau * (1 + 4 * u) + 128 * u  # rounding of tau itself and the 2δ slack
-    det = a * c - b * b
-    det_lo = det - 4 * u * (a * c + b * b)
-    k = (a + c) ** 2 / jnp.where(det_lo > 0, det_lo, 1.0)
-    shrink = 1.0 - 2.0 * gamma_ulps * u * k
-    unbounded = p.valid & ((det_lo <= 0) | (shrink < 0.5))
-    tau_pad = tau / jnp.where(unbounded, 1.0, shrink)
-    det_safe = jnp.where(unbounded, 1.0, det_lo)
-    rx = jnp.sqrt(tau_pad * c / det_safe) * (1 + 8 * u)
-    ry = jnp.sqrt(tau_pad * a / det_safe) * (1 + 8 * u)
+    u = jnp.finfo(p.mean2d.dtype).eps / 2
+    e = padded_ellipse(p)
+    unbounded = e.unbounded
+    rx = jnp.sqrt(e.tau_pad * p.conic[:, 2] / e.det_lo) * (1 + 8 * u)
+    ry = jnp.sqrt(e.tau_pad * p.conic[:, 0] / e.det_lo) * (1 + 8 * u)
     mx, my = p.mean2d[:, 0], p.mean2d[:, 1]
 
     def axis_range(m, r, n):
@@ -102,6 +121,7 @@ class TileBins:
 
     Attributes:
       gauss: (capacity,) int32 Gaussian index of each pair (pairs past `tile_end[-1]` are padding).
+      tile: (capacity,) int32 tile index of each pair (row-major; n_tiles for padding).
       tile_start, tile_end: (n_tiles,) int32 half-open ranges of each tile's pairs in `gauss`.
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
@@ -109,6 +129,7 @@ class TileBins:
     """
 
     gauss: Any
+    tile: Any
     tile_start: Any
     tile_end: Any
     pairs_required: Any
@@ -158,5 +179,5 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileB
     tile_ids = jnp.arange(n_tiles, dtype=jnp.int32)
     start = jnp.searchsorted(tile, tile_ids, side="left").astype(jnp.int32)
     end = jnp.searchsorted(tile, tile_ids, side="right").astype(jnp.int32)
-    return TileBins(gauss=gauss, tile_start=start, tile_end=end, pairs_required=total,
+    return TileBins(gauss=gauss, tile=tile, tile_start=start, tile_end=end, pairs_required=total,
                     overflow=total > capacity, n_unbounded=jnp.sum(unbounded, dtype=jnp.int32))

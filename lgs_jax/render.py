@@ -21,13 +21,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import binning
-from .backends import brute, reference
+from .backends import brute, reference, tiles
 from .composite import finish
 from .config import RasterConfig
 from .projection import Projected, project
 from .scene import Camera, Gaussians, validate_camera, validate_gaussians
 
-BACKENDS = ("brute", "reference")
+BACKENDS = ("brute", "reference", "tiles")
 
 
 class CapacityError(ValueError):
@@ -54,6 +54,8 @@ class RenderStats:
       n_transparent: valid Gaussians culled because opacity < 1/255.
       n_unbounded: Gaussians whose float rounding could not be bounded, binned to every tile.
       pairs_required: tile–Gaussian pairs the scene needs (saturates at 2^31 − 1).
+      strip_pairs: strip–Gaussian pairs processed (`tiles` backend; 8·pairs without warp
+        culling, so strip_pairs / (8·pairs) is the share of work the strip masks keep).
       capacity: size of the pair buffer used.
       overflow: pairs_required > capacity (the image lacks the farthest pairs).
       backend: name of the backend that rendered (static).
@@ -64,6 +66,7 @@ class RenderStats:
     n_transparent: Any
     n_unbounded: Any
     pairs_required: Any
+    strip_pairs: Any
     capacity: Any
     overflow: Any
     backend: str = dataclasses.field(metadata=dict(static=True))
@@ -94,13 +97,15 @@ def _count(g: Gaussians, cam: Camera, width: int, height: int):
     return binning.count_pairs(project(g, cam), width, height)[0]
 
 
-def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None) -> RenderStats:
+def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
+           strip_pairs=None) -> RenderStats:
     i32 = functools.partial(jnp.sum, dtype=jnp.int32)
     zero = jnp.int32(0)
     return RenderStats(
         n_valid=i32(p.valid), n_invalid=i32(p.invalid), n_transparent=i32(~p.valid & ~p.invalid),
         n_unbounded=bins.n_unbounded if bins else zero,
         pairs_required=bins.pairs_required if bins else zero,
+        strip_pairs=zero if strip_pairs is None else strip_pairs.astype(jnp.int32),
         capacity=jnp.int32(capacity), overflow=bins.overflow if bins else jnp.bool_(False),
         backend=backend)
 
@@ -110,22 +115,26 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
             capacity: int) -> RenderOutput:
     width, height = cam.width, cam.height
     p = project(g, cam)
-    bins = None
+    bins = strip_pairs = None
     if backend == "brute":
         state = brute.rasterize(p, width, height, config)
     else:
         bins = binning.bin_gaussians(p, width, height, capacity)
-        state = reference.rasterize(p, bins, width, height, config)
+        if backend == "tiles":
+            state, strip_pairs = tiles.rasterize(p, bins, width, height, config)
+        else:
+            state = reference.rasterize(p, bins, width, height, config)
     image, alpha, depth = finish(state, background)
     return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
-                        depth=depth.reshape(height, width), stats=_stats(p, backend, capacity, bins))
+                        depth=depth.reshape(height, width),
+                        stats=_stats(p, backend, capacity, bins, strip_pairs))
 
 
 def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
     h, w = cam.height, cam.width
     zero = jnp.int32(0)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
-                        pairs_required=zero, capacity=zero, overflow=jnp.bool_(False),
+                        pairs_required=zero, strip_pairs=zero, capacity=zero, overflow=jnp.bool_(False),
                         backend=backend)
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
@@ -140,8 +149,8 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
       gaussians: the scene; its dtype (float32 or float64) is the precision of the whole render.
       camera: a `Camera`; batch cameras with `jax.vmap` (then pass `capacity`).
       background: (3,) colour behind the scene, black by default.
-      backend: "reference" (16x16 tiles, per-pixel semantics) or "brute" (all Gaussians for every
-        pixel, no tiles: for small scenes).
+      backend: "tiles" (Local-GS kernels, `config` switches), "reference" (16x16 tiles, per-pixel
+        semantics) or "brute" (all Gaussians for every pixel, no tiles: for small scenes).
       config: a `RasterConfig` (static), default `RasterConfig()`.
       capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up to a
         power of two. Under jit/vmap pass an int and check `stats.overflow`.

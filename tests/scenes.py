@@ -3,9 +3,14 @@ hypothesis run compiles each function once)."""
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+from hypothesis import strategies as st
 
 import lgs_jax
+from lgs_jax.config import ALPHA_MIN
+from lgs_jax.projection import EPS2D, Projected
 
 N = 32  # Gaussians per test scene (fixed: no recompiles)
 W, H = 40, 24  # image size: not a multiple of 16, so edge tiles are partial
@@ -81,3 +86,46 @@ def cast(g: lgs_jax.Gaussians, dtype) -> lgs_jax.Gaussians:
     import jax
 
     return jax.tree.map(lambda x: np.asarray(x, dtype), g)
+
+
+def float_arrays(lo, hi, n):
+    """A hypothesis strategy for float64 arrays of fixed length n."""
+    return st.lists(st.floats(lo, hi), min_size=n, max_size=n).map(np.asarray)
+
+
+def projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, edge=None,
+                     width=64, height=48, edge_pixel=None):
+    """Projected Gaussians with 2D covariance eigenvalues λmin (>= the 0.3 dilation) and
+    λmin·κ, rotated by θ, centred `offset` px from the image centre.
+
+    With `edge` (relative offsets ~1e-6), Gaussian m is instead placed so that a pixel centre near
+    the image centre lies on its 1/255 ellipse (q = τ·(1 + edge[m])) in the direction `angle`:
+    the float test there is a coin flip, which is where an unpadded box fails. `edge_pixel`
+    (n, 2) integer (column, row) picks that pixel per Gaussian (default: the image centre)."""
+    n = len(log_kappa)
+    lmin = EPS2D + np.exp(log_lmin)
+    lmax = lmin * np.exp(log_kappa)
+    c, s = np.cos(theta), np.sin(theta)
+    sxx, sxy, syy = c * c * lmax + s * s * lmin, c * s * (lmax - lmin), s * s * lmax + c * c * lmin
+    cov = np.stack([sxx, sxy, syy], -1).astype(dtype)
+    sxx, sxy, syy = (cov[:, i] for i in range(3))
+    det = sxx * syy - sxy * sxy  # in dtype, as projection does
+    with np.errstate(divide="ignore", invalid="ignore"):
+        conic = np.stack([syy / det, -sxy / det, sxx / det], -1)
+    mean = np.stack([width / 2 + offset * np.cos(angle), height / 2 + offset * np.sin(angle)], -1)
+    opacity = np.asarray(jax.nn.sigmoid(logit.astype(dtype)))
+    if edge is not None:
+        q64 = np.stack([syy, -sxy, sxx], -1).astype(np.float64) / det.astype(np.float64)[:, None]
+        v = np.stack([np.cos(angle), np.sin(angle)], -1)
+        qv = q64[:, 0] * v[:, 0] ** 2 + 2 * q64[:, 1] * v[:, 0] * v[:, 1] + q64[:, 2] * v[:, 1] ** 2
+        tau = 2 * np.log(np.maximum(255 * opacity.astype(np.float64), 1.0))
+        r = np.sqrt(np.maximum(tau * (1 + edge), 0) / np.where(qv > 0, qv, 1.0))
+        pix = (np.array([[width // 2, height // 2]]) if edge_pixel is None
+               else np.asarray(edge_pixel)) + 0.5
+        mean = np.where((qv > 0)[:, None], pix + r[:, None] * v, mean)
+    valid = (det > 0) & np.all(np.isfinite(conic), -1) & (opacity >= dtype(ALPHA_MIN))
+    return Projected(mean2d=jnp.asarray(mean, dtype), cov2d=jnp.asarray(cov),
+                     conic=jnp.asarray(np.where(valid[:, None], conic, 1.0), dtype),
+                     depth=jnp.ones(n, dtype), opacity=jnp.asarray(np.where(valid, opacity, 0)),
+                     rgb=jnp.zeros((n, 3), dtype), valid=jnp.asarray(valid),
+                     invalid=jnp.asarray(~valid))

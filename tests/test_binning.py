@@ -13,7 +13,7 @@ import lgs_jax
 from lgs_jax import binning
 from lgs_jax.composite import gaussian_alpha
 from lgs_jax.config import ALPHA_MIN
-from lgs_jax.projection import EPS2D, Projected, project
+from lgs_jax.projection import Projected, project
 from tests import scenes
 
 W, H = 64, 48
@@ -48,48 +48,15 @@ def _check_covered(p: Projected, width=W, height=H):
     return passing
 
 
-def _conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, edge=None):
-    """Projected Gaussians with 2D covariance eigenvalues λmin (>= the 0.3 dilation) and
-    λmin·κ, rotated by θ, centred `offset` px from the image centre.
-
-    With `edge` (relative offsets ~1e-6), Gaussian m is instead placed so that a pixel centre near
-    the image centre lies on its 1/255 ellipse (q = τ·(1 + edge[m])) in the direction `angle`:
-    the float test there is a coin flip, which is where an unpadded box fails."""
-    lmin = EPS2D + np.exp(log_lmin)
-    lmax = lmin * np.exp(log_kappa)
-    c, s = np.cos(theta), np.sin(theta)
-    sxx, sxy, syy = c * c * lmax + s * s * lmin, c * s * (lmax - lmin), s * s * lmax + c * c * lmin
-    cov = np.stack([sxx, sxy, syy], -1).astype(dtype)
-    sxx, sxy, syy = (cov[:, i] for i in range(3))
-    det = sxx * syy - sxy * sxy  # in dtype, as projection does
-    conic = np.stack([syy / det, -sxy / det, sxx / det], -1)
-    mean = np.stack([W / 2 + offset * np.cos(angle), H / 2 + offset * np.sin(angle)], -1)
-    opacity = np.asarray(jax.nn.sigmoid(logit.astype(dtype)))
-    if edge is not None:
-        q64 = np.stack([syy, -sxy, sxx], -1).astype(np.float64) / det.astype(np.float64)[:, None]
-        v = np.stack([np.cos(angle), np.sin(angle)], -1)
-        qv = q64[:, 0] * v[:, 0] ** 2 + 2 * q64[:, 1] * v[:, 0] * v[:, 1] + q64[:, 2] * v[:, 1] ** 2
-        tau = 2 * np.log(np.maximum(255 * opacity.astype(np.float64), 1.0))
-        r = np.sqrt(np.maximum(tau * (1 + edge), 0) / np.where(qv > 0, qv, 1.0))
-        pix = np.array([W // 2 + 0.5, H // 2 + 0.5])
-        mean = np.where((qv > 0)[:, None], pix + r[:, None] * v, mean)
-    valid = (det > 0) & np.all(np.isfinite(conic), -1) & (opacity >= dtype(ALPHA_MIN))
-    return Projected(mean2d=jnp.asarray(mean, dtype), cov2d=jnp.asarray(cov),
-                     conic=jnp.asarray(np.where(valid[:, None], conic, 1.0), dtype),
-                     depth=jnp.ones(M, dtype), opacity=jnp.asarray(np.where(valid, opacity, 0)),
-                     rgb=jnp.zeros((M, 3), dtype), valid=jnp.asarray(valid),
-                     invalid=jnp.asarray(~valid))
-
-
 def _arrays(lo, hi):
-    return st.lists(st.floats(lo, hi), min_size=M, max_size=M).map(np.asarray)
+    return scenes.float_arrays(lo, hi, M)
 
 
 @given(log_kappa=_arrays(0, np.log(1e8)), theta=_arrays(0, np.pi), log_lmin=_arrays(-8, 8),
        offset=_arrays(0, 3000), angle=_arrays(0, 2 * np.pi),
        logit=_arrays(np.log(1 / 254), 12), dtype=st.sampled_from([np.float32, np.float64]))
 def test_box_covers_every_passing_pixel(log_kappa, theta, log_lmin, offset, angle, logit, dtype):
-    p = _conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit)
+    p = scenes.projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit)
     _check_covered(p)
 
 
@@ -98,7 +65,7 @@ def test_box_covers_every_passing_pixel(log_kappa, theta, log_lmin, offset, angl
        edge=_arrays(-3e-6, 3e-6), dtype=st.sampled_from([np.float32, np.float64]))
 def test_box_covers_pixels_on_the_ellipse_edge(log_kappa, theta, log_lmin, angle, logit, edge,
                                                dtype):
-    p = _conics(dtype, log_kappa, theta, log_lmin, np.zeros(M), angle, logit, edge=edge)
+    p = scenes.projected_conics(dtype, log_kappa, theta, log_lmin, np.zeros(M), angle, logit, edge=edge)
     _check_covered(p)
 
 
@@ -114,7 +81,7 @@ def test_box_is_tight_for_ordinary_gaussians():
     rng = np.random.default_rng(0)
     args = (rng.uniform(0, np.log(100), M), rng.uniform(0, np.pi, M), rng.uniform(-2, 5, M),
             rng.uniform(0, 20, M), rng.uniform(0, 2 * np.pi, M), rng.uniform(-4, 6, M))
-    p = _conics(np.float32, *args)
+    p = scenes.projected_conics(np.float32, *args)
     x0, x1, _, _, unbounded = (np.asarray(v) for v in binning.pixel_box(p, 10**6, 10**6))
     cov = np.asarray(p.cov2d, np.float64)
     tau = 2 * np.log(255 * np.asarray(p.opacity, np.float64))

@@ -1,0 +1,267 @@
+"""`tiles` backend: the Local-GS rasterizer (Sec. III) as jitted JAX.
+
+Layout. The screen is 16x16 tiles; each tile is eight 16x2 strips, each strip the 32 pixels of
+one warp. A strip owns a list of Gaussians in (depth, index) order: with `warp_cull` the tile's
+pairs whose strip-mask bit is set (compacted with prefix sums and `searchsorted`, no scatter),
+otherwise the tile's whole list.
+
+Work scales with the pairs a scene has, not with its worst tile: strips are sorted by list
+length and processed in groups of GROUP strips; a group runs only as many CHUNK-Gaussian steps as
+its longest list needs (empty strips run none) and stops early once all its pixels are done.
+
+Per chunk, ln α for GROUP x 32 pixels x CHUNK Gaussians is one batched product of the pixel basis
+with the hoisted vectors (Eq. 9–10) at Precision.HIGHEST (TF32 would break exactness on GPUs), or
+the difference form when `hoist` is off. Blending within a chunk uses a running product of
+(1 − α) (w = α·T; C += f·w; T −= w, Sec. III-D):
+
+  exact: per-pixel semantics of the contract: a pixel stops at the first Gaussian with
+         T·(1 − α) < 1e-4 (which is not blended); alpha tests are masks.
+  fast:  the paper's warp-coherent blending: no per-pixel stop; a strip stops when all 32 pixels
+         have T < 1e-4 (checked between chunks).
+
+Bound on `fast` (derived here, tested in tests/test_tiles.py). Until the exact pixel's stop at
+Gaussian k*, both modes blend the same Gaussians. The exact pixel then keeps T_e = T_{k*}, with
+T_{k*}·(1 − α_{k*}) < 1e-4, so T_e < 1e-4 / (1 − cap). The fast pixel additionally blends weights
+w_j (j >= k*) with Σ w_j <= T_e, moving colour from background to those Gaussians:
+
+  |image_fast − image_exact| <= T_e · max_j |rgb_j − background| < 1e-4/(1 − cap) · max|rgb − bg|
+  |alpha_fast − alpha_exact| < 1e-4/(1 − cap),  |depth_fast − depth_exact| < 1e-4/(1 − cap)·max z
+
+i.e. 0.01 (3dgs, cap 0.99) or 0.1 (gsplat, cap 0.999) times the colour range, plus rounding.
+
+The hoisted forms clamp ln α at ln o (its exact maximum) instead of the difference form's
+`power > 0` skip: in the expanded form that skip would fire on rounding at Gaussian centres.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from .. import hoist
+from ..binning import TILE, TileBins, padded_ellipse, tile_grid
+from ..composite import PixelState
+from ..config import ALPHA_MIN, T_STOP, RasterConfig
+from ..projection import Projected
+from ..warp_masks import FULL_MASK, STRIPS, strip_mask
+from .reference import tiles_to_image
+
+GROUP = 32  # strips processed together
+CHUNK = 32  # Gaussians per step
+STRIP_PIXELS = 2 * TILE
+HIGHEST = lax.Precision.HIGHEST
+
+
+def tile_origin(tile_x, tile_y, config: RasterConfig, dtype):
+    """Origin T of the hoisting frame (Eq. 1): tile corner or centre; (0, 0) for global coords."""
+    if not config.local_coords:
+        return jnp.zeros(jnp.shape(tile_x) + (2,), dtype)
+    off = TILE / 2 if config.origin == "center" else 0.0
+    return jnp.stack([tile_x * TILE + off, tile_y * TILE + off], -1).astype(dtype)
+
+
+def pair_masks(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """Strip masks of every pair (FULL_MASK for Gaussians the binning could not bound)."""
+    dt = p.mean2d.dtype
+    u = jnp.finfo(dt).eps / 2
+    e = padded_ellipse(p)
+    g, t = bins.gauss, bins.tile
+    tx, ty = t % tiles_x, t // tiles_x
+    tau = e.tau_pad[g]
+    if config.hoist:
+        origin = tile_origin(tx, ty, config, dt)
+        corner = jnp.stack([tx * TILE, ty * TILE], -1).astype(dt)
+        reach = jnp.maximum(jnp.abs(corner + 0.5 - origin), jnp.abs(corner + TILE - 0.5 - origin))
+        err = hoist.error_bound(p.mean2d[g], p.conic[g], jnp.log(p.opacity[g]), origin,
+                                reach[:, 0], reach[:, 1], 16 * u)
+        tau = jnp.maximum(tau, e.tau[g] * (1 + 4 * u) + 128 * u + 2 * err)
+    mask = strip_mask(p.mean2d[g], p.conic[g], tau, e.det_lo[g], tx, ty)
+    mask = jnp.where(e.unbounded[g], FULL_MASK, mask)
+    return jnp.where(t < bins.tile_start.shape[0], mask, 0)
+
+
+def pair_vectors(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """Hoisted V (Eq. 8) of every pair, relative to its tile's origin: (capacity, 6)."""
+    g, t = bins.gauss, bins.tile
+    origin = tile_origin(t % tiles_x, t // tiles_x, config, p.mean2d.dtype)
+    return hoist.hoist(p.mean2d[g], p.conic[g], jnp.log(p.opacity[g]), origin)
+
+
+def pixel_basis(lx, ly, px, py, config: RasterConfig):
+    """Pixel basis (Eq. 9) in the hoisting frame, from tile-local (lx, ly) and global (px, py)
+    pixel centres; None without hoisting."""
+    if not config.hoist:
+        return None
+    if not config.local_coords:
+        return hoist.basis(px, py)
+    off = TILE / 2 if config.origin == "center" else 0.0  # x' = pixel − origin: exact
+    return hoist.basis(lx - off, ly - off)
+
+
+def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
+    """(α, hit) of Gaussians g (n, G) at the pixels of n strips (n, P): arrays (n, P, G).
+
+    hoist: ln α = basis·V (Eq. 10) at Precision.HIGHEST, clamped at ln o; α = min(cap, e^{ln α});
+    hit = ln α >= ln(1/255) (the test in the log domain). Difference form otherwise, exactly as
+    lgs_jax.composite: hit = power <= 0 and α >= 1/255.
+    """
+    dt = p.mean2d.dtype
+    cap = jnp.asarray(config.alpha_cap, dt)
+    if config.hoist:
+        ln_a = jnp.einsum("spk,sgk->spg", basis, v, precision=HIGHEST)
+        ln_a = jnp.minimum(ln_a, jnp.log(p.opacity[g])[:, None, :])
+        return jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt))
+    m, q = p.mean2d[g], p.conic[g]
+    dx = m[:, None, :, 0] - px[:, :, None]
+    dy = m[:, None, :, 1] - py[:, :, None]
+    a, b, c = (q[:, None, :, i] for i in range(3))
+    power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
+    alpha = jnp.minimum(cap, p.opacity[g][:, None, :] * jnp.exp(power))
+    return alpha, (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+
+
+def strip_lists(bins: TileBins, masks, warp_cull: bool):
+    """Per strip (n_tiles·8, tile-major): list length and a function j -> pair index.
+
+    With warp_cull, strip s's list is the tile's pairs with bit s set: with cs[s] the inclusive
+    prefix count of bit s over all pairs, its j-th entry is the first k with cs[s][k] = base + j + 1,
+    found by one `searchsorted` on the 8 rows laid end to end (offset so they stay sorted).
+    """
+    start, end = bins.tile_start, bins.tile_end
+    if not warp_cull:
+        counts = jnp.repeat(end - start, STRIPS)
+        base = jnp.repeat(start, STRIPS)
+        return counts, lambda sid, j: base[sid][:, None] + j
+    cap = bins.gauss.shape[0]
+    if 8 * (cap + 1) >= 2**31:
+        raise ValueError(f"capacity: {cap} is too large for warp_cull strip lists (< 2^28)")
+    bits = (masks[None, :] >> jnp.arange(STRIPS, dtype=jnp.int32)[:, None]) & 1
+    cs = jnp.cumsum(bits, axis=1, dtype=jnp.int32)  # (8, cap) inclusive
+    cs0 = jnp.concatenate([jnp.zeros((STRIPS, 1), jnp.int32), cs], axis=1)
+    row = jnp.arange(STRIPS, dtype=jnp.int32)
+    base = cs0[row[None, :], start[:, None]]  # (n_tiles, 8)
+    counts = (cs0[row[None, :], end[:, None]] - base).reshape(-1)
+    base = base.reshape(-1)
+    flat = (cs + row[:, None] * (cap + 1)).reshape(-1)
+
+    def lookup(sid, j):
+        s = sid % STRIPS
+        want = s[:, None] * (cap + 1) + base[sid][:, None] + j + 1
+        return jnp.searchsorted(flat, want, side="left", method="scan").astype(jnp.int32) \
+            - s[:, None] * cap
+
+    return counts, lookup
+
+
+def _strip_pixels(sid, tiles_x: int, dtype):
+    """Pixel centres of strips `sid`, each (n, 32), row-major within a strip: tile-local
+    (lx, ly) relative to the tile corner, and global (px, py)."""
+    t, s = sid // STRIPS, sid % STRIPS
+    k = jnp.arange(STRIP_PIXELS)
+    lx = jnp.broadcast_to(k % TILE, (sid.shape[0], STRIP_PIXELS)) + 0.5
+    ly = 2 * s[:, None] + k // TILE + 0.5
+    px = (t % tiles_x)[:, None] * TILE + lx
+    py = (t // tiles_x)[:, None] * TILE + ly
+    return tuple(v.astype(dtype) for v in (lx, ly, px, py))
+
+
+def rasterize(p: Projected, bins: TileBins, width: int, height: int,
+              config: RasterConfig) -> tuple[PixelState, jax.Array]:
+    """Returns the (H·W,) pixel state and the number of strip–Gaussian pairs processed."""
+    dt = p.mean2d.dtype
+    tiles_x, tiles_y = tile_grid(width, height)
+    n_strips = tiles_x * tiles_y * STRIPS
+    n_groups = -(-n_strips // GROUP)
+    t_stop = jnp.asarray(T_STOP, dt)
+
+    masks = pair_masks(p, bins, tiles_x, config) if config.warp_cull else None
+    counts, lookup = strip_lists(bins, masks, config.warp_cull)
+    order = jnp.argsort(-counts, stable=True).astype(jnp.int32)
+    order = jnp.concatenate([order, jnp.zeros(n_groups * GROUP - n_strips, jnp.int32)])
+    counts_sorted = jnp.concatenate([counts[order[:n_strips]],
+                                     jnp.zeros(n_groups * GROUP - n_strips, jnp.int32)])
+    pair_v = pair_vectors(p, bins, tiles_x, config) if config.hoist else None
+
+    def stopped(trans):
+        return (trans <= t_stop) if config.stop_inclusive else (trans < t_stop)
+
+    def run_group(gi):
+        sid = lax.dynamic_slice(order, (gi * GROUP,), (GROUP,))
+        cnt = lax.dynamic_slice(counts_sorted, (gi * GROUP,), (GROUP,))
+        lx, ly, px, py = _strip_pixels(sid, tiles_x, dt)
+        basis = pixel_basis(lx, ly, px, py, config)
+        n_chunks = (cnt[0] + CHUNK - 1) // CHUNK
+
+        def active(c, state):
+            more = c * CHUNK < cnt
+            if config.blend == "exact":
+                return more & ~jnp.all(state.done, -1)
+            return more & ~jnp.all(stopped(state.trans), -1)
+
+        def cond(carry):
+            c, state = carry
+            return (c < n_chunks) & jnp.any(active(c, state))
+
+        def body(carry):
+            c, state = carry
+            j = c * CHUNK + jnp.arange(CHUNK, dtype=jnp.int32)
+            valid = (j[None, :] < cnt[:, None]) & active(c, state)[:, None]
+            k = jnp.clip(lookup(sid, j[None, :]), 0, bins.gauss.shape[0] - 1)  # (GROUP, CHUNK)
+            g = bins.gauss[k]
+            alpha, hit = evaluate(p, g, pair_v[k] if config.hoist else None, basis, px, py,
+                                  config)
+            hit = hit & valid[:, None, :]
+            if config.blend == "exact":
+                hit = hit & ~state.done[:, :, None]
+            keep = jnp.where(hit, 1 - alpha, 1)
+            cp = jnp.cumprod(keep, axis=-1)
+            t0 = state.trans[:, :, None]
+            t_after = t0 * cp
+            t_before = t0 * jnp.concatenate([jnp.ones_like(cp[..., :1]), cp[..., :-1]], -1)
+            if config.blend == "exact":
+                stop = hit & stopped(t_after)
+                first = jnp.cumsum(stop, axis=-1, dtype=jnp.int32)
+                blended = hit & (first == 0)
+                any_stop = first[..., -1] > 0
+                k_stop = jnp.argmax(stop, axis=-1)
+                t_new = jnp.where(any_stop,
+                                  jnp.take_along_axis(t_before, k_stop[..., None], -1)[..., 0],
+                                  t_after[..., -1])
+                done = state.done | any_stop
+            else:
+                blended = hit
+                t_new, done = t_after[..., -1], state.done
+            w = jnp.where(blended, alpha * t_before, 0)
+            color = state.color + jnp.einsum("spg,sgc->spc", w, p.rgb[g], precision=HIGHEST)
+            depth = state.depth + jnp.einsum("spg,sg->sp", w, p.depth[g], precision=HIGHEST)
+            return c + 1, PixelState(color=color, trans=t_new, depth=depth, done=done)
+
+        init = PixelState(color=jnp.zeros((GROUP, STRIP_PIXELS, 3), dt),
+                          trans=jnp.ones((GROUP, STRIP_PIXELS), dt),
+                          depth=jnp.zeros((GROUP, STRIP_PIXELS), dt),
+                          done=jnp.zeros((GROUP, STRIP_PIXELS), bool))
+        return lax.while_loop(cond, body, (jnp.int32(0), init))[1]
+
+    def group_cond(carry):
+        gi, _ = carry
+        return (gi < n_groups) & (counts_sorted[jnp.minimum(gi, n_groups - 1) * GROUP] > 0)
+
+    def group_body(carry):
+        gi, out = carry
+        state = run_group(gi)
+        out = jax.tree.map(lambda o, s: lax.dynamic_update_slice_in_dim(o, s, gi * GROUP, 0),
+                           out, state)
+        return gi + 1, out
+
+    out = PixelState(color=jnp.zeros((n_groups * GROUP, STRIP_PIXELS, 3), dt),
+                     trans=jnp.ones((n_groups * GROUP, STRIP_PIXELS), dt),
+                     depth=jnp.zeros((n_groups * GROUP, STRIP_PIXELS), dt),
+                     done=jnp.zeros((n_groups * GROUP, STRIP_PIXELS), bool))
+    out = lax.while_loop(group_cond, group_body, (jnp.int32(0), out))[1]
+    inverse = jnp.argsort(order[:n_strips]).astype(jnp.int32)  # strip id -> sorted position
+    # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
+    state = jax.tree.map(lambda x: x[inverse].reshape((tiles_x * tiles_y, TILE * TILE)
+                                                      + x.shape[2:]), out)
+    state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)
+    return state, jnp.sum(counts)

@@ -1,0 +1,47 @@
+"""Gaussian parameter hoisting (Local-GS Sec. III-B, Eq. 1–10).
+
+With the tile origin T (the tile's top-left corner, Eq. 1, or its centre) and Δ = μ − T (Eq. 2),
+
+    ln α = ln o − ½[a(x' − Δx)² + 2b(x' − Δx)(y' − Δy) + c(y' − Δy)²]          (Eq. 6)
+         = A x'² + B x'y' + C y'² + D x' + E y' + F                           (Eq. 7)
+
+    [A, B, C, D, E, F] = [−½a, −b, −½c, aΔx + bΔy, bΔx + cΔy,
+                          −½aΔx² − bΔxΔy − ½cΔy² + ln o]                      (Eq. 8)
+
+so per-pixel ln α is one dot product V·[x'², x'y', y'², x', y', 1] (Eq. 9–10). In global
+coordinates (`local_coords=False`) T = (0, 0) and x' is the global pixel centre.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def hoist(mean2d, conic, log_opacity, origin):
+    """The hoisted 6-vector V (Eq. 8) of Gaussians (..., ) relative to tile origins (..., 2)."""
+    a, b, c = conic[..., 0], conic[..., 1], conic[..., 2]
+    dx, dy = mean2d[..., 0] - origin[..., 0], mean2d[..., 1] - origin[..., 1]
+    return jnp.stack([
+        -0.5 * a, -b, -0.5 * c,
+        a * dx + b * dy, b * dx + c * dy,
+        -0.5 * a * dx * dx - b * dx * dy - 0.5 * c * dy * dy + log_opacity,
+    ], axis=-1)
+
+
+def basis(x, y):
+    """The local pixel basis B = [x'², x'y', y'², x', y', 1] (Eq. 9) at coordinates (x', y')."""
+    return jnp.stack([x * x, x * y, y * y, x, y, jnp.ones_like(x)], axis=-1)
+
+
+def error_bound(mean2d, conic, log_opacity, origin, reach_x, reach_y, gamma):
+    """Bound on |fl(V·B) − ln α| over pixels with |x'| <= reach_x, |y'| <= reach_y.
+
+    Every term of Eq. 7, and every term formed while computing V (Eq. 8), is bounded by the
+    corresponding term of ½a(|Δx| + X)² + |b|(|Δx| + X)(|Δy| + Y) + ½c(|Δy| + Y)² + |ln o|; the
+    float evaluation of V and the 6-term dot product errs by at most γ times that sum
+    (γ = 16u is generous for both).
+    """
+    a, b, c = conic[..., 0], jnp.abs(conic[..., 1]), conic[..., 2]
+    dx = jnp.abs(mean2d[..., 0] - origin[..., 0]) + reach_x
+    dy = jnp.abs(mean2d[..., 1] - origin[..., 1]) + reach_y
+    return gamma * (0.5 * a * dx * dx + b * dx * dy + 0.5 * c * dy * dy + jnp.abs(log_opacity))
