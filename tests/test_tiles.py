@@ -136,7 +136,7 @@ def _check_masks(p, config, capacity=4096):
         v = None if vecs is None else jnp.broadcast_to(vecs[k], (STRIPS, 1, 6))
         inside = (px < W) & (py < H)  # edge tiles: pixels past the image are never shown
         _, hit = tiles.evaluate(p, g, v, basis, px, py, config)
-        return jnp.any(hit[..., 0] & inside, axis=-1)  # (8,)
+        return jnp.any(hit[0] & inside, axis=-1)  # (8,)
 
     hits = np.asarray(jax.jit(jax.vmap(strip_hits))(jnp.arange(capacity)))[:n]
     bits = (masks[:, None] >> np.arange(STRIPS)) & 1

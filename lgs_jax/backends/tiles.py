@@ -47,8 +47,8 @@ from ..projection import Projected
 from ..warp_masks import FULL_MASK, STRIPS, strip_mask
 from .reference import tiles_to_image
 
-GROUP = 32  # strips processed together
-CHUNK = 32  # Gaussians per step
+GROUP = 256  # strips processed together
+CHUNK = 16  # Gaussians per staged batch
 STRIP_PIXELS = 2 * TILE
 HIGHEST = lax.Precision.HIGHEST
 
@@ -100,7 +100,7 @@ def pixel_basis(lx, ly, px, py, config: RasterConfig):
 
 
 def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
-    """(α, hit) of Gaussians g (n, G) at the pixels of n strips (n, P): arrays (n, P, G).
+    """(α, hit) of Gaussians g (n, G) at the pixels of n strips (n, P): arrays (G, n, P).
 
     hoist: ln α = basis·V (Eq. 10) at Precision.HIGHEST, clamped at ln o; α = min(cap, e^{ln α});
     hit = ln α >= ln(1/255) (the test in the log domain). Difference form otherwise, exactly as
@@ -109,24 +109,60 @@ def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
     dt = p.mean2d.dtype
     cap = jnp.asarray(config.alpha_cap, dt)
     if config.hoist:
-        ln_a = jnp.einsum("spk,sgk->spg", basis, v, precision=HIGHEST)
-        ln_a = jnp.minimum(ln_a, jnp.log(p.opacity[g])[:, None, :])
+        ln_a = jnp.einsum("spk,sgk->gsp", basis, v, precision=HIGHEST)
+        ln_a = jnp.minimum(ln_a, jnp.log(p.opacity[g]).T[:, :, None])
         return jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt))
-    m, q = p.mean2d[g], p.conic[g]
-    dx = m[:, None, :, 0] - px[:, :, None]
-    dy = m[:, None, :, 1] - py[:, :, None]
-    a, b, c = (q[:, None, :, i] for i in range(3))
+    m, q = jnp.swapaxes(p.mean2d[g], 0, 1), jnp.swapaxes(p.conic[g], 0, 1)  # (G, n, ...)
+    dx = m[:, :, None, 0] - px[None]
+    dy = m[:, :, None, 1] - py[None]
+    a, b, c = (q[:, :, None, i] for i in range(3))
     power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-    alpha = jnp.minimum(cap, p.opacity[g][:, None, :] * jnp.exp(power))
+    alpha = jnp.minimum(cap, p.opacity[g].T[:, :, None] * jnp.exp(power))
     return alpha, (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
 
 
-def strip_lists(bins: TileBins, masks, warp_cull: bool):
-    """Per strip (n_tiles·8, tile-major): list length and a function j -> pair index.
+def blend_chunk(state: PixelState, alpha, hit, feats, config: RasterConfig) -> PixelState:
+    """Blend a chunk of Gaussians, in order, over strips of pixels (Algorithm 1).
 
-    With warp_cull, strip s's list is the tile's pairs with bit s set: with cs[s] the inclusive
-    prefix count of bit s over all pairs, its j-th entry is the first k with cs[s][k] = base + j + 1,
-    found by one `searchsorted` on the 8 rows laid end to end (offset so they stay sorted).
+    alpha, hit: (G, n, P) per Gaussian and pixel (Gaussian-major); feats: (G, n, 4) colour and
+    depth per Gaussian. A `lax.scan` over the G Gaussians: each step is one fused elementwise
+    pass over the n·P pixels.
+
+    exact: test_T = T·(1 − α); stop (not blended) if test_T < 1e-4 (<= for gsplat), else
+           C += f·α·T, T = test_T: the contract's per-pixel semantics, the reference arithmetic.
+    fast:  w = α·T; C += f·w; T −= w for every hit (the paper's branch-free loop); no per-pixel
+           stop: the caller ends a strip when all its pixels have T < 1e-4.
+    """
+    dt = state.trans.dtype
+    t_stop = jnp.asarray(T_STOP, dt)
+
+    def step(st: PixelState, x):
+        a, h, f = x
+        f = f[:, None, :]  # (n, 1, 4)
+        if config.blend == "exact":
+            h = h & ~st.done
+            test_t = st.trans * (1 - a)
+            stop = (test_t <= t_stop) if config.stop_inclusive else (test_t < t_stop)
+            take = h & ~stop
+            w = jnp.where(take, a * st.trans, 0)
+            trans = jnp.where(take, test_t, st.trans)
+            done = st.done | (h & stop)
+        else:
+            w = jnp.where(h, a * st.trans, 0)
+            trans, done = st.trans - w, st.done
+        return PixelState(color=st.color + w[..., None] * f[..., :3], trans=trans,
+                          depth=st.depth + w * f[..., 3], done=done), None
+
+    return lax.scan(step, state, (alpha, hit, feats))[0]
+
+
+def strip_lists(bins: TileBins, masks, warp_cull: bool):
+    """Per strip (n_tiles·8, tile-major): list length and a function (sid, j) -> pair index.
+
+    With warp_cull, strip s's list is its tile's pairs with bit s set, in order. They are emitted
+    once into a buffer of 8·capacity slots: pair k goes to slot strip_start + (number of earlier
+    pairs of the tile with bit s set), an exclusive prefix count. Every written slot is distinct,
+    so the scatter is a plain deterministic store (no accumulation, no atomics).
     """
     start, end = bins.tile_start, bins.tile_end
     if not warp_cull:
@@ -134,24 +170,25 @@ def strip_lists(bins: TileBins, masks, warp_cull: bool):
         base = jnp.repeat(start, STRIPS)
         return counts, lambda sid, j: base[sid][:, None] + j
     cap = bins.gauss.shape[0]
-    if 8 * (cap + 1) >= 2**31:
+    if STRIPS * cap >= 2**31:
         raise ValueError(f"capacity: {cap} is too large for warp_cull strip lists (< 2^28)")
-    bits = (masks[None, :] >> jnp.arange(STRIPS, dtype=jnp.int32)[:, None]) & 1
-    cs = jnp.cumsum(bits, axis=1, dtype=jnp.int32)  # (8, cap) inclusive
-    cs0 = jnp.concatenate([jnp.zeros((STRIPS, 1), jnp.int32), cs], axis=1)
+    n_tiles = start.shape[0]
+    bits = (masks[None, :] >> jnp.arange(STRIPS, dtype=jnp.int32)[:, None]) & 1  # (8, cap)
+    before = jnp.cumsum(bits, axis=1, dtype=jnp.int32) - bits  # exclusive prefix count
+    before_end = jnp.concatenate([before, (before[:, -1] + bits[:, -1])[:, None]], axis=1)
     row = jnp.arange(STRIPS, dtype=jnp.int32)
-    base = cs0[row[None, :], start[:, None]]  # (n_tiles, 8)
-    counts = (cs0[row[None, :], end[:, None]] - base).reshape(-1)
-    base = base.reshape(-1)
-    flat = (cs + row[:, None] * (cap + 1)).reshape(-1)
-
-    def lookup(sid, j):
-        s = sid % STRIPS
-        want = s[:, None] * (cap + 1) + base[sid][:, None] + j + 1
-        return jnp.searchsorted(flat, want, side="left", method="scan").astype(jnp.int32) \
-            - s[:, None] * cap
-
-    return counts, lookup
+    base = before_end[row[None, :], start[:, None]]  # (n_tiles, 8)
+    counts = (before_end[row[None, :], end[:, None]] - base).reshape(-1)
+    strip_start = jnp.cumsum(counts, dtype=jnp.int32) - counts
+    tile = jnp.minimum(bins.tile, n_tiles - 1)
+    sid = tile[None, :] * STRIPS + row[:, None]  # (8, cap)
+    slot = strip_start[sid] + before - base.reshape(-1)[sid]
+    slot = jnp.where(bits == 1, slot, STRIPS * cap)  # cleared bits: dropped
+    pair = jnp.broadcast_to(jnp.arange(cap, dtype=jnp.int32), (STRIPS, cap))
+    lists = jnp.zeros(STRIPS * cap, jnp.int32).at[slot.reshape(-1)].set(
+        pair.reshape(-1), mode="drop", unique_indices=True)
+    return counts, lambda sid, j: lists[jnp.minimum(strip_start[sid][:, None] + j,
+                                                    STRIPS * cap - 1)]
 
 
 def _strip_pixels(sid, tiles_x: int, dtype):
@@ -211,31 +248,9 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int,
             g = bins.gauss[k]
             alpha, hit = evaluate(p, g, pair_v[k] if config.hoist else None, basis, px, py,
                                   config)
-            hit = hit & valid[:, None, :]
-            if config.blend == "exact":
-                hit = hit & ~state.done[:, :, None]
-            keep = jnp.where(hit, 1 - alpha, 1)
-            cp = jnp.cumprod(keep, axis=-1)
-            t0 = state.trans[:, :, None]
-            t_after = t0 * cp
-            t_before = t0 * jnp.concatenate([jnp.ones_like(cp[..., :1]), cp[..., :-1]], -1)
-            if config.blend == "exact":
-                stop = hit & stopped(t_after)
-                first = jnp.cumsum(stop, axis=-1, dtype=jnp.int32)
-                blended = hit & (first == 0)
-                any_stop = first[..., -1] > 0
-                k_stop = jnp.argmax(stop, axis=-1)
-                t_new = jnp.where(any_stop,
-                                  jnp.take_along_axis(t_before, k_stop[..., None], -1)[..., 0],
-                                  t_after[..., -1])
-                done = state.done | any_stop
-            else:
-                blended = hit
-                t_new, done = t_after[..., -1], state.done
-            w = jnp.where(blended, alpha * t_before, 0)
-            color = state.color + jnp.einsum("spg,sgc->spc", w, p.rgb[g], precision=HIGHEST)
-            depth = state.depth + jnp.einsum("spg,sg->sp", w, p.depth[g], precision=HIGHEST)
-            return c + 1, PixelState(color=color, trans=t_new, depth=depth, done=done)
+            hit = hit & valid.T[:, :, None]
+            feats = jnp.concatenate([p.rgb[g.T], p.depth[g.T][..., None]], -1)  # (CHUNK, GROUP, 4)
+            return c + 1, blend_chunk(state, alpha, hit, feats, config)
 
         init = PixelState(color=jnp.zeros((GROUP, STRIP_PIXELS, 3), dt),
                           trans=jnp.ones((GROUP, STRIP_PIXELS), dt),

@@ -1,0 +1,163 @@
+"""Run time against error: every backend and Local-GS ablation on the same scene and camera.
+
+    python -m lgs_jax.bench [--scene SPEC ...] [--repeat N] [--csv FILE] [--no-error]
+    python -m lgs_jax.bench --preset cpu --csv bench_cpu.csv
+
+A scene SPEC is `NAME=PLY:CAMERAS@WxH[#VIEW]` (cameras rescaled to WxH), `default@WxH`, or
+`synthetic:N@WxH`. Each row reports the median time of `--repeat` calls after a warm-up call
+(compile time separately), tile–Gaussian and strip–Gaussian pairs, and the error against the
+float64 reference backend (max abs and PSNR over the image).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import os
+import platform
+import statistics
+import sys
+import time
+
+import jax
+import numpy as np
+
+from .config import RasterConfig
+
+C = RasterConfig
+ROWS = {  # name -> (backend, config); the tiles rows are the paper's Table IV and Table V
+    "reference": ("reference", C()),
+    "tiles:baseline": ("tiles", C(hoist=False, warp_cull=False)),
+    "tiles:+hoisting": ("tiles", C(warp_cull=False)),
+    "tiles:+warp_culling": ("tiles", C()),
+    "tiles:+coherent_blending": ("tiles", C(blend="fast")),
+    "tiles:difference+culling": ("tiles", C(hoist=False)),
+    "tiles:local_center": ("tiles", C(origin="center")),
+    "tiles:global_coords": ("tiles", C(local_coords=False)),
+}
+PRESETS = {
+    "cpu": ["guitar=../shared/data/guitar/guitar.ply:../shared/data/guitar/orbit_cameras.json"
+            "@640x360",
+            "lego_sh3=../shared/data/lego_sh3/lego_sh3.ply:../shared/data/lego_sh3/"
+            "lego_cameras.json@400x400",
+            "synthetic:100000@640x360"],
+}
+
+
+@dataclasses.dataclass
+class Case:
+    name: str
+    scene: object
+    camera: object
+
+
+def parse_scene(spec: str) -> Case:
+    from . import default_camera, default_scene, load_cameras, load_ply
+    from .synthetic import random_scene, synthetic_camera
+
+    spec, _, size = spec.partition("@")
+    view = 0
+    if "#" in size:
+        size, view = size.split("#")
+        view = int(view)
+    width, height = (int(v) for v in size.split("x")) if size else (None, None)
+    if spec == "default":
+        return Case("default", default_scene(), default_camera(view, width, height))
+    if spec.startswith("synthetic:"):
+        n = int(spec.split(":")[1])
+        return Case(f"synthetic{n}", random_scene(n), synthetic_camera(width or 1280,
+                                                                        height or 720))
+    name, _, paths = spec.partition("=")
+    ply, _, cams = paths.partition(":")
+    return Case(name, load_ply(ply), load_cameras(cams, width=width, height=height)[view])
+
+
+def _time(f, *args, repeat: int):
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(f(*args))
+    compile_s = time.perf_counter() - t0
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(f(*args))
+        times.append(time.perf_counter() - t0)
+    return out, compile_s, statistics.median(times)
+
+
+def run_case(case: Case, rows, repeat: int, with_error: bool):
+    from . import render
+
+    g, cam = case.scene, case.camera
+    first = render(g, cam)
+    cap = int(first.stats.capacity)
+    truth = None
+    if with_error:
+        g64 = jax.tree.map(lambda x: np.asarray(x, np.float64), g)
+        truth = np.asarray(render(g64, cam, capacity=cap).image)
+    results = []
+    for name in rows:
+        backend, config = ROWS[name]
+        f = jax.jit(lambda g, c, b=backend, cf=config: render(g, c, backend=b, config=cf,
+                                                             capacity=cap))
+        out, compile_s, median_s = _time(f, g, cam, repeat=repeat)
+        row = dict(scene=case.name, width=cam.width, height=cam.height, gaussians=g.num,
+                   row=name, median_ms=1e3 * median_s, compile_s=compile_s,
+                   pairs=int(out.stats.pairs_required), strip_pairs=int(out.stats.strip_pairs))
+        if truth is not None:
+            err = np.abs(np.asarray(out.image, np.float64) - truth)
+            mse = float(np.mean(err**2))
+            row.update(max_abs_err=float(err.max()),
+                       psnr_db=float("inf") if mse == 0 else -10 * np.log10(mse))
+        results.append(row)
+        print(_format(row), flush=True)
+    ref = next((r for r in results if r["row"] == "reference"), None)
+    if ref:
+        for r in results:
+            r["speedup_vs_reference"] = ref["median_ms"] / r["median_ms"]
+    return results
+
+
+def _format(r):
+    err = (f"  max|err| {r['max_abs_err']:.2e}  PSNR {r['psnr_db']:6.1f} dB"
+           if "max_abs_err" in r else "")
+    return (f"{r['scene']:>16s} {r['width']}x{r['height']} {r['row']:<26s} "
+            f"{r['median_ms']:9.1f} ms (compile {r['compile_s']:5.1f} s)  pairs {r['pairs']:>9d} "
+            f"strip-pairs {r['strip_pairs']:>10d}{err}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m lgs_jax.bench", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scene", action="append", default=[], help="scene SPEC (repeatable)")
+    ap.add_argument("--preset", choices=sorted(PRESETS))
+    ap.add_argument("--rows", nargs="+", default=list(ROWS), choices=list(ROWS))
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--no-error", action="store_true", help="skip the float64 reference")
+    ap.add_argument("--csv", help="write rows to this CSV file")
+    args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # for the float64 ground truth; renders stay f32
+    specs = args.scene + (PRESETS[args.preset] if args.preset else [])
+    if not specs:
+        specs = ["default@640x360"]
+    dev = jax.devices()[0]
+    print(f"device {dev.platform} ({dev.device_kind}); {os.cpu_count()} CPUs; JAX {jax.__version__};"
+          f" Python {platform.python_version()}")
+    rows = []
+    for spec in specs:
+        rows += run_case(parse_scene(spec), args.rows, args.repeat, not args.no_error)
+    print("\nspeedup vs reference (same run):")
+    for r in rows:
+        if "speedup_vs_reference" in r:
+            print(f"  {r['scene']:>16s} {r['row']:<26s} {r['speedup_vs_reference']:6.2f}x")
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=sorted({k for r in rows for k in r}))
+            w.writeheader()
+            w.writerows(rows)
+        print(f"wrote {args.csv}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
