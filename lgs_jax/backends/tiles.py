@@ -82,10 +82,13 @@ def pair_masks(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig)
 
 
 def pair_vectors(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
-    """Hoisted V (Eq. 8) of every pair, relative to its tile's origin: (capacity, 6)."""
+    """What each pair stages (capacity, 7): the hoisted V (Eq. 8) relative to its tile's origin,
+    then ln o (the clamp of ln α)."""
     g, t = bins.gauss, bins.tile
     origin = tile_origin(t % tiles_x, t // tiles_x, config, p.mean2d.dtype)
-    return hoist.hoist(p.mean2d[g], p.conic[g], jnp.log(p.opacity[g]), origin)
+    log_o = jnp.log(p.opacity[g])
+    return jnp.concatenate([hoist.hoist(p.mean2d[g], p.conic[g], log_o, origin),
+                            log_o[:, None]], -1)
 
 
 def pixel_basis(lx, ly, px, py, config: RasterConfig):
@@ -102,15 +105,16 @@ def pixel_basis(lx, ly, px, py, config: RasterConfig):
 def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
     """(α, hit) of Gaussians g (n, G) at the pixels of n strips (n, P): arrays (G, n, P).
 
-    hoist: ln α = basis·V (Eq. 10) at Precision.HIGHEST, clamped at ln o; α = min(cap, e^{ln α});
+    hoist: with v (n, G, 7) from `pair_vectors`, ln α = basis·V (Eq. 10) at Precision.HIGHEST,
+    clamped at ln o; α = min(cap, e^{ln α});
     hit = ln α >= ln(1/255) (the test in the log domain). Difference form otherwise, exactly as
     lgs_jax.composite: hit = power <= 0 and α >= 1/255.
     """
     dt = p.mean2d.dtype
     cap = jnp.asarray(config.alpha_cap, dt)
     if config.hoist:
-        ln_a = jnp.einsum("spk,sgk->gsp", basis, v, precision=HIGHEST)
-        ln_a = jnp.minimum(ln_a, jnp.log(p.opacity[g]).T[:, :, None])
+        ln_a = jnp.einsum("spk,sgk->gsp", basis, v[..., :6], precision=HIGHEST)
+        ln_a = jnp.minimum(ln_a, v[..., 6].T[:, :, None])
         return jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt))
     m, q = jnp.swapaxes(p.mean2d[g], 0, 1), jnp.swapaxes(p.conic[g], 0, 1)  # (G, n, ...)
     dx = m[:, :, None, 0] - px[None]
@@ -219,6 +223,7 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int,
     counts_sorted = jnp.concatenate([counts[order[:n_strips]],
                                      jnp.zeros(n_groups * GROUP - n_strips, jnp.int32)])
     pair_v = pair_vectors(p, bins, tiles_x, config) if config.hoist else None
+    feats = jnp.concatenate([p.rgb, p.depth[:, None]], -1)  # (N, 4): colour and depth
 
     def stopped(trans):
         return (trans <= t_stop) if config.stop_inclusive else (trans < t_stop)
@@ -249,8 +254,7 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int,
             alpha, hit = evaluate(p, g, pair_v[k] if config.hoist else None, basis, px, py,
                                   config)
             hit = hit & valid.T[:, :, None]
-            feats = jnp.concatenate([p.rgb[g.T], p.depth[g.T][..., None]], -1)  # (CHUNK, GROUP, 4)
-            return c + 1, blend_chunk(state, alpha, hit, feats, config)
+            return c + 1, blend_chunk(state, alpha, hit, feats[g.T], config)
 
         init = PixelState(color=jnp.zeros((GROUP, STRIP_PIXELS, 3), dt),
                           trans=jnp.ones((GROUP, STRIP_PIXELS), dt),
