@@ -137,18 +137,22 @@ class TileBins:
     n_unbounded: Any
 
 
-def count_pairs(p: Projected, width: int, height: int):
-    """Number of tile–Gaussian pairs, exact below 2^31 and saturated at 2^31 − 1 above.
+def total_pairs(counts):
+    """Σ counts, exact below 2^31 and saturated at 2^31 − 1 above.
 
-    Per-Gaussian counts are < 2^24 (tiles per image are validated), so the float64-free total is
-    estimated in float32 first: an int32 cumsum is exact whenever that estimate is below 2^31·(1 −
-    2^-10), a margin far above float32's summation error for any N that fits in memory.
+    Per-Gaussian counts are < 2^24 (tiles per image are validated), so the total is estimated in
+    float32 first: an int32 sum is exact whenever that estimate is below 2^31·(1 − 2^-10), a
+    margin far above float32's summation error for any N that fits in memory.
     """
-    _, _, nx, ny, _ = tile_rects(p, width, height)
-    counts = nx * ny
     estimate = jnp.sum(counts.astype(jnp.float32))
     fits = estimate < 2.0**31 * (1 - 2.0**-10)
-    return jnp.where(fits, jnp.sum(counts), MAX_PAIRS).astype(jnp.int32), counts
+    return jnp.where(fits, jnp.sum(counts), MAX_PAIRS).astype(jnp.int32)
+
+
+def count_pairs(p: Projected, width: int, height: int):
+    """Number of tile–Gaussian pairs the scene needs (see `total_pairs`)."""
+    _, _, nx, ny, _ = tile_rects(p, width, height)
+    return total_pairs(nx * ny)
 
 
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
@@ -163,7 +167,8 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileB
     tiles_x, tiles_y = tile_grid(width, height)
     n_tiles = tiles_x * tiles_y
     tx0, ty0, nx, ny, unbounded = tile_rects(p, width, height)
-    total, counts = count_pairs(p, width, height)
+    counts = nx * ny
+    total = total_pairs(counts)
     n = counts.shape[0]
     order = depth_order(p)
     counts_sorted = counts[order]

@@ -32,9 +32,17 @@ class PixelState:
     done: Any  # (P,) bool: the stop test fired
 
     @classmethod
-    def empty(cls, num_pixels: int, dtype) -> "PixelState":
-        return cls(color=jnp.zeros((num_pixels, 3), dtype), trans=jnp.ones((num_pixels,), dtype),
-                   depth=jnp.zeros((num_pixels,), dtype), done=jnp.zeros((num_pixels,), bool))
+    def empty(cls, shape, dtype) -> "PixelState":
+        """Nothing blended yet (T = 1) for pixels of the given shape (int or tuple)."""
+        shape = (shape,) if isinstance(shape, int) else tuple(shape)
+        return cls(color=jnp.zeros(shape + (3,), dtype), trans=jnp.ones(shape, dtype),
+                   depth=jnp.zeros(shape, dtype), done=jnp.zeros(shape, bool))
+
+
+def stops(trans, config: RasterConfig):
+    """The stop test on a (candidate) transmittance: T < 1e-4, or T <= 1e-4 for gsplat."""
+    t_stop = jnp.asarray(T_STOP, trans.dtype)
+    return (trans <= t_stop) if config.stop_inclusive else (trans < t_stop)
 
 
 def gaussian_alpha(mean2d, conic, opacity, px, py, cap):
@@ -52,8 +60,7 @@ def blend(state: PixelState, mean2d, conic, opacity, rgb, depth, active, px, py,
     power, alpha = gaussian_alpha(mean2d, conic, opacity, px, py, jnp.asarray(config.alpha_cap, dt))
     hit = active & ~state.done & (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
     test_t = state.trans * (1 - alpha)
-    t_stop = jnp.asarray(T_STOP, dt)
-    stop = (test_t <= t_stop) if config.stop_inclusive else (test_t < t_stop)
+    stop = stops(test_t, config)
     take = hit & ~stop
     w = jnp.where(take, alpha * state.trans, 0)
     return PixelState(color=state.color + w[:, None] * rgb, trans=jnp.where(take, test_t, state.trans),

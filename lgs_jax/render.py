@@ -94,7 +94,7 @@ def _is_traced(tree) -> bool:
 
 @functools.partial(jax.jit, static_argnames=("width", "height"))
 def _count(g: Gaussians, cam: Camera, width: int, height: int):
-    return binning.count_pairs(project(g, cam), width, height)[0]
+    return binning.count_pairs(project(g, cam), width, height)
 
 
 def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
