@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-DEFAULT_BACKEND = "reference"  # the fastest exact backend available
+DEFAULT_BACKEND = "tiles"  # the fastest exact backend available (exact blending by default)
 
 
 def _render(args) -> int:

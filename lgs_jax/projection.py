@@ -61,8 +61,13 @@ def quat_to_rotmat(q):
 
 
 def _matmul(a, b):
-    """Batched a @ b as explicit multiply-adds (exact float32 on GPUs, no TF32)."""
-    return jnp.sum(a[..., :, :, None] * b[..., None, :, :], axis=-2)
+    """Batched a @ b for tiny matrices, unrolled into elementwise multiply-adds: exact float32 on
+    GPUs (no TF32), and fused by XLA (a broadcast-and-sum becomes a slow batched dot on CPU)."""
+    rows = []
+    for i in range(a.shape[-2]):
+        rows.append(jnp.stack([sum(a[..., i, l] * b[..., l, j] for l in range(a.shape[-1]))
+                               for j in range(b.shape[-1])], -1))
+    return jnp.stack(rows, -2)
 
 
 def camera_center(viewmat):
@@ -146,4 +151,4 @@ def depth_order(p: Projected):
     """Gaussian indices sorted by (depth, index), valid Gaussians first (conventions.md, "Order")."""
     idx = jnp.arange(p.depth.shape[0], dtype=jnp.int32)
     key = jnp.where(p.valid, p.depth, jnp.inf)
-    return jax.lax.sort((key, idx), num_keys=2)[1]
+    return jax.lax.sort((key, idx), num_keys=1, is_stable=True)[1]  # stable: ties by index
