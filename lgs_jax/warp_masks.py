@@ -28,7 +28,7 @@ STRIPS = TILE // 2  # eight 16x2 strips per tile
 FULL_MASK = (1 << STRIPS) - 1
 
 
-def tight_box(mean2d, conic, tau, det, x0, x1):
+def tight_box(conic, tau, det, x0, x1):
     """(ỹ_min, ỹ_max, empty) of the ellipse q <= τ over the column x̃ ∈ [x̃0, x̃1] (Eq. 14–19).
 
     All arguments broadcast; `det` must be a positive lower bound of ac − b². The result is padded
@@ -64,8 +64,7 @@ def strip_mask(mean2d, conic, tau, det, tile_x, tile_y):
     left = (tile_x * TILE).astype(dt) + 0.5  # pixel-centre columns of the tile
     right = left + (TILE - 1)
     slack_x = 4 * u * (jnp.abs(left) + TILE + jnp.abs(mx))
-    y_min, y_max, empty = tight_box(mean2d, conic, tau, det, left - mx - slack_x,
-                                    right - mx + slack_x)
+    y_min, y_max, empty = tight_box(conic, tau, det, left - mx - slack_x, right - mx + slack_x)
     top = (tile_y * TILE).astype(dt)
     slack_y = 8 * u * (jnp.abs(my) + jnp.maximum(jnp.abs(y_min), jnp.abs(y_max)) + 1.0)
     lo = jnp.clip(my + y_min - 0.5 - slack_y - top, -1.0, TILE)  # tile-local rows
