@@ -279,10 +279,13 @@ def test_global_coordinates_show_float32_cancellation():
 # ------------------------------------------------------------------ API behaviour
 
 def test_tiles_under_vmap_and_repeated_calls_are_bit_identical():
-    """A vmapped batch equals each view rendered alone, bit for bit, and repeated calls agree.
+    """Repeated calls agree bit for bit (everywhere), and a vmapped batch equals each view
+    rendered alone: bit for bit on CPUs; on GPUs within 2 ulps, because XLA compiles the batched
+    program's fusions differently and contracts different multiply-adds into FMAs (measured on
+    the H100: 1% of pixels differ by 1 ulp; BENCHMARKS.md).
 
-    Scene and background are arguments in both programs: folded in as constants, XLA compiles
-    different arithmetic (on GPUs, different FMA contraction) and the last bit may differ."""
+    Scene and background are arguments in both programs: folded in as constants, XLA would
+    compile different arithmetic even on CPUs."""
     g = scenes.cast(scenes.scene(9), np.float32)
     bg = np.array([0.2, 0.5, 0.9], np.float32)
     cams = [scenes.camera(yaw=y) for y in (-0.2, 0.25)]
@@ -292,7 +295,10 @@ def test_tiles_under_vmap_and_repeated_calls_are_bit_identical():
     for i, cam in enumerate(cams):
         one = lgs_jax.render(g, cam, background=bg, backend="tiles", capacity=4096)
         again = lgs_jax.render(g, cam, background=bg, backend="tiles", capacity=4096)
-        np.testing.assert_array_equal(batch.image[i], one.image)
+        if jax.default_backend() == "cpu":
+            np.testing.assert_array_equal(batch.image[i], one.image)
+        else:
+            np.testing.assert_allclose(batch.image[i], one.image, rtol=2.0**-22, atol=2e-7)
         np.testing.assert_array_equal(again.image, one.image)
         assert one.stats.backend == "tiles"
 
