@@ -53,11 +53,16 @@ STRIP_PIXELS = 2 * TILE
 HIGHEST = lax.Precision.HIGHEST
 
 
+def _origin_offset(config: RasterConfig) -> float:
+    """Offset of the tile-local origin from the tile corner, in pixels (both axes)."""
+    return TILE / 2 if config.origin == "center" else 0.0
+
+
 def tile_origin(tile_x, tile_y, config: RasterConfig, dtype):
     """Origin T of the hoisting frame (Eq. 1): tile corner or centre; (0, 0) for global coords."""
     if not config.local_coords:
         return jnp.zeros(jnp.shape(tile_x) + (2,), dtype)
-    off = TILE / 2 if config.origin == "center" else 0.0
+    off = _origin_offset(config)
     return jnp.stack([tile_x * TILE + off, tile_y * TILE + off], -1).astype(dtype)
 
 
@@ -98,7 +103,7 @@ def pixel_basis(lx, ly, px, py, config: RasterConfig):
         return None
     if not config.local_coords:
         return hoist.basis(px, py)
-    off = TILE / 2 if config.origin == "center" else 0.0  # x' = pixel − origin: exact
+    off = _origin_offset(config)  # x' = pixel − origin: exact in any float
     return hoist.basis(lx - off, ly - off)
 
 
