@@ -159,7 +159,8 @@ def main(argv=None) -> int:
     if not specs:
         specs = ["default@640x360"]
     dev = jax.devices()[0]
-    print(f"device {dev.platform} ({dev.device_kind}); {os.cpu_count()} CPUs; JAX {jax.__version__};"
+    print(f"device {dev.platform} ({dev.device_kind}); {os.cpu_count()} CPUs; "
+          f"JAX {jax.__version__};"
           f" Python {platform.python_version()}")
     rows = []
     for spec in specs:

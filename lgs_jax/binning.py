@@ -10,8 +10,9 @@ Rounding bound (u = unit roundoff of the dtype, 2^-24 for float32). The differen
 p̂ = −½(a·dx² + c·dy²) − b·dx·dy evaluated in floating point obeys |p̂ − p| <= γ·S with
 S = ½(a·dx² + c·dy²) + |b·dx·dy| <= (a + c)·|d|² <= K·q, K = (a + c)²/det(Q) >= 4 (since
 |b| <= √(ac) <= (a + c)/2 and |d|² <= q/λ_min(Q) <= q·(a + c)/det), and γ = 16u covers the
-subtraction, products, sums and the rounding of Q's determinant. The test passes only if p̂ >= −τ/2 − δ (δ = 64u absorbs exp, the product
-with o and the 1/255 constant), hence q·(1 − 2γK) <= τ + 2δ, i.e. q <= τ_pad with
+subtraction, products, sums and the rounding of Q's determinant. The test passes only if
+p̂ >= −τ/2 − δ (δ = 64u absorbs exp, the product with o and the 1/255 constant), hence
+q·(1 − 2γK) <= τ + 2δ, i.e. q <= τ_pad with
 
     τ_pad = (τ + 2δ) / (1 − 2γK).
 

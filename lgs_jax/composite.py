@@ -63,7 +63,8 @@ def blend(state: PixelState, mean2d, conic, opacity, rgb, depth, active, px, py,
     stop = stops(test_t, config)
     take = hit & ~stop
     w = jnp.where(take, alpha * state.trans, 0)
-    return PixelState(color=state.color + w[:, None] * rgb, trans=jnp.where(take, test_t, state.trans),
+    return PixelState(color=state.color + w[:, None] * rgb,
+                      trans=jnp.where(take, test_t, state.trans),
                       depth=state.depth + w * depth, done=state.done | (hit & stop))
 
 

@@ -24,7 +24,8 @@ class RasterConfig:
         "fast" (the paper's warp-coherent blending, Sec. III-D: a 16x2 strip stops only when all
         32 pixels have T < 1e-4; deviates from the contract by at most 1e-4/(1 − cap)·max|rgb −
         background| per pixel, see lgs_jax.backends.tiles).
-      hoist: evaluate ln α as V·[x'², x'y', y'², x', y', 1] (Eq. 8–10) instead of the difference form.
+      hoist: evaluate ln α as V·[x'², x'y', y'², x', y', 1] (Eq. 8–10) instead of the
+        difference form.
       warp_cull: per-strip Gaussian lists from the 8-bit strip masks (Sec. III-C, Eq. 13–21).
       local_coords: hoist in tile-local coordinates (Eq. 1–3); False expands in global screen
         coordinates (the paper's "w/o Local Coord", Table V).

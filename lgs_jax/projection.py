@@ -148,7 +148,7 @@ def project(g: Gaussians, cam: Camera) -> Projected:
 
 
 def depth_order(p: Projected):
-    """Gaussian indices sorted by (depth, index), valid Gaussians first (conventions.md, "Order")."""
+    """Gaussian indices sorted by (depth, index), valid ones first (conventions.md, "Order")."""
     idx = jnp.arange(p.depth.shape[0], dtype=jnp.int32)
     key = jnp.where(p.valid, p.depth, jnp.inf)
     return jax.lax.sort((key, idx), num_keys=1, is_stable=True)[1]  # stable: ties by index

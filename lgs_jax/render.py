@@ -134,7 +134,8 @@ def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
     h, w = cam.height, cam.width
     zero = jnp.int32(0)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
-                        pairs_required=zero, strip_pairs=zero, capacity=zero, overflow=jnp.bool_(False),
+                        pairs_required=zero, strip_pairs=zero, capacity=zero,
+                        overflow=jnp.bool_(False),
                         backend=backend)
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
@@ -182,8 +183,8 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         capacity = 0  # no pair buffer
     elif capacity is None:
         if traced:
-            raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an eager "
-                             "render's stats.capacity), then check stats.overflow and "
+            raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an "
+                             "eager render's stats.capacity), then check stats.overflow and "
                              "stats.pairs_required, or use lgs_jax.render_growing")
         required = int(_count(gaussians, camera, camera.width, camera.height))
         if required >= binning.MAX_PAIRS:
