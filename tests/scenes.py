@@ -28,6 +28,16 @@ def camera(width=W, height=H, dtype=np.float32, yaw=0.0):
                           cx=dtype(width / 2), cy=dtype(height / 2), width=width, height=height)
 
 
+BACKGROUND = (0.2, 0.5, 0.9)
+
+
+def render(g, cam, backend, config, bg=BACKGROUND):
+    """Render a test scene with a fixed capacity (one compile per shape) and a coloured
+    background (so background-weighting errors show)."""
+    return lgs_jax.render(g, cam, background=np.asarray(bg, g.means.dtype), backend=backend,
+                          config=config, capacity=4096)
+
+
 def random_quats(rng, n):
     return rng.normal(size=(n, 4)) * rng.uniform(0.1, 3.0, size=(n, 1))  # not unit length
 

@@ -15,12 +15,7 @@ from tests import oracle, scenes
 from tests.compare import assert_render_close
 
 CONVENTIONS = [lgs_jax.RasterConfig("3dgs"), lgs_jax.RasterConfig("gsplat")]
-BG = np.array([0.2, 0.5, 0.9])
-
-
-def _render(g, cam, backend, config, bg=BG):
-    return lgs_jax.render(g, cam, background=np.asarray(bg, g.means.dtype), backend=backend,
-                          config=config, capacity=4096)
+BG = np.array(scenes.BACKGROUND)  # what scenes.render composites over
 
 
 @pytest.mark.parametrize("config", CONVENTIONS, ids=lambda c: c.convention)
@@ -28,7 +23,7 @@ def _render(g, cam, backend, config, bg=BG):
 def test_reference_equals_brute_float64(config, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    ref, bru = _render(g, cam, "reference", config), _render(g, cam, "brute", config)
+    ref, bru = scenes.render(g, cam, "reference", config), scenes.render(g, cam, "brute", config)
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(ref, field), getattr(bru, field), atol=1e-10, what=field)
     assert ref.image.dtype == np.float64
@@ -39,7 +34,7 @@ def test_reference_equals_oracle_float64(seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
     config = CONVENTIONS[seed % 2]
-    ref = _render(g, cam, "reference", config)
+    ref = scenes.render(g, cam, "reference", config)
     img, alpha, depth = oracle.composite(g, cam, BG, cap=config.alpha_cap,
                                          inclusive=config.stop_inclusive)
     assert_render_close(ref.image, img, atol=1e-9, what="image")
@@ -51,7 +46,7 @@ def test_reference_equals_oracle_float64(seed):
 def test_reference_equals_brute_float32(seed):
     g = scenes.cast(scenes.scene(seed), np.float32)
     cam = scenes.camera()
-    ref, bru = _render(g, cam, "reference", CONVENTIONS[0]), _render(g, cam, "brute", CONVENTIONS[0])
+    ref, bru = scenes.render(g, cam, "reference", CONVENTIONS[0]), scenes.render(g, cam, "brute", CONVENTIONS[0])
     assert ref.image.dtype == np.float32  # x64 is on in tests: float32 in, float32 out
     assert_render_close(ref.image, bru.image, atol=1e-5, max_flip_share=0.01, flip_atol=2.0)
     assert_render_close(ref.alpha, bru.alpha, atol=1e-5, max_flip_share=0.01, flip_atol=1.0)
@@ -61,7 +56,7 @@ def test_reference_equals_brute_float32(seed):
 def test_reference_float32_accuracy_vs_float64_oracle(seed):
     kinds = ("normal", "tiny", "behind", "faint", "opaque", "layers", "invalid", "huge_far")
     g64 = scenes.scene(seed, kinds=kinds)
-    ref = _render(scenes.cast(g64, np.float32), scenes.camera(), "reference", CONVENTIONS[0])
+    ref = scenes.render(scenes.cast(g64, np.float32), scenes.camera(), "reference", CONVENTIONS[0])
     img, alpha, _ = oracle.composite(g64, scenes.camera(dtype=np.float64), BG)
     assert_render_close(ref.image, img, atol=2e-4, max_flip_share=0.02, flip_atol=2.0)
     assert_render_close(ref.alpha, alpha, atol=2e-4, max_flip_share=0.02, flip_atol=1.0)
@@ -72,6 +67,6 @@ def test_depth_and_alpha_definitions():
     g = scenes.scene(11, kinds=("normal",), n=scenes.N)
     g = lgs_jax.Gaussians(g.means[:1], g.quats[:1], g.log_scales[:1], g.logit_opacities[:1],
                           g.sh[:1])
-    out = _render(g, scenes.camera(dtype=np.float64), "reference", CONVENTIONS[0], bg=(0, 0, 0))
+    out = scenes.render(g, scenes.camera(dtype=np.float64), "reference", CONVENTIONS[0], bg=(0, 0, 0))
     np.testing.assert_allclose(np.asarray(out.depth), np.asarray(out.alpha) * g.means[0, 2],
                                rtol=1e-12, atol=1e-15)

@@ -43,11 +43,6 @@ def all_exact_configs():
     return out
 
 
-def _render(g, cam, backend, config, bg=(0.2, 0.5, 0.9)):
-    return lgs_jax.render(g, cam, background=np.asarray(bg, g.means.dtype), backend=backend,
-                          config=config, capacity=4096)
-
-
 # ---------------------------------------------------------------- hoist transform (Eq. 8)
 
 def test_hoist_equals_the_quadratic_form_float64():
@@ -192,7 +187,7 @@ def test_strip_masks_are_tight_on_a_real_scene(data_dir, capsys):
 def test_tiles_exact_equals_reference_float64(name, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    ref, out = _render(g, cam, "reference", C()), _render(g, cam, "tiles", EXACT[name])
+    ref, out = scenes.render(g, cam, "reference", C()), scenes.render(g, cam, "tiles", EXACT[name])
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=1e-9, what=field)
 
@@ -209,11 +204,11 @@ def test_tiles_exact_local_equals_reference_float32(name, seed):
     g64 = scenes.scene(seed)
     g = scenes.cast(g64, np.float32)
     cam = scenes.camera()
-    ref, out = _render(g, cam, "reference", C()), _render(g, cam, "tiles", EXACT[name])
+    ref, out = scenes.render(g, cam, "reference", C()), scenes.render(g, cam, "tiles", EXACT[name])
     assert out.image.dtype == np.float32
     assert_render_close(out.image, ref.image, atol=F32_ATOL, max_flip_share=0.01, flip_atol=2.0)
     assert_render_close(out.alpha, ref.alpha, atol=F32_ATOL, max_flip_share=0.01, flip_atol=1.0)
-    truth = np.asarray(_render(g64, scenes.camera(dtype=np.float64), "reference", C()).image)
+    truth = np.asarray(scenes.render(g64, scenes.camera(dtype=np.float64), "reference", C()).image)
     err_tiles = np.abs(np.asarray(out.image) - truth).max(-1)
     err_ref = np.abs(np.asarray(ref.image) - truth).max(-1)
     assert np.mean(err_tiles > err_ref + F32_ATOL) <= 0.01
@@ -225,8 +220,8 @@ def test_fast_blending_stays_within_its_bound(convention, seed):
     g = scenes.scene(seed, kinds=("normal", "opaque", "layers", "tiny"))
     cam = scenes.camera(dtype=np.float64)
     bg = np.array([0.2, 0.5, 0.9])
-    exact = _render(g, cam, "tiles", C(convention))
-    fast = _render(g, cam, "tiles", C(convention, blend="fast"))
+    exact = scenes.render(g, cam, "tiles", C(convention))
+    fast = scenes.render(g, cam, "tiles", C(convention, blend="fast"))
     cap = C(convention).alpha_cap
     rgb = np.asarray(project(g, cam).rgb)
     bound = 1e-4 / (1 - cap)
@@ -241,12 +236,12 @@ def test_fast_blending_stays_within_its_bound(convention, seed):
 def test_every_exact_switch_combination_equals_reference(config, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    ref = _render(g, cam, "reference", C(config.convention))
-    out = _render(g, cam, "tiles", config)
+    ref = scenes.render(g, cam, "reference", C(config.convention))
+    out = scenes.render(g, cam, "tiles", config)
     assert_render_close(out.image, ref.image, atol=1e-9)
     if config.local_coords:
-        out32 = _render(scenes.cast(g, np.float32), scenes.camera(), "tiles", config)
-        ref32 = _render(scenes.cast(g, np.float32), scenes.camera(), "reference",
+        out32 = scenes.render(scenes.cast(g, np.float32), scenes.camera(), "tiles", config)
+        ref32 = scenes.render(scenes.cast(g, np.float32), scenes.camera(), "reference",
                         C(config.convention))
         assert_render_close(out32.image, ref32.image, atol=F32_ATOL, max_flip_share=0.01,
                             flip_atol=2.0)
@@ -268,7 +263,7 @@ def test_global_coordinates_show_float32_cancellation():
     cam = scenes.camera(width, height, dtype=np.float64)
     truth = np.asarray(lgs_jax.render(g, cam, capacity=4096).image)
     g32 = scenes.cast(g, np.float32)
-    err = {name: np.quantile(np.abs(np.asarray(_render(g32, cam, "tiles", PRECISION[name],
+    err = {name: np.quantile(np.abs(np.asarray(scenes.render(g32, cam, "tiles", PRECISION[name],
                                                        bg=(0, 0, 0)).image) - truth), 0.99)
            for name in PRECISION}
     print(err)
@@ -306,7 +301,7 @@ def test_tiles_under_vmap_and_repeated_calls_are_bit_identical():
 def test_strip_pairs_report_culling():
     g = scenes.cast(scenes.scene(12, kinds=("normal", "tiny")), np.float32)
     cam = scenes.camera()
-    culled = _render(g, cam, "tiles", C())
-    full = _render(g, cam, "tiles", C(warp_cull=False))
+    culled = scenes.render(g, cam, "tiles", C())
+    full = scenes.render(g, cam, "tiles", C(warp_cull=False))
     assert int(full.stats.strip_pairs) == 8 * int(full.stats.pairs_required)
     assert 0 < int(culled.stats.strip_pairs) < int(full.stats.strip_pairs)
