@@ -18,6 +18,8 @@ rounding of that evaluation (inputs taken as exact), so that errors from roundin
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from lgs_jax import hoist
@@ -26,34 +28,43 @@ FORMS = ("difference", "global", "local_corner", "local_center", "principal_axes
 TILE = 16
 
 
+def _xp(x):
+    """jax.numpy for JAX arrays (traced or not), numpy otherwise."""
+    return jnp if isinstance(x, jax.Array) else np
+
+
 def tile_origin(form: str, pixel):
     """The hoisting origin of a pixel (..., 2) for a form (zeros for global/difference)."""
-    corner = np.floor(pixel / TILE) * TILE
+    xp = _xp(pixel)
+    corner = xp.floor(pixel / TILE) * TILE
     if form == "local_corner":
         return corner
     if form == "local_center":
         return corner + TILE / 2
-    return np.zeros_like(pixel)
+    return xp.zeros_like(pixel)
 
 
 def principal_axes(cov):
     """(λ₁, λ₂, e₁) of 2x2 covariances (..., 3) as (xx, xy, yy), computed in float64:
-    λ₁ >= λ₂, e₁ the unit eigenvector of λ₁ (e₂ = e₁ rotated by 90°)."""
-    sxx, sxy, syy = (np.asarray(cov[..., i], np.float64) for i in range(3))
+    λ₁ >= λ₂, e₁ the unit eigenvector of λ₁ (e₂ = e₁ rotated by 90°). NumPy or JAX arrays (JAX
+    computes in float64 only with jax_enable_x64)."""
+    xp = _xp(cov)
+    sxx, sxy, syy = (xp.asarray(cov[..., i], xp.float64) for i in range(3))
     half_diff = 0.5 * (sxx - syy)
-    root = np.hypot(half_diff, sxy)
+    root = xp.hypot(half_diff, sxy)
     mid = 0.5 * (sxx + syy)
     lam1 = mid + root
     lam2 = (sxx * syy - sxy * sxy) / lam1  # no cancellation in mid − root
-    theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)
-    return lam1, lam2, np.stack([np.cos(theta), np.sin(theta)], -1)
+    theta = 0.5 * xp.arctan2(2 * sxy, sxx - syy)
+    return lam1, lam2, xp.stack([xp.cos(theta), xp.sin(theta)], -1)
 
 
 def log_alpha(form: str, mean, pixel, conic, log_o, axes=None):
     """ln α of Gaussians (mean (..., 2), conic (..., 3), log_o (...)) at pixels (..., 2).
 
     All arrays share one float dtype, in which the form is evaluated. `axes` = (λ₁, λ₂, e₁) in
-    that dtype, needed by principal_axes only.
+    that dtype, needed by principal_axes only. NumPy in, NumPy out; JAX arrays in, JAX out (so
+    that `numerics.cost` can jit and time the same code).
     """
     if form == "difference":
         dx, dy = mean[..., 0] - pixel[..., 0], mean[..., 1] - pixel[..., 1]
@@ -67,11 +78,12 @@ def log_alpha(form: str, mean, pixel, conic, log_o, axes=None):
         return log_o - 0.5 * (t1 * t1 / lam1 + t2 * t2 / lam2)
     if form not in FORMS:
         raise ValueError(f"form: expected one of {FORMS}, got {form!r}")
+    xp = _xp(pixel)
     origin = tile_origin(form, pixel).astype(pixel.dtype)
-    v = np.asarray(hoist.hoist(mean, conic, log_o, origin))
+    v = xp.asarray(hoist.hoist(mean, conic, log_o, origin))
     local = pixel - origin
-    basis = np.asarray(hoist.basis(local[..., 0], local[..., 1]))
-    return np.sum(v * basis, axis=-1, dtype=pixel.dtype)
+    basis = xp.asarray(hoist.basis(local[..., 0], local[..., 1]))
+    return xp.sum(v * basis, axis=-1, dtype=pixel.dtype)
 
 
 def evaluation_bound(form: str, mean, pixel, conic, log_o, axes=None, dtype=np.float32):

@@ -5,9 +5,11 @@
 For each scene and resolution (the view's camera rescaled), renders the float64 `reference` image,
 then the float32 `tiles` image in each exponent form (difference: hoist off; global; local_corner;
 local_center; all exact blending), and writes DIR/render_summary.csv (PSNR, SSIM from
-scikit-image, max abs error, share of pixels off by more than 1/255) and, per scene and
-resolution, a PNG of where the global and local_corner errors sit. Full frames, not crops: a crop
-re-bases pixel coordinates and would hide the global expansion's error. Meant for the GPU.
+scikit-image, max abs error, share of pixels off by more than 1/255, and the form's forward time:
+median over `--repeat` interleaved rounds of the jitted render, compile excluded), per scene and
+resolution a PNG of where the global and local_corner errors sit, and DIR/tradeoff.png (time
+against PSNR, one panel per scene and size). Full frames, not crops: a crop re-bases pixel
+coordinates and would hide the global expansion's error. Meant for the GPU.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import statistics
+import time
 
 import jax
 import numpy as np
@@ -33,6 +37,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", action="append", required=True)
     ap.add_argument("--res", action="append", required=True)
     ap.add_argument("--out", required=True)
+    ap.add_argument("--repeat", type=int, default=10, help="timing rounds")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     import matplotlib
@@ -58,10 +63,9 @@ def main(argv=None) -> int:
             truth = np.asarray(lgs_jax.render(g64, cam).image)
             clipped_truth = np.clip(truth, 0, 1)
             maps = {}
-            for form, kw in FORMS.items():
-                img = np.asarray(lgs_jax.render(g, cam, backend="tiles",
-                                                config=lgs_jax.RasterConfig(**kw)).image,
-                                 np.float64)
+            images, times = _timed_forms(g, cam, args.repeat)
+            for form in FORMS:
+                img = images[form]
                 err = np.abs(img - truth).max(-1)
                 mse = float(np.mean((img - truth) ** 2))
                 ssim = structural_similarity(np.clip(img, 0, 1), clipped_truth, channel_axis=-1,
@@ -69,7 +73,8 @@ def main(argv=None) -> int:
                 rows.append(dict(scene=name, resolution=w, height=h, form=form,
                                  psnr_db=float("inf") if mse == 0 else -10 * np.log10(mse),
                                  ssim=float(ssim), max_abs_err=float(err.max()),
-                                 share_over_1_255=float(np.mean(err > 1 / 255))))
+                                 share_over_1_255=float(np.mean(err > 1 / 255)),
+                                 time_ms=times[form]))
                 print(rows[-1], flush=True)
                 maps[form] = err
             fig, axs = plt.subplots(1, 2, figsize=(12, 3.8))
@@ -86,7 +91,52 @@ def main(argv=None) -> int:
         wr = csv.DictWriter(f, fieldnames=list(rows[0]))
         wr.writeheader()
         wr.writerows(rows)
+    tradeoff_plot(rows, os.path.join(args.out, "tradeoff.png"))
     return 0
+
+
+def _timed_forms(g, cam, repeat):
+    """Each form's float32 image (float64 numpy) and median forward time in ms, same run.
+
+    Every form is a jitted `render` at one capacity; rounds call each form once in turn, so that
+    drift in the machine's speed affects all forms alike.
+    """
+    import lgs_jax
+
+    cap = int(lgs_jax.render(g, cam).stats.capacity)
+    fns = {form: jax.jit(lambda g, c, kw=kw: lgs_jax.render(
+        g, c, backend="tiles", config=lgs_jax.RasterConfig(**kw), capacity=cap).image)
+        for form, kw in FORMS.items()}
+    images = {form: np.asarray(jax.block_until_ready(f(g, cam)), np.float64)
+              for form, f in fns.items()}
+    times = {form: [] for form in FORMS}
+    for _ in range(repeat):
+        for form, f in fns.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(g, cam))
+            times[form].append(1e3 * (time.perf_counter() - t0))
+    return images, {form: statistics.median(t) for form, t in times.items()}
+
+
+def tradeoff_plot(rows, path):
+    """Run time against PSNR (vs the float64 render) of each form, one panel per scene and size."""
+    import matplotlib.pyplot as plt
+
+    cases = sorted({(r["scene"], int(r["resolution"]), int(r["height"])) for r in rows})
+    fig, axs = plt.subplots(1, len(cases), figsize=(3.6 * len(cases), 3.4), squeeze=False)
+    for ax, (scene, w, h) in zip(axs[0], cases):
+        for form, marker in zip(FORMS, "osD^"):
+            r = next(r for r in rows if (r["scene"], int(r["resolution"]), r["form"]) ==
+                     (scene, w, form))
+            ax.plot(float(r["time_ms"]), min(float(r["psnr_db"]), 150), marker, label=form)
+        ax.set_title(f"{scene} {w}x{h}", fontsize=9)
+        ax.set_xlabel("forward time (ms)")
+        ax.grid(alpha=0.3)
+    axs[0][0].set_ylabel("PSNR vs float64 (dB)")
+    axs[0][-1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

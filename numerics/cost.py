@@ -1,0 +1,140 @@
+"""Cost of each exponent form: jitted float32 evaluation of ln α on the default JAX device.
+
+    python -m numerics.cost [--gaussians G] [--repeat N] [--csv FILE]
+
+One call evaluates G Gaussians at the 256 pixel centres of one 16x16 tile, the work a tile does
+per Gaussian, split as a renderer splits it: `setup` runs once per Gaussian (difference: nothing;
+hoisted forms: the 6-vector V of Eq. 8 relative to the tile origin; principal_axes: the 2x2
+eigendecomposition in float64, then λ and e₁ rounded to float32), `evaluate` once per
+(Gaussian, pixel). Reported: median ns per Gaussian for each part and per exponent for the
+evaluation, each form timed in the same interleaved rounds. The evaluation arithmetic is that of
+`numerics.forms.log_alpha` (tests/test_numerics_forms.py checks they agree).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from lgs_jax import hoist
+
+from . import forms
+
+TILE_ORIGIN = {"global": (1024.0, 512.0), "local_corner": (0.0, 0.0), "local_center": (8.0, 8.0)}
+"""Where the timed tile's pixel (0, 0) sits in each form's coordinates (global: a tile at
+(1024, 512) of a large image; local: the tile-local frames)."""
+
+
+def tile_pixels(form):
+    """The 256 pixel centres of the tile, (256, 2) float32, in the form's coordinates."""
+    y, x = np.mgrid[0:16, 0:16] + 0.5
+    shift = np.asarray(TILE_ORIGIN.get(form, (1024.0, 512.0)), np.float32)
+    if form == "local_center":
+        shift = -shift
+    return jnp.asarray(np.stack([x.ravel(), y.ravel()], -1).astype(np.float32) + shift)
+
+
+def setup(form, mean, conic, log_o, cov64):
+    """Per-Gaussian work of a form (float32 outputs; cov64 used by principal_axes only)."""
+    if form == "difference":
+        return mean, conic, log_o
+    if form == "principal_axes":
+        lam1, lam2, e1 = forms.principal_axes(cov64)
+        return mean, (1 / lam1).astype(jnp.float32), (1 / lam2).astype(jnp.float32), \
+            e1.astype(jnp.float32), log_o
+    origin = jnp.zeros_like(mean)  # the tile origin in the form's own coordinates
+    return hoist.hoist(mean, conic, log_o, origin)
+
+
+def evaluate(form, state, pixels):
+    """ln α for every (Gaussian, pixel): (G, P) float32."""
+    if form == "difference":
+        mean, conic, log_o = (s[:, None] for s in state)
+        return forms.log_alpha(form, mean, pixels[None], conic, log_o)
+    if form == "principal_axes":
+        mean, inv1, inv2, e1, log_o = (s[:, None] for s in state)
+        d = mean - pixels[None]
+        t1 = e1[..., 0] * d[..., 0] + e1[..., 1] * d[..., 1]
+        t2 = e1[..., 0] * d[..., 1] - e1[..., 1] * d[..., 0]
+        return log_o - 0.5 * (t1 * t1 * inv1 + t2 * t2 * inv2)
+    return jnp.einsum("gk,pk->gp", state, hoist.basis(pixels[:, 0], pixels[:, 1]),
+                      precision=jax.lax.Precision.HIGHEST)
+
+
+def scene(n, seed=0):
+    """G Gaussians around the timed tile, in each form's coordinates: (mean, conic, log_o, cov64)
+    per form; float32 except cov64."""
+    rng = np.random.default_rng(seed)
+    mean = rng.uniform(-24, 40, (n, 2))
+    lam = rng.uniform(0.3, 200, (n, 2))
+    th = rng.uniform(0, np.pi, n)
+    c, s = np.cos(th), np.sin(th)
+    cov = np.stack([c * c * lam[:, 0] + s * s * lam[:, 1], c * s * (lam[:, 0] - lam[:, 1]),
+                    s * s * lam[:, 0] + c * c * lam[:, 1]], -1)
+    det = cov[:, 0] * cov[:, 2] - cov[:, 1] ** 2
+    conic = np.stack([cov[:, 2], -cov[:, 1], cov[:, 0]], -1) / det[:, None]
+    log_o = np.log(rng.uniform(0.05, 1, n))
+    f32 = lambda x: jnp.asarray(x, jnp.float32)
+    out = {}
+    for form in forms.FORMS:
+        shift = np.asarray(TILE_ORIGIN.get(form, (1024.0, 512.0)))
+        shift = -shift if form == "local_center" else shift
+        out[form] = (f32(mean + shift), f32(conic), f32(log_o), jnp.asarray(cov))
+    return out
+
+
+def measure(n=16384, repeat=20):
+    """Rows (form, setup_ns_per_gaussian, eval_ns_per_exponent, device)."""
+    data = scene(n)
+    setups = {f: jax.jit(lambda m, q, o, c, f=f: setup(f, m, q, o, c)) for f in forms.FORMS}
+    evals = {f: jax.jit(lambda s, p, f=f: evaluate(f, s, p)) for f in forms.FORMS}
+    states = {f: jax.block_until_ready(setups[f](*data[f])) for f in forms.FORMS}
+    pixels = {f: tile_pixels(f) for f in forms.FORMS}
+    for f in forms.FORMS:
+        jax.block_until_ready(evals[f](states[f], pixels[f]))
+    t_setup = {f: [] for f in forms.FORMS}
+    t_eval = {f: [] for f in forms.FORMS}
+    for _ in range(repeat):
+        for f in forms.FORMS:
+            t0 = time.perf_counter()
+            jax.block_until_ready(setups[f](*data[f]))
+            t1 = time.perf_counter()
+            jax.block_until_ready(evals[f](states[f], pixels[f]))
+            t2 = time.perf_counter()
+            t_setup[f].append(t1 - t0)
+            t_eval[f].append(t2 - t1)
+    dev = jax.devices()[0]
+    return [dict(form=f, gaussians=n, setup_ns_per_gaussian=1e9 * statistics.median(t_setup[f]) / n,
+                 eval_ns_per_exponent=1e9 * statistics.median(t_eval[f]) / (n * 256),
+                 device=f"{dev.platform} ({dev.device_kind})", jax=jax.__version__)
+            for f in forms.FORMS]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m numerics.cost", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--gaussians", type=int, default=16384)
+    ap.add_argument("--repeat", type=int, default=20)
+    ap.add_argument("--csv")
+    args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # principal_axes' setup is float64
+    rows = measure(args.gaussians, args.repeat)
+    for r in rows:
+        print(f"{r['form']:>15s}  setup {r['setup_ns_per_gaussian']:8.2f} ns/Gaussian  "
+              f"evaluate {r['eval_ns_per_exponent']:7.3f} ns/exponent  ({r['device']})")
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
