@@ -156,11 +156,38 @@ def count_pairs(p: Projected, width: int, height: int):
     return total_pairs(nx * ny)
 
 
+def _searchsorted_right(sorted_values, queries):
+    """jnp.searchsorted(side="right"), lowered per platform: on GPUs the unrolled bisection (one
+    fused kernel; the default while-loop form launches a kernel per step: 0.56 vs 0.12 ms for
+    2^19 queries on an H100), elsewhere the default (XLA:CPU compiles the unrolled form slowly).
+    Both give the same integers."""
+    search = lambda method: (lambda: jnp.searchsorted(sorted_values, queries, side="right",
+                                                      method=method).astype(jnp.int32))
+    return lax.platform_dependent(default=search("scan"), cuda=search("scan_unrolled"))
+
+
+def tile_ranges(tile, n_tiles: int):
+    """Half-open ranges [start, end) of each tile's pairs in `tile`, sorted ascending with padding
+    pairs (tile == n_tiles) last.
+
+    The first pair of each distinct tile stores its position (one writer per slot: a plain,
+    deterministic store); a reverse running minimum gives empty tiles the next tile's start.
+    O(pairs), no per-tile binary search (which costs a kernel launch per bisection step on GPUs).
+    """
+    cap = tile.shape[0]
+    pos = jnp.arange(cap, dtype=jnp.int32)
+    first = jnp.concatenate([jnp.ones((1,), bool), tile[1:] != tile[:-1]])
+    firsts = jnp.full((n_tiles + 1,), cap, jnp.int32).at[jnp.where(first, tile, n_tiles + 1)].set(
+        pos, mode="drop", unique_indices=True)
+    firsts = lax.cummin(firsts, axis=0, reverse=True)
+    return firsts[:n_tiles], firsts[1:]
+
+
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
     """Emit pairs in (depth, index) order, then stable-sort them by tile.
 
     Pair emission uses a prefix sum and `searchsorted(cumsum, arange(capacity))` (no scatter, so
-    it is deterministic on GPUs). Because Gaussians are visited in depth order and the tile sort
+    it is deterministic on GPUs); tile ranges come from `tile_ranges`. Because Gaussians are visited in depth order and the tile sort
     is stable, each tile's list comes out sorted by (depth, index).
     """
     if not 0 < capacity <= MAX_PAIRS:
@@ -175,15 +202,13 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileB
     counts_sorted = counts[order]
     ends = jnp.cumsum(counts_sorted)  # exact when total fits (otherwise overflow is reported)
     slot = jnp.arange(capacity, dtype=jnp.int32)
-    k = jnp.clip(jnp.searchsorted(ends, slot, side="right"), 0, max(n - 1, 0)).astype(jnp.int32)
+    k = jnp.clip(_searchsorted_right(ends, slot), 0, max(n - 1, 0)).astype(jnp.int32)
     g = order[k]
     local = slot - (ends[k] - counts_sorted[k])
     nxg = jnp.maximum(nx[g], 1)
     tile = (ty0[g] + local // nxg) * tiles_x + tx0[g] + local % nxg
     tile = jnp.where(slot < total, tile, n_tiles)  # padding sorts last
     tile, gauss = lax.sort((tile, g), num_keys=1, is_stable=True)
-    tile_ids = jnp.arange(n_tiles, dtype=jnp.int32)
-    start = jnp.searchsorted(tile, tile_ids, side="left").astype(jnp.int32)
-    end = jnp.searchsorted(tile, tile_ids, side="right").astype(jnp.int32)
+    start, end = tile_ranges(tile, n_tiles)
     return TileBins(gauss=gauss, tile=tile, tile_start=start, tile_end=end, pairs_required=total,
                     overflow=total > capacity, n_unbounded=jnp.sum(unbounded, dtype=jnp.int32))

@@ -17,15 +17,24 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 
+def hoist_terms(a, b, c, dx, dy, log_opacity):
+    """The six components (A, B, C, D, E, F) of Eq. 8 from the conic and Δ = μ − T, as separate
+    arrays (kernels keep them in registers; `hoist` stacks them)."""
+    return (-0.5 * a, -b, -0.5 * c, a * dx + b * dy, b * dx + c * dy,
+            -0.5 * a * dx * dx - b * dx * dy - 0.5 * c * dy * dy + log_opacity)
+
+
 def hoist(mean2d, conic, log_opacity, origin):
     """The hoisted 6-vector V (Eq. 8) of Gaussians (..., ) relative to tile origins (..., 2)."""
-    a, b, c = conic[..., 0], conic[..., 1], conic[..., 2]
     dx, dy = mean2d[..., 0] - origin[..., 0], mean2d[..., 1] - origin[..., 1]
-    return jnp.stack([
-        -0.5 * a, -b, -0.5 * c,
-        a * dx + b * dy, b * dx + c * dy,
-        -0.5 * a * dx * dx - b * dx * dy - 0.5 * c * dy * dy + log_opacity,
-    ], axis=-1)
+    return jnp.stack(hoist_terms(conic[..., 0], conic[..., 1], conic[..., 2], dx, dy,
+                                 log_opacity), axis=-1)
+
+
+def evaluate_terms(v, x, y):
+    """ln α = A·x'² + B·x'y' + C·y'² + D·x' + E·y' + F (Eq. 10) from the six terms of Eq. 8, in
+    this summation order (kernels; the tiles backend takes the same sum as a batched product)."""
+    return v[0] * (x * x) + v[1] * (x * y) + v[2] * (y * y) + v[3] * x + v[4] * y + v[5]
 
 
 def basis(x, y):

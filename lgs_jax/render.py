@@ -21,13 +21,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import binning
-from .backends import brute, reference, tiles
+from .backends import brute, pallas, reference, tiles
 from .composite import finish
 from .config import RasterConfig
 from .projection import Projected, project
 from .scene import Camera, Gaussians, validate_camera, validate_gaussians
 
-BACKENDS = ("brute", "reference", "tiles")
+BACKENDS = ("brute", "reference", "tiles", "pallas", "pallas_vanilla")
 
 
 class CapacityError(ValueError):
@@ -54,11 +54,15 @@ class RenderStats:
       n_transparent: valid Gaussians culled because opacity < 1/255.
       n_unbounded: Gaussians whose float rounding could not be bounded, binned to every tile.
       pairs_required: tile–Gaussian pairs the scene needs (saturates at 2^31 − 1).
-      strip_pairs: strip–Gaussian pairs processed (`tiles` backend; 8·pairs without warp
-        culling, so strip_pairs / (8·pairs) is the share of work the strip masks keep).
+      strip_pairs: strip–Gaussian pairs processed (`tiles` and `pallas` backends; 8·pairs
+        without warp culling, so strip_pairs / (8·pairs) is the share of work the strip masks
+        keep).
       capacity: size of the pair buffer used.
       overflow: pairs_required > capacity (the image lacks the farthest pairs).
       backend: name of the backend that rendered (static).
+      kernel: the Pallas kernel that ran ("localgs-triton", "vanilla-triton"; "" for the XLA
+        backends) (static).
+      interpreted: the Pallas kernel ran in interpret mode (no GPU) (static).
     """
 
     n_valid: Any
@@ -70,6 +74,8 @@ class RenderStats:
     capacity: Any
     overflow: Any
     backend: str = dataclasses.field(metadata=dict(static=True))
+    kernel: str = dataclasses.field(default="", metadata=dict(static=True))
+    interpreted: bool = dataclasses.field(default=False, metadata=dict(static=True))
 
 
 @jax.tree_util.register_dataclass
@@ -107,7 +113,8 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
         pairs_required=bins.pairs_required if bins else zero,
         strip_pairs=zero if strip_pairs is None else strip_pairs.astype(jnp.int32),
         capacity=jnp.int32(capacity), overflow=bins.overflow if bins else jnp.bool_(False),
-        backend=backend)
+        backend=backend, kernel=pallas.KERNELS.get(backend, ""),
+        interpreted=backend in pallas.KERNELS and pallas.interpreted())
 
 
 @functools.partial(jax.jit, static_argnames=("backend", "config", "capacity"))
@@ -122,6 +129,9 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
         bins = binning.bin_gaussians(p, width, height, capacity)
         if backend == "tiles":
             state, strip_pairs = tiles.rasterize(p, bins, width, height, config)
+        elif backend in pallas.KERNELS:
+            state, strip_pairs = pallas.rasterize(p, bins, width, height, config,
+                                                  vanilla=backend == "pallas_vanilla")
         else:
             state = reference.rasterize(p, bins, width, height, config)
     image, alpha, depth = finish(state, background)
@@ -135,8 +145,9 @@ def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
     zero = jnp.int32(0)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
                         pairs_required=zero, strip_pairs=zero, capacity=zero,
-                        overflow=jnp.bool_(False),
-                        backend=backend)
+                        overflow=jnp.bool_(False), backend=backend,
+                        kernel=pallas.KERNELS.get(backend, ""),
+                        interpreted=backend in pallas.KERNELS and pallas.interpreted())
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
                         stats=stats)
@@ -150,8 +161,11 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
       gaussians: the scene; its dtype (float32 or float64) is the precision of the whole render.
       camera: a `Camera`; batch cameras with `jax.vmap` (then pass `capacity`).
       background: (3,) colour behind the scene, black by default.
-      backend: "tiles" (Local-GS kernels, `config` switches), "reference" (16x16 tiles, per-pixel
-        semantics) or "brute" (all Gaussians for every pixel, no tiles: for small scenes).
+      backend: "tiles" (Local-GS kernels in XLA, `config` switches), "pallas" (the Local-GS
+        Pallas kernel, same switches), "pallas_vanilla" (the original 3DGS kernel in Pallas),
+        "reference" (16x16 tiles, per-pixel semantics) or "brute" (all Gaussians for every
+        pixel, no tiles: for small scenes). The Pallas backends run in interpret mode without a
+        GPU (slow; `stats.interpreted`).
       config: a `RasterConfig` (static), default `RasterConfig()`.
       capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up to a
         power of two. Under jit/vmap pass an int and check `stats.overflow`.

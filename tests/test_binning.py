@@ -102,3 +102,15 @@ def test_overflow_is_reported_under_jit():
     full = lgs_jax.render(g, cam)
     assert int(full.stats.pairs_required) == int(stats.pairs_required)
     assert int(full.stats.capacity) >= int(stats.pairs_required)
+
+
+@given(seed=st.integers(0, 2**32 - 1))
+def test_tile_ranges_equal_searchsorted(seed):
+    """Sorted tiles with runs, gaps (empty tiles), padding (n_tiles) or none, and one tile only."""
+    rng = np.random.default_rng(seed)
+    n_tiles = 12
+    tile = np.sort(rng.choice(rng.integers(0, n_tiles + 1, 1 + rng.integers(0, 6)), 64))
+    start, end = binning.tile_ranges(jnp.asarray(tile, jnp.int32), n_tiles)
+    ids = np.arange(n_tiles)
+    np.testing.assert_array_equal(start, np.searchsorted(tile, ids, side="left"))
+    np.testing.assert_array_equal(end, np.searchsorted(tile, ids, side="right"))

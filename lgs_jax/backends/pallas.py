@@ -1,0 +1,233 @@
+"""`pallas` and `pallas_vanilla` backends: the rasterization stage as Pallas (Triton) kernels.
+
+Projection, binning and sorting stay in XLA (shared with the `tiles` backend); the kernels read
+the sorted pair list and one packed row per Gaussian. The plain-jnp counterpart of each kernel,
+which the tests compare them with, is `lgs_jax.backends.tiles` (same masks, same hoisted
+arithmetic, same blending semantics) and `lgs_jax.backends.reference` (per-pixel semantics).
+
+Local-GS kernel (`backend="pallas"`, Sec. III): one program per 16x2 strip, `num_warps=1`, so a
+program is one warp and its 32 lanes are the strip's pixels. It walks its tile's pairs in order;
+with `warp_cull` a pair whose strip-mask bit is clear is skipped by a warp-uniform branch before
+anything else of it is loaded (Sec. III-C); the hoisted 6-vector (Eq. 8) is built from the
+Gaussian's row and the tile origin as the pair is staged, and each pixel evaluates ln α as a
+6-term sum in its local coordinates (Eq. 10). The strip stops as a unit once every lane is done
+(`exact`: each pixel's stop test fired; `fast`: every T below 1e-4, the paper's coherent
+blending). Pairs are staged UNROLL at a time (independent loads issued together).
+
+Vanilla kernel (`backend="pallas_vanilla"`, the original 3DGS rasterizer): one program per 16x16
+tile with 8 warps (256 lanes), the difference form, per-pixel termination, and a tile-wide early
+exit when every pixel is done. It ignores the Local-GS switches (it is the baseline the paper
+measures against) but honours `convention`.
+
+Both use exact per-pixel blending semantics (lgs_jax.composite) unless `blend="fast"` (Local-GS
+only). Without a GPU the kernels run in Pallas interpret mode (slow, meant for tests);
+`stats.kernel` names the kernel that ran, `stats.interpreted` says whether it was interpreted.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jax.experimental import pallas as pl
+
+from .. import hoist
+from ..binning import TILE, TileBins, tile_grid
+from ..composite import PixelState, stops
+from ..config import ALPHA_MIN, RasterConfig
+from ..projection import Projected
+from ..warp_masks import STRIPS
+from .reference import tiles_to_image
+from .tiles import _origin_offset, pair_masks
+
+UNROLL = 4  # pairs staged per loop iteration
+STRIP_PIXELS = 2 * TILE
+ROW = 12  # packed Gaussian row: mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
+KERNELS = {"pallas": "localgs-triton", "pallas_vanilla": "vanilla-triton"}
+
+
+def interpreted() -> bool:
+    """Whether the kernels run in interpret mode (no GPU backend; LGS_JAX_PALLAS_LOWER=gpu forces
+    GPU lowering, for `tests/test_pallas.py`'s lowering check on machines without a GPU)."""
+    return jax.default_backend() != "gpu" and os.environ.get("LGS_JAX_PALLAS_LOWER") != "gpu"
+
+
+def gaussian_rows(p: Projected):
+    """(N, ROW) packed per-Gaussian data the kernels load: one row per Gaussian."""
+    o = p.opacity
+    cols = [p.mean2d[:, 0], p.mean2d[:, 1], p.conic[:, 0], p.conic[:, 1], p.conic[:, 2],
+            jnp.log(o), o, p.rgb[:, 0], p.rgb[:, 1], p.rgb[:, 2], p.depth, jnp.zeros_like(o)]
+    return jnp.stack(cols, -1)
+
+
+def _blend(state, alpha, hit, rgb, z, config: RasterConfig):
+    """One Gaussian over a lane vector of pixels; state = (r, g, b, T, D, done).
+
+    exact: the contract (lgs_jax.composite.blend): a hit whose T·(1 − α) passes the stop test
+    ends the pixel unblended; otherwise C += rgb·α·T, T = T·(1 − α).
+    fast: w = α·T; C += rgb·w; T −= w for every hit (Sec. III-D).
+    """
+    r, g, b, t, d, done = state
+    if config.blend == "exact":
+        hit = hit & ~done
+        test_t = t * (1 - alpha)
+        stop = stops(test_t, config)
+        take = hit & ~stop
+        w = jnp.where(take, alpha * t, 0)
+        t, done = jnp.where(take, test_t, t), done | (hit & stop)
+    else:
+        w = jnp.where(hit, alpha * t, 0)
+        t = t - w
+    return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, done
+
+
+def _running(state, config: RasterConfig):
+    """Whether any lane still blends: the program-uniform loop condition."""
+    if config.blend == "exact":
+        return jnp.min(state[5].astype(jnp.int32)) == 0
+    return jnp.min(stops(state[3], config).astype(jnp.int32)) == 0
+
+
+def _staged_loop(start, end, state, step, config: RasterConfig):
+    """Walk pairs [start, end) UNROLL at a time while some lane still blends."""
+    def cond(carry):
+        j, st = carry
+        return (j < end) & _running(st, config)
+
+    def body(carry):
+        j, st = carry
+        for u in range(UNROLL):
+            st = step(j + u, j + u < end, st)
+        return j + UNROLL, st
+
+    return lax.while_loop(cond, body, (start, state))[1]
+
+
+def _empty(lanes: int, dt):
+    """(r, g, b, T, D, done) of lanes with nothing blended (lgs_jax.composite.PixelState.empty)."""
+    zero = jnp.zeros((lanes,), dt)
+    return zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), bool)
+
+
+def _store(refs, state):
+    for ref, x in zip(refs, state[:5]):
+        ref[...] = x
+
+
+def _localgs_kernel(start_ref, end_ref, gauss_ref, mask_ref, rows_ref, *out_refs,
+                    config: RasterConfig, tiles_x: int, last_pair: int):
+    dt = rows_ref.dtype
+    sid = pl.program_id(0)
+    tile, s = sid // STRIPS, sid % STRIPS
+    k = lax.iota(jnp.int32, STRIP_PIXELS)
+    lx = (k % TILE).astype(dt) + 0.5  # tile-local pixel centres (exact in any float)
+    ly = (2 * s + k // TILE).astype(dt) + 0.5
+    corner_x, corner_y = ((tile % tiles_x) * TILE).astype(dt), ((tile // tiles_x) * TILE).astype(dt)
+    if config.local_coords:
+        off = _origin_offset(config)
+        ox, oy, x, y = corner_x + off, corner_y + off, lx - off, ly - off
+    else:
+        ox, oy, x, y = jnp.zeros((), dt), jnp.zeros((), dt), corner_x + lx, corner_y + ly
+    cap = jnp.asarray(config.alpha_cap, dt)
+    ln_min = jnp.log(jnp.asarray(ALPHA_MIN, dt))
+    bit = jnp.left_shift(jnp.int32(1), s)
+
+    def blend_pair(j, st):
+        gi = gauss_ref[j]
+        row = lambda c: rows_ref[gi, c]
+        mx, my, a, b, c = row(0), row(1), row(2), row(3), row(4)
+        if config.hoist:
+            v = hoist.hoist_terms(a, b, c, mx - ox, my - oy, row(5))  # staged per pair (Eq. 8)
+            ln_a = jnp.minimum(hoist.evaluate_terms(v, x, y), row(5))
+            alpha, hit = jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= ln_min
+        else:
+            dx, dy = mx - (corner_x + lx), my - (corner_y + ly)
+            power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
+            alpha = jnp.minimum(cap, row(6) * jnp.exp(power))
+            hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+        return _blend(st, alpha, hit, (row(7), row(8), row(9)), row(10), config)
+
+    def step(j, in_range, st):
+        jj = jnp.minimum(j, last_pair)
+        take = in_range
+        if config.warp_cull:  # warp-uniform branch on the strip's mask bit (Sec. III-C)
+            take = take & ((mask_ref[jj] & bit) != 0)
+        return lax.cond(take, functools.partial(blend_pair, jj), lambda st: st, st)
+
+    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(STRIP_PIXELS, dt), step,
+                                  config))
+
+
+def _vanilla_kernel(start_ref, end_ref, gauss_ref, rows_ref, *out_refs, config: RasterConfig,
+                    tiles_x: int, last_pair: int):
+    dt = rows_ref.dtype
+    tile = pl.program_id(0)
+    k = lax.iota(jnp.int32, TILE * TILE)
+    px = ((tile % tiles_x) * TILE + k % TILE).astype(dt) + 0.5
+    py = ((tile // tiles_x) * TILE + k // TILE).astype(dt) + 0.5
+    cap = jnp.asarray(config.alpha_cap, dt)
+
+    def step(j, in_range, st):
+        def blend_pair(st):
+            gi = gauss_ref[jnp.minimum(j, last_pair)]
+            row = lambda c: rows_ref[gi, c]
+            dx, dy = row(0) - px, row(1) - py
+            power = -0.5 * (row(2) * dx * dx + row(4) * dy * dy) - row(3) * dx * dy
+            alpha = jnp.minimum(cap, row(6) * jnp.exp(power))
+            hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+            return _blend(st, alpha, hit, (row(7), row(8), row(9)), row(10), config)
+
+        return lax.cond(in_range, blend_pair, lambda st: st, st)
+
+    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt), step,
+                                  config))
+
+
+def _call(kernel, n_programs: int, lanes: int, num_warps: int, dt, args):
+    from jax.experimental.pallas import triton as pl_triton
+
+    out = jax.ShapeDtypeStruct((n_programs, lanes), dt)
+    spec = pl.BlockSpec((None, lanes), lambda i: (i, 0))
+    return pl.pallas_call(
+        kernel, out_shape=[out] * 5, grid=(n_programs,),
+        out_specs=[spec] * 5,
+        compiler_params=pl_triton.CompilerParams(num_warps=num_warps, num_stages=1),
+        interpret=interpreted(), name=kernel.func.__name__.strip("_"),
+    )(*args)
+
+
+def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+              vanilla: bool = False) -> tuple[PixelState, jax.Array]:
+    """Returns the (H·W,) pixel state and the strip–Gaussian pairs the kernel had to visit
+    (with warp culling: the pairs' set mask bits; otherwise 8 per pair)."""
+    dt = p.mean2d.dtype
+    tiles_x, tiles_y = tile_grid(width, height)
+    n_tiles = tiles_x * tiles_y
+    last_pair = bins.gauss.shape[0] - 1
+    rows = gaussian_rows(p)
+    valid_pair = bins.tile < n_tiles
+    if vanilla:
+        kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
+                                   last_pair=last_pair)
+        outs = _call(kernel, n_tiles, TILE * TILE, 8, dt,
+                     (bins.tile_start, bins.tile_end, bins.gauss, rows))
+        strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
+    else:
+        if config.warp_cull:
+            masks = pair_masks(p, bins, tiles_x, config)
+            strip_pairs = jnp.sum(lax.population_count(masks), dtype=jnp.int32)
+        else:
+            masks = jnp.zeros((1,), jnp.int32)
+            strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
+        kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
+                                   last_pair=last_pair)
+        outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt,
+                     (bins.tile_start, bins.tile_end, bins.gauss, masks, rows))
+    # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
+    r, g, b, t, d = (x.reshape(n_tiles, TILE * TILE) for x in outs)
+    state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
+                       done=jnp.zeros(t.shape, bool))
+    return jax.tree.map(lambda x: tiles_to_image(x, width, height), state), strip_pairs

@@ -1,0 +1,142 @@
+"""`pallas` / `pallas_vanilla` backends against `reference` and `tiles`.
+
+Without a GPU the kernels run in Pallas interpret mode (what CI exercises); on a GPU the same
+tests run the compiled Triton kernels (scripts/gpu_check.sh). `test_kernels_lower_to_triton`
+lowers every kernel variant to Triton IR on any machine (the GPU description is faked), so a
+primitive the Triton lowering lacks fails here, not first on the GPU.
+"""
+
+import itertools
+
+import jax
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+import lgs_jax
+from lgs_jax.backends import pallas
+from lgs_jax.projection import project
+from tests import scenes
+from tests.compare import assert_render_close
+from tests.test_tiles import F32_ATOL
+
+C = lgs_jax.RasterConfig
+LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
+    "local_gs": C(),
+    "no_cull": C(warp_cull=False),
+    "difference": C(hoist=False),
+    "baseline": C(hoist=False, warp_cull=False),
+    "local_center": C(origin="center"),
+    "global": C(local_coords=False),
+    "gsplat": C("gsplat"),
+}
+
+
+@pytest.mark.parametrize("name", LOCALGS)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_localgs_kernel_equals_reference_float64(name, seed):
+    g = scenes.scene(seed)
+    cam = scenes.camera(dtype=np.float64)
+    config = LOCALGS[name]
+    ref = scenes.render(g, cam, "reference", C(config.convention))
+    out = scenes.render(g, cam, "pallas", config)
+    assert out.stats.kernel == "localgs-triton"
+    assert out.stats.interpreted == (jax.default_backend() != "gpu")
+    for field in ("image", "alpha", "depth"):
+        assert_render_close(getattr(out, field), getattr(ref, field), atol=1e-9, what=field)
+
+
+@pytest.mark.parametrize("name", ["local_gs", "difference", "local_center", "gsplat"])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_localgs_kernel_equals_reference_float32(name, seed):
+    """Same tolerance as the tiles backend (tests/test_tiles.py): hoisted and difference forms
+    round differently; threshold flips on at most 1% of pixels."""
+    g = scenes.cast(scenes.scene(seed), np.float32)
+    cam = scenes.camera()
+    config = LOCALGS[name]
+    ref = scenes.render(g, cam, "reference", C(config.convention))
+    out = scenes.render(g, cam, "pallas", config)
+    assert out.image.dtype == np.float32
+    assert_render_close(out.image, ref.image, atol=F32_ATOL, max_flip_share=0.01, flip_atol=2.0)
+    assert_render_close(out.alpha, ref.alpha, atol=F32_ATOL, max_flip_share=0.01, flip_atol=1.0)
+    tiles = scenes.render(g, cam, "tiles", config)
+    assert_render_close(out.image, tiles.image, atol=F32_ATOL, max_flip_share=0.01,
+                        flip_atol=2.0)
+    assert int(out.stats.strip_pairs) == int(tiles.stats.strip_pairs)
+
+
+@pytest.mark.parametrize("convention,dtype", itertools.product(["3dgs", "gsplat"],
+                                                               [np.float32, np.float64]))
+@given(seed=st.integers(0, 2**32 - 1))
+def test_vanilla_kernel_equals_reference(convention, dtype, seed):
+    """The vanilla kernel is the reference's arithmetic in the reference's order."""
+    g = scenes.cast(scenes.scene(seed), dtype)
+    cam = scenes.camera(dtype=dtype)
+    ref = scenes.render(g, cam, "reference", C(convention))
+    out = scenes.render(g, cam, "pallas_vanilla", C(convention))
+    assert out.stats.kernel == "vanilla-triton"
+    atol = 1e-9 if dtype == np.float64 else 1e-6
+    for field in ("image", "alpha", "depth"):
+        assert_render_close(getattr(out, field), getattr(ref, field), atol=atol,
+                            max_flip_share=0.0 if dtype == np.float64 else 0.005,
+                            flip_atol=2.0, what=field)
+
+
+@pytest.mark.parametrize("convention", ["3dgs", "gsplat"])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_fast_blending_kernel_stays_within_its_bound(convention, seed):
+    """|fast − exact| <= 1e-4/(1 − cap)·max|rgb − background| (lgs_jax.backends.tiles)."""
+    g = scenes.scene(seed, kinds=("normal", "opaque", "layers", "tiny"))
+    cam = scenes.camera(dtype=np.float64)
+    bg = np.array(scenes.BACKGROUND)
+    exact = scenes.render(g, cam, "reference", C(convention))
+    fast = scenes.render(g, cam, "pallas", C(convention, blend="fast"))
+    bound = 1e-4 / (1 - C(convention).alpha_cap)
+    rgb = np.asarray(project(g, cam).rgb)
+    colour_range = np.abs(rgb[:, None, :] - bg).max() if len(rgb) else 0.0
+    assert_render_close(fast.image, exact.image, atol=bound * colour_range + 1e-9)
+    assert_render_close(fast.alpha, exact.alpha, atol=bound + 1e-9)
+
+
+def test_pallas_under_jit_and_vmap_reports_overflow_and_matches_single_views():
+    g = scenes.cast(scenes.scene(7), np.float32)
+    cams = lgs_jax.stack_cameras([scenes.camera(yaw=y) for y in (0.0, 0.2)])
+    # The scene is an argument of both programs (a closed-over constant would be folded at
+    # compile time and round differently).
+    one = jax.jit(lambda g, c: lgs_jax.render(g, c, backend="pallas", capacity=4096))
+    out = jax.jit(jax.vmap(one, in_axes=(None, 0)))(g, cams)
+    for i, yaw in enumerate((0.0, 0.2)):
+        np.testing.assert_array_equal(out.image[i], one(g, scenes.camera(yaw=yaw)).image)
+    small = jax.jit(lambda c: lgs_jax.render(g, c, backend="pallas", capacity=8).stats)(
+        scenes.camera())
+    assert bool(small.overflow) and int(small.pairs_required) > 8
+    with pytest.raises(lgs_jax.CapacityError):
+        lgs_jax.render(g, scenes.camera(), backend="pallas", capacity=8)
+
+
+def test_empty_and_background_only_scenes():
+    g = scenes.cast(scenes.scene(1, kinds=("behind", "invalid")), np.float32)
+    out = scenes.render(g, scenes.camera(), "pallas", C())
+    np.testing.assert_array_equal(out.image, np.broadcast_to(
+        np.asarray(scenes.BACKGROUND, np.float32), out.image.shape))
+
+
+@pytest.mark.parametrize("backend,config", [("pallas", c) for c in LOCALGS.values()]
+                         + [("pallas", C(blend="fast")), ("pallas_vanilla", C())], ids=str)
+def test_kernels_lower_to_triton(backend, config, monkeypatch):
+    """Every kernel variant lowers through the Pallas Triton lowering (to Triton IR, for an
+    H100), so CI catches what the GPU would reject at lowering time."""
+    from jax._src.pallas.triton import gpu_info
+
+    jax.clear_caches()  # `render`'s traces are cached per config: retrace with GPU lowering
+    monkeypatch.setenv("LGS_JAX_PALLAS_LOWER", "gpu")
+    monkeypatch.setattr(gpu_info, "get_gpu_info",
+                        lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
+    g = scenes.cast(scenes.scene(0), np.float32)
+    f = jax.jit(lambda g, c: lgs_jax.render(g, c, backend=backend, config=config,
+                                            capacity=4096).image)
+    try:
+        text = f.trace(g, scenes.camera()).lower(lowering_platforms=("cuda",)).as_text()
+    finally:
+        jax.clear_caches()  # and drop those traces before other tests run kernels
+    assert "__gpu$xla.gpu.triton" in text
