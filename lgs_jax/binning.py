@@ -183,17 +183,16 @@ def tile_ranges(tile, n_tiles: int):
     return firsts[:n_tiles], firsts[1:]
 
 
-def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
-    """Emit pairs in (depth, index) order, then stable-sort them by tile.
+def emit_pairs(p: Projected, width: int, height: int, capacity: int):
+    """Tile–Gaussian pairs in (depth, index) order: (tile, gauss, total, n_unbounded).
 
-    Pair emission uses a prefix sum and `searchsorted(cumsum, arange(capacity))` (no scatter, so
-    it is deterministic on GPUs); tile ranges come from `tile_ranges`. Because Gaussians are visited in depth order and the tile sort
-    is stable, each tile's list comes out sorted by (depth, index).
+    A prefix sum over the depth-ordered tile counts and `searchsorted(cumsum, arange(capacity))`
+    give each slot its Gaussian (no scatter, so deterministic on GPUs); slots past the total
+    get tile = n_tiles (padding, sorts last).
     """
     if not 0 < capacity <= MAX_PAIRS:
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
     tiles_x, tiles_y = tile_grid(width, height)
-    n_tiles = tiles_x * tiles_y
     tx0, ty0, nx, ny, unbounded = tile_rects(p, width, height)
     counts = nx * ny
     total = total_pairs(counts)
@@ -207,8 +206,22 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileB
     local = slot - (ends[k] - counts_sorted[k])
     nxg = jnp.maximum(nx[g], 1)
     tile = (ty0[g] + local // nxg) * tiles_x + tx0[g] + local % nxg
-    tile = jnp.where(slot < total, tile, n_tiles)  # padding sorts last
-    tile, gauss = lax.sort((tile, g), num_keys=1, is_stable=True)
-    start, end = tile_ranges(tile, n_tiles)
+    tile = jnp.where(slot < total, tile, tiles_x * tiles_y)
+    return tile, g, total, jnp.sum(unbounded, dtype=jnp.int32)
+
+
+def sort_pairs(tile, gauss, n_tiles: int):
+    """Stable sort of pairs by tile (each tile's list stays in (depth, index) order) and the
+    tiles' ranges: (tile, gauss, tile_start, tile_end)."""
+    tile, gauss = lax.sort((tile, gauss), num_keys=1, is_stable=True)
+    return (tile, gauss) + tile_ranges(tile, n_tiles)
+
+
+def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
+    """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
+    pairs are emitted in depth order and the tile sort is stable."""
+    tiles_x, tiles_y = tile_grid(width, height)
+    tile, g, total, n_unbounded = emit_pairs(p, width, height, capacity)
+    tile, gauss, start, end = sort_pairs(tile, g, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, tile_start=start, tile_end=end, pairs_required=total,
-                    overflow=total > capacity, n_unbounded=jnp.sum(unbounded, dtype=jnp.int32))
+                    overflow=total > capacity, n_unbounded=n_unbounded)

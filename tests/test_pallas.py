@@ -65,8 +65,8 @@ def test_localgs_kernel_equals_reference_float32(name, seed):
     assert int(out.stats.strip_pairs) == int(tiles.stats.strip_pairs)
 
 
-@pytest.mark.parametrize("convention,dtype", itertools.product(["3dgs", "gsplat"],
-                                                               [np.float32, np.float64]))
+@pytest.mark.parametrize("convention,dtype", list(itertools.product(["3dgs", "gsplat"],
+                                                                    [np.float32, np.float64])))
 @given(seed=st.integers(0, 2**32 - 1))
 def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     """The vanilla kernel is the reference's arithmetic in the reference's order."""

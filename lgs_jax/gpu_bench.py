@@ -1,0 +1,248 @@
+"""GPU benchmark of the Pallas kernels against gsplat 1.5.3, same process, scenes and cameras.
+
+    XLA_PYTHON_CLIENT_PREALLOCATE=false python -m lgs_jax.gpu_bench --preset issue5 \\
+        [--data DIR] [--repeat 30] [--csv FILE]
+
+Rows per scene and camera: `pallas` (Local-GS, exact and fast blending), `pallas_vanilla`,
+`tiles` (XLA; fewer rounds: it is slow on GPUs) and `gsplat` (`rasterization(...,
+packed=False, rasterize_mode="classic")`, when gsplat imports). Per row: the rasterization stage
+(`raster_ms`: our kernel call with its mask and row packing, from projected and binned inputs;
+gsplat's `rasterize_to_pixels` from its own intersections), the end-to-end forward
+(`e2e_ms`: one jitted `render` from device-resident parameters / one `rasterization` call), the
+shared stages (`project_ms`, `emit_ms` = pair emission, `sort_ms` = tile sort and ranges;
+gsplat: projection + SH, intersection, offsets), tile–Gaussian pairs, peak memory (ours: XLA's
+compiled buffer sizes for the e2e program; gsplat: torch's peak allocation in the call), and
+the error against gsplat's image (max abs, PSNR) and, where it fits (`--f64-max-pixels`), against
+the float64 reference. Times are medians of `--repeat` calls after warm-up, each ended by
+`block_until_ready` / `torch.cuda.synchronize`; rows alternate within each round.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import binning, render
+from .backends import pallas, tiles
+from .bench import parse_scene
+from .config import RasterConfig
+from .projection import project
+
+C = RasterConfig
+OURS = {  # row -> (backend, config, rasterize stage)
+    "pallas": ("pallas", C(), lambda p, b, w, h: pallas.rasterize(p, b, w, h, C())),
+    "pallas:fast": ("pallas", C(blend="fast"),
+                    lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(blend="fast"))),
+    "pallas:no_cull": ("pallas", C(warp_cull=False),
+                       lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(warp_cull=False))),
+    "pallas_vanilla": ("pallas_vanilla", C(),
+                       lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(), vanilla=True)),
+    "tiles": ("tiles", C(), lambda p, b, w, h: tiles.rasterize(p, b, w, h, C())),
+}
+
+
+def _preset(data):
+    g, l = f"{data}/guitar", f"{data}/lego_sh3"
+    guitar = f"guitar={g}/guitar.ply:{g}/orbit_cameras.json"
+    lego = f"lego_sh3={l}/lego_sh3.ply:{l}/lego_cameras.json"
+    return [f"{guitar}@1280x720", f"{guitar}@3840x2160", f"{lego}@800x800", f"{lego}@3200x3200",
+            "synthetic:1000000@1280x720", "synthetic:3000000@1280x720"]
+
+
+def _median_ms(fns, repeat, sync):
+    """{name: median ms} over `repeat` rounds, each round calling every fn once, in turn."""
+    times = {name: [] for name in fns}
+    for _ in range(repeat):
+        for name, f in fns.items():
+            t0 = time.perf_counter()
+            sync(f())
+            times[name].append(time.perf_counter() - t0)
+    return {name: 1e3 * statistics.median(t) for name, t in times.items()}
+
+
+def _ours(case, repeat, slow_repeat, f64_max_pixels):
+    g = jax.device_put(case.scene)
+    cam = jax.device_put(case.camera)
+    w, h = cam.width, cam.height
+    first = render(g, cam, backend="pallas")
+    cap = int(first.stats.capacity)
+    n_tiles = int(np.prod(binning.tile_grid(w, h)))
+    proj = jax.jit(project)
+    emit = jax.jit(lambda p: binning.emit_pairs(p, w, h, cap))
+    sort = jax.jit(lambda t, g: binning.sort_pairs(t, g, n_tiles))
+    p = proj(g, cam)
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    t, gi, _, _ = emit(p)
+    stage_fns = {"project": lambda: proj(g, cam), "emit": lambda: emit(p),
+                 "sort": lambda: sort(t, gi)}
+    stages = _median_ms(stage_fns, repeat, jax.block_until_ready)
+    e2e, raster, images, memory = {}, {}, {}, {}
+    for name, (backend, config, stage) in OURS.items():
+        f = jax.jit(lambda g, c, b=backend, cf=config: render(g, c, backend=b, config=cf,
+                                                               capacity=cap).image)
+        r = jax.jit(lambda p, b, st=stage: st(p, b, w, h)[0].color)
+        images[name] = np.asarray(f(g, cam))
+        jax.block_until_ready(r(p, bins))
+        mem = f.lower(g, cam).compile().memory_analysis()
+        memory[name] = None if mem is None else (mem.temp_size_in_bytes + mem.argument_size_in_bytes
+                                                 + mem.output_size_in_bytes)
+        n = slow_repeat if name == "tiles" else repeat
+        times = _median_ms({"e2e": lambda: f(g, cam), "raster": lambda: r(p, bins)}, n,
+                           jax.block_until_ready)
+        e2e[name], raster[name] = times["e2e"], times["raster"]
+    truth = None
+    if w * h <= f64_max_pixels:
+        g64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), g)
+        truth = np.asarray(render(g64, cam, capacity=cap).image)
+    rows = []
+    for name in OURS:
+        row = dict(scene=case.name, width=w, height=h, gaussians=case.scene.num, row=name,
+                   raster_ms=raster[name], e2e_ms=e2e[name], project_ms=stages["project"],
+                   emit_ms=stages["emit"], sort_ms=stages["sort"],
+                   pairs=int(first.stats.pairs_required), peak_mb=memory[name] / 2**20
+                   if memory[name] else "")
+        if truth is not None:
+            err = np.abs(images[name].astype(np.float64) - truth)
+            row.update(max_err_f64=float(err.max()), psnr_f64=_psnr(err))
+        rows.append(row)
+    return rows, images
+
+
+def _psnr(err):
+    mse = float(np.mean(np.square(err)))
+    return float("inf") if mse == 0 else -10 * np.log10(mse)
+
+
+def _gsplat(case, repeat):
+    """gsplat 1.5.3's forward on the same scene and camera: (row, image) or None."""
+    try:
+        import gsplat
+        import torch
+        from gsplat.cuda._wrapper import (fully_fused_projection, isect_offset_encode,
+                                          isect_tiles, rasterize_to_pixels, spherical_harmonics)
+    except Exception as e:  # noqa: BLE001 - any import failure means no peer
+        print(f"gsplat unavailable: {e}", file=sys.stderr)
+        return None
+    dev = torch.device("cuda")
+    g, cam = case.scene, case.camera
+    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    means, quats = t(g.means), t(g.quats)
+    scales, opac = torch.exp(t(g.log_scales)), torch.sigmoid(t(g.logit_opacities))
+    sh = t(g.sh)
+    deg = int(round(np.sqrt(sh.shape[1]))) - 1
+    viewmat = t(cam.viewmat)[None]
+    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
+    w, h = cam.width, cam.height
+    near, far = float(cam.near), float(cam.far)
+    sync = lambda _: torch.cuda.synchronize()
+
+    def full():
+        return gsplat.rasterization(means, quats, scales, opac, sh, viewmat, K, w, h,
+                                    near_plane=near, far_plane=far, sh_degree=deg, packed=False,
+                                    rasterize_mode="classic")[0]
+
+    def proj():
+        radii, m2d, depths, conics, _ = fully_fused_projection(
+            means, None, quats, scales, viewmat, K, w, h, near_plane=near, far_plane=far,
+            opacities=opac)  # as rasterization() calls it
+        dirs = means[None] - torch.linalg.inv(viewmat)[:, None, :3, 3]
+        colors = spherical_harmonics(deg, dirs, sh[None].expand(1, -1, -1, -1),
+                                     masks=(radii > 0).all(dim=-1))
+        colors = torch.clamp_min(colors + 0.5, 0.0)
+        return radii, m2d, depths, conics, colors
+
+    radii, m2d, depths, conics, colors = proj()
+    tw, th = -(-w // 16), -(-h // 16)
+
+    def isect():
+        return isect_tiles(m2d, radii, depths, 16, tw, th, packed=False)
+
+    _, isect_ids, flatten_ids = isect()
+
+    def offsets():
+        return isect_offset_encode(isect_ids, 1, tw, th).reshape(1, th, tw)
+
+    offs = offsets()
+    op = opac[None]
+
+    def raster():
+        return rasterize_to_pixels(m2d, conics, colors, op, w, h, 16, offs, flatten_ids)
+
+    image = full()
+    torch.cuda.synchronize()
+    torch.cuda.reset_peak_memory_stats()
+    base = torch.cuda.memory_allocated()
+    full()
+    torch.cuda.synchronize()
+    peak = (torch.cuda.max_memory_allocated() - base) / 2**20
+    times = _median_ms({"e2e": full, "project": proj, "isect": isect, "offsets": offsets,
+                        "raster": raster}, repeat, sync)
+    row = dict(scene=case.name, width=w, height=h, gaussians=g.num, row="gsplat",
+               raster_ms=times["raster"], e2e_ms=times["e2e"], project_ms=times["project"],
+               emit_ms=times["isect"], sort_ms=times["offsets"], pairs=int(isect_ids.shape[0]),
+               peak_mb=peak)
+    return row, image[0].float().cpu().numpy()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m lgs_jax.gpu_bench", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scene", action="append", default=[], help="scene SPEC (lgs_jax.bench)")
+    ap.add_argument("--preset", choices=["issue5"])
+    ap.add_argument("--data", default=os.path.join("..", "shared", "data"))
+    ap.add_argument("--repeat", type=int, default=30)
+    ap.add_argument("--slow-repeat", type=int, default=3, help="rounds for the tiles row")
+    ap.add_argument("--f64-max-pixels", type=int, default=1280 * 720)
+    ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--csv")
+    args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # the float64 reference; renders stay float32
+    specs = args.scene + (_preset(args.data) if args.preset else [])
+    dev = jax.devices()[0]
+    print(f"device {dev.device_kind}; JAX {jax.__version__}; Pallas kernels interpreted: "
+          f"{pallas.interpreted()}", flush=True)
+    rows = []
+    for spec in specs:
+        case = parse_scene(spec)
+        ours, images = _ours(case, args.repeat, args.slow_repeat, args.f64_max_pixels)
+        peer = None if args.no_gsplat else _gsplat(case, args.repeat)
+        if peer:
+            row, image = peer
+            for r in ours:
+                err = np.abs(images[r["row"]].astype(np.float64) - image)
+                r.update(max_err_gsplat=float(err.max()), psnr_gsplat=_psnr(err),
+                         e2e_vs_gsplat=r["e2e_ms"] / row["e2e_ms"])
+            ours.append(row)
+        vanilla = next(r for r in ours if r["row"] == "pallas_vanilla")
+        for r in ours:
+            r["raster_speedup_vs_vanilla"] = vanilla["raster_ms"] / r["raster_ms"]
+        rows += ours
+        for r in ours:
+            print(_format(r), flush=True)
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            wr = csv.DictWriter(f, fieldnames=sorted({k for r in rows for k in r}))
+            wr.writeheader()
+            wr.writerows(rows)
+    return 0
+
+
+def _format(r):
+    extra = (f" | vs gsplat {r['psnr_gsplat']:6.1f} dB e2e ratio {r['e2e_vs_gsplat']:5.2f}"
+             if "psnr_gsplat" in r else "")
+    return (f"{r['scene']:>16s} {r['width']}x{r['height']} {r['row']:<15s} raster "
+            f"{r['raster_ms']:8.3f} e2e {r['e2e_ms']:8.3f} ms (proj {r['project_ms']:.3f} emit "
+            f"{r['emit_ms']:.3f} sort {r['sort_ms']:.3f}) pairs {r['pairs']:>9d} "
+            f"x{r['raster_speedup_vs_vanilla']:.2f} vs vanilla{extra}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
