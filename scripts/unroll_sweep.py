@@ -16,7 +16,7 @@ for w, h in [(1280, 720), (3840, 2160)]:
     p = jax.jit(project)(g, cam)
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
     for unroll in (1, 2, 4, 8):
-        pallas.UNROLL = unroll
+        pallas.UNROLL = {"localgs": unroll, "vanilla": unroll}
         jax.clear_caches()
         for name, cfg, vanilla in [("localgs", C(), False), ("fast", C(blend="fast"), False),
                                    ("vanilla", C(), True)]:

@@ -7,12 +7,14 @@ arithmetic, same blending semantics) and `lgs_jax.backends.reference` (per-pixel
 
 Local-GS kernel (`backend="pallas"`, Sec. III): one program per 16x2 strip, `num_warps=1`, so a
 program is one warp and its 32 lanes are the strip's pixels. It walks its tile's pairs in order;
-with `warp_cull` a pair whose strip-mask bit is clear is skipped by a warp-uniform branch before
-anything else of it is loaded (Sec. III-C); the hoisted 6-vector (Eq. 8) is built from the
+with `warp_cull` a pair whose strip-mask bit is clear does not blend, and a staged group of pairs
+with no bit set is skipped by one warp-uniform branch (Sec. III-C); the hoisted 6-vector (Eq. 8) is built from the
 Gaussian's row and the tile origin as the pair is staged, and each pixel evaluates ln α as a
 6-term sum in its local coordinates (Eq. 10). The strip stops as a unit once every lane is done
 (`exact`: each pixel's stop test fired; `fast`: every T below 1e-4, the paper's coherent
-blending). Pairs are staged UNROLL at a time (independent loads issued together).
+blending). Pairs are staged UNROLL["localgs"] at a time: their Gaussian ids and mask bits are fetched one
+iteration ahead, the group's α are computed together (independent work that overlaps), then
+blended in order, so the serial chain per pair is the blend alone.
 
 Vanilla kernel (`backend="pallas_vanilla"`, the original 3DGS rasterizer): one program per 16x16
 tile with 8 warps (256 lanes), the difference form, per-pixel termination, and a tile-wide early
@@ -43,7 +45,7 @@ from ..warp_masks import STRIPS
 from .reference import tiles_to_image
 from .tiles import _origin_offset, pair_masks
 
-UNROLL = 4  # pairs staged per loop iteration
+UNROLL = {"localgs": 4, "vanilla": 8}  # pairs staged per iteration (scripts/kernel_profile.py)
 STRIP_PIXELS = 2 * TILE
 ROW = 12  # packed Gaussian row: mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
 KERNELS = {"pallas": "localgs-triton", "pallas_vanilla": "vanilla-triton"}
@@ -91,19 +93,39 @@ def _running(state, config: RasterConfig):
     return jnp.min(stops(state[3], config).astype(jnp.int32)) == 0
 
 
-def _staged_loop(start, end, state, step, config: RasterConfig):
-    """Walk pairs [start, end) UNROLL at a time while some lane still blends."""
+def _staged_loop(start, end, state, fetch, pair_alpha, config: RasterConfig, unroll: int,
+                 take=None):
+    """Walk pairs [start, end) `unroll` at a time while some lane still blends.
+
+    `fetch(j)` loads pair j's small index data (Gaussian id, mask bit) one iteration ahead.
+    Each iteration evaluates its `unroll` pairs first (`pair_alpha(fetched) -> (α, hit, rgb, z)`,
+    independent of the pixel state, so their loads and arithmetic overlap) and then blends them
+    in order. `take(fetched)` (optional) says whether a pair concerns this program at all (its
+    mask bit): pairs without it do not blend, and a group with none is skipped by one
+    program-uniform branch.
+    """
     def cond(carry):
-        j, st = carry
+        j, _, st = carry
         return (j < end) & _running(st, config)
 
     def body(carry):
-        j, st = carry
-        for u in range(UNROLL):
-            st = step(j + u, j + u < end, st)
-        return j + UNROLL, st
+        j, cur, st = carry
+        nxt = [fetch(j + unroll + u) for u in range(unroll)]
+        takes = [(j + u < end) & (True if take is None else take(cur[u])) for u in range(unroll)]
 
-    return lax.while_loop(cond, body, (start, state))[1]
+        def group(st):
+            evaluated = [pair_alpha(f) for f in cur]
+            for (alpha, hit, rgb, z), ok in zip(evaluated, takes):
+                st = _blend(st, alpha, hit & ok, rgb, z, config)
+            return st
+
+        if take is None:
+            return j + unroll, nxt, group(st)
+        return j + unroll, nxt, lax.cond(functools.reduce(jnp.logical_or, takes), group,
+                                         lambda st: st, st)
+
+    first = [fetch(start + u) for u in range(unroll)]
+    return lax.while_loop(cond, body, (start, first, state))[2]
 
 
 def _empty(lanes: int, dt):
@@ -135,30 +157,28 @@ def _localgs_kernel(start_ref, end_ref, gauss_ref, mask_ref, rows_ref, *out_refs
     ln_min = jnp.log(jnp.asarray(ALPHA_MIN, dt))
     bit = jnp.left_shift(jnp.int32(1), s)
 
-    def blend_pair(j, st):
-        gi = gauss_ref[j]
-        row = lambda c: rows_ref[gi, c]
-        mx, my, a, b, c = row(0), row(1), row(2), row(3), row(4)
+    def fetch(j):
+        jj = jnp.minimum(j, last_pair)
+        return gauss_ref[jj], ((mask_ref[jj] & bit) != 0) if config.warp_cull else None
+
+    def pair_alpha(fetched):
+        row = [rows_ref[fetched[0], c] for c in range(ROW - 1)]
+        mx, my, a, b, c = row[:5]
         if config.hoist:
-            v = hoist.hoist_terms(a, b, c, mx - ox, my - oy, row(5))  # staged per pair (Eq. 8)
-            ln_a = jnp.minimum(hoist.evaluate_terms(v, x, y), row(5))
+            v = hoist.hoist_terms(a, b, c, mx - ox, my - oy, row[5])  # staged per pair (Eq. 8)
+            ln_a = jnp.minimum(hoist.evaluate_terms(v, x, y), row[5])
             alpha, hit = jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= ln_min
         else:
             dx, dy = mx - (corner_x + lx), my - (corner_y + ly)
             power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-            alpha = jnp.minimum(cap, row(6) * jnp.exp(power))
+            alpha = jnp.minimum(cap, row[6] * jnp.exp(power))
             hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
-        return _blend(st, alpha, hit, (row(7), row(8), row(9)), row(10), config)
+        return alpha, hit, row[7:10], row[10]
 
-    def step(j, in_range, st):
-        jj = jnp.minimum(j, last_pair)
-        take = in_range
-        if config.warp_cull:  # warp-uniform branch on the strip's mask bit (Sec. III-C)
-            take = take & ((mask_ref[jj] & bit) != 0)
-        return lax.cond(take, functools.partial(blend_pair, jj), lambda st: st, st)
-
-    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(STRIP_PIXELS, dt), step,
-                                  config))
+    # With warp culling, the strip's mask bit decides (a warp-uniform branch, Sec. III-C).
+    take = (lambda fetched: fetched[1]) if config.warp_cull else None
+    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(STRIP_PIXELS, dt), fetch,
+                                  pair_alpha, config, UNROLL["localgs"], take))
 
 
 def _vanilla_kernel(start_ref, end_ref, gauss_ref, rows_ref, *out_refs, config: RasterConfig,
@@ -170,20 +190,19 @@ def _vanilla_kernel(start_ref, end_ref, gauss_ref, rows_ref, *out_refs, config: 
     py = ((tile // tiles_x) * TILE + k // TILE).astype(dt) + 0.5
     cap = jnp.asarray(config.alpha_cap, dt)
 
-    def step(j, in_range, st):
-        def blend_pair(st):
-            gi = gauss_ref[jnp.minimum(j, last_pair)]
-            row = lambda c: rows_ref[gi, c]
-            dx, dy = row(0) - px, row(1) - py
-            power = -0.5 * (row(2) * dx * dx + row(4) * dy * dy) - row(3) * dx * dy
-            alpha = jnp.minimum(cap, row(6) * jnp.exp(power))
-            hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
-            return _blend(st, alpha, hit, (row(7), row(8), row(9)), row(10), config)
+    def fetch(j):
+        return gauss_ref[jnp.minimum(j, last_pair)]
 
-        return lax.cond(in_range, blend_pair, lambda st: st, st)
+    def pair_alpha(gi):
+        row = [rows_ref[gi, c] for c in range(ROW - 1)]
+        dx, dy = row[0] - px, row[1] - py
+        power = -0.5 * (row[2] * dx * dx + row[4] * dy * dy) - row[3] * dx * dy
+        alpha = jnp.minimum(cap, row[6] * jnp.exp(power))
+        hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+        return alpha, hit, row[7:10], row[10]
 
-    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt), step,
-                                  config))
+    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt), fetch,
+                                  pair_alpha, config, UNROLL["vanilla"]))
 
 
 def _call(kernel, n_programs: int, lanes: int, num_warps: int, dt, args):
