@@ -1,18 +1,19 @@
 """`pallas` and `pallas_vanilla` backends: the rasterization stage as Pallas (Triton) kernels.
 
-Projection, binning and sorting stay in XLA (shared with the `tiles` backend); the kernels read
-the sorted pair list and one packed row per Gaussian. The plain-jnp counterpart of each kernel,
-which the tests compare them with, is `lgs_jax.backends.tiles` (same masks, same hoisted
-arithmetic, same blending semantics) and `lgs_jax.backends.reference` (per-pixel semantics).
+Projection, binning and sorting stay in XLA (shared with the `tiles` backend). The plain-jnp
+counterpart of each kernel, which the tests compare them with, is `lgs_jax.backends.tiles` (same
+masks, same hoisted arithmetic, same blending semantics) and `lgs_jax.backends.reference`
+(per-pixel semantics).
 
 Local-GS kernel (`backend="pallas"`, Sec. III): one program per 16x2 strip, `num_warps=1`, so a
-program is one warp and its 32 lanes are the strip's pixels. It walks its tile's pairs in order;
-with `warp_cull` a pair whose strip-mask bit is clear does not blend, and a staged group of pairs
-with no bit set is skipped by one warp-uniform branch (Sec. III-C); the hoisted 6-vector (Eq. 8) is built from the
-Gaussian's row and the tile origin as the pair is staged, and each pixel evaluates ln α as a
-6-term sum in its local coordinates (Eq. 10). The strip stops as a unit once every lane is done
+program is one warp and its 32 lanes are the strip's pixels. It walks its tile's pairs in order,
+reading one record per pair (`pair_records`): the hoisted 6-vector V (Eq. 8), built once per
+(tile, Gaussian) pair relative to the tile origin, then ln o, colour and depth; each pixel
+evaluates ln α as a 6-term sum in its local coordinates (Eq. 10). With `warp_cull` a pair whose
+strip-mask bit is clear does not blend, and a staged group of pairs with no bit set is skipped
+by one warp-uniform branch (Sec. III-C). The strip stops as a unit once every lane is done
 (`exact`: each pixel's stop test fired; `fast`: every T below 1e-4, the paper's coherent
-blending). Pairs are staged UNROLL["localgs"] at a time: their Gaussian ids and mask bits are fetched one
+blending). Pairs are staged UNROLL["localgs"] at a time: their mask bits are fetched one
 iteration ahead, the group's α are computed together (independent work that overlaps), then
 blended in order, so the serial chain per pair is the blend alone.
 
@@ -22,7 +23,9 @@ exit when every pixel is done. It ignores the Local-GS switches (it is the basel
 measures against) but honours `convention`.
 
 Both use exact per-pixel blending semantics (lgs_jax.composite) unless `blend="fast"` (Local-GS
-only). Without a GPU the kernels run in Pallas interpret mode (slow, meant for tests);
+only). Programs run tiles in order of decreasing list length (longest-first scheduling: the
+slowest programs start first and short ones fill in behind them; each writes its own output
+row). Without a GPU the kernels run in Pallas interpret mode (slow, meant for tests);
 `stats.kernel` names the kernel that ran, `stats.interpreted` says whether it was interpreted.
 """
 
@@ -43,11 +46,12 @@ from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import STRIPS
 from .reference import tiles_to_image
-from .tiles import _origin_offset, pair_masks
+from .tiles import _origin_offset, pair_masks, pair_vectors
 
 UNROLL = {"localgs": 4, "vanilla": 8}  # pairs staged per iteration (scripts/kernel_profile.py)
 STRIP_PIXELS = 2 * TILE
-ROW = 12  # packed Gaussian row: mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
+ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
+REC = 12  # packed pair record (Local-GS): see `pair_records`
 KERNELS = {"pallas": "localgs-triton", "pallas_vanilla": "vanilla-triton"}
 
 
@@ -63,6 +67,23 @@ def gaussian_rows(p: Projected):
     cols = [p.mean2d[:, 0], p.mean2d[:, 1], p.conic[:, 0], p.conic[:, 1], p.conic[:, 2],
             jnp.log(o), o, p.rgb[:, 0], p.rgb[:, 1], p.rgb[:, 2], p.depth, jnp.zeros_like(o)]
     return jnp.stack(cols, -1)
+
+
+def pair_records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """(capacity, REC) per-pair rows the Local-GS kernel loads, in pair order (no indirection).
+
+    hoist: V (Eq. 8) relative to the pair's tile origin, ln o, rgb, z: the hoisted vector is
+    built once per (tile, Gaussian) pair, as the paper stages it per tile, not once per strip.
+    Otherwise the Gaussian's mean, conic and opacity, then rgb, z (the difference form).
+    """
+    g = bins.gauss
+    if config.hoist:
+        head = pair_vectors(p, bins, tiles_x, config)  # (capacity, 7): V, ln o
+    else:
+        head = jnp.concatenate([p.mean2d[g], p.conic[g], p.opacity[g, None],
+                                jnp.zeros_like(p.opacity[g, None])], -1)
+    tail = jnp.concatenate([p.rgb[g], p.depth[g, None], jnp.zeros_like(p.depth[g, None])], -1)
+    return jnp.concatenate([head, tail], -1)
 
 
 def _blend(state, alpha, hit, rgb, z, config: RasterConfig):
@@ -134,57 +155,59 @@ def _empty(lanes: int, dt):
     return zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), bool)
 
 
-def _store(refs, state):
+def _store(refs, row, state):
+    """Write (r, g, b, T, D) to row `row` of the (programs, lanes) outputs."""
     for ref, x in zip(refs, state[:5]):
-        ref[...] = x
+        ref[row, :] = x
 
 
-def _localgs_kernel(start_ref, end_ref, gauss_ref, mask_ref, rows_ref, *out_refs,
+def _localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
                     config: RasterConfig, tiles_x: int, last_pair: int):
-    dt = rows_ref.dtype
-    sid = pl.program_id(0)
-    tile, s = sid // STRIPS, sid % STRIPS
+    dt = rec_ref.dtype
+    pid = pl.program_id(0)
+    tile, s = order_ref[pid // STRIPS], pid % STRIPS
     k = lax.iota(jnp.int32, STRIP_PIXELS)
     lx = (k % TILE).astype(dt) + 0.5  # tile-local pixel centres (exact in any float)
     ly = (2 * s + k // TILE).astype(dt) + 0.5
     corner_x, corner_y = ((tile % tiles_x) * TILE).astype(dt), ((tile // tiles_x) * TILE).astype(dt)
     if config.local_coords:
         off = _origin_offset(config)
-        ox, oy, x, y = corner_x + off, corner_y + off, lx - off, ly - off
+        x, y = lx - off, ly - off
     else:
-        ox, oy, x, y = jnp.zeros((), dt), jnp.zeros((), dt), corner_x + lx, corner_y + ly
+        x, y = corner_x + lx, corner_y + ly
+    px, py = corner_x + lx, corner_y + ly
     cap = jnp.asarray(config.alpha_cap, dt)
     ln_min = jnp.log(jnp.asarray(ALPHA_MIN, dt))
     bit = jnp.left_shift(jnp.int32(1), s)
 
     def fetch(j):
         jj = jnp.minimum(j, last_pair)
-        return gauss_ref[jj], ((mask_ref[jj] & bit) != 0) if config.warp_cull else None
+        return jj, ((mask_ref[jj] & bit) != 0) if config.warp_cull else None
 
     def pair_alpha(fetched):
-        row = [rows_ref[fetched[0], c] for c in range(ROW - 1)]
-        mx, my, a, b, c = row[:5]
-        if config.hoist:
-            v = hoist.hoist_terms(a, b, c, mx - ox, my - oy, row[5])  # staged per pair (Eq. 8)
-            ln_a = jnp.minimum(hoist.evaluate_terms(v, x, y), row[5])
+        rec = [rec_ref[fetched[0], c] for c in range(REC - 1)]
+        if config.hoist:  # V (Eq. 8), hoisted once per pair: ln α = V·B (Eq. 10) <= ln o
+            ln_a = jnp.minimum(hoist.evaluate_terms(rec[:6], x, y), rec[6])
             alpha, hit = jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= ln_min
         else:
-            dx, dy = mx - (corner_x + lx), my - (corner_y + ly)
+            mx, my, a, b, c, o = rec[:6]
+            dx, dy = mx - px, my - py
             power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-            alpha = jnp.minimum(cap, row[6] * jnp.exp(power))
+            alpha = jnp.minimum(cap, o * jnp.exp(power))
             hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
-        return alpha, hit, row[7:10], row[10]
+        return alpha, hit, rec[7:10], rec[10]
 
     # With warp culling, the strip's mask bit decides (a warp-uniform branch, Sec. III-C).
     take = (lambda fetched: fetched[1]) if config.warp_cull else None
-    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(STRIP_PIXELS, dt), fetch,
-                                  pair_alpha, config, UNROLL["localgs"], take))
+    _store(out_refs, tile * STRIPS + s,
+           _staged_loop(start_ref[tile], end_ref[tile], _empty(STRIP_PIXELS, dt), fetch,
+                        pair_alpha, config, UNROLL["localgs"], take))
 
 
-def _vanilla_kernel(start_ref, end_ref, gauss_ref, rows_ref, *out_refs, config: RasterConfig,
-                    tiles_x: int, last_pair: int):
+def _vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
+                    config: RasterConfig, tiles_x: int, last_pair: int):
     dt = rows_ref.dtype
-    tile = pl.program_id(0)
+    tile = order_ref[pl.program_id(0)]
     k = lax.iota(jnp.int32, TILE * TILE)
     px = ((tile % tiles_x) * TILE + k % TILE).astype(dt) + 0.5
     py = ((tile // tiles_x) * TILE + k // TILE).astype(dt) + 0.5
@@ -201,18 +224,16 @@ def _vanilla_kernel(start_ref, end_ref, gauss_ref, rows_ref, *out_refs, config: 
         hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
         return alpha, hit, row[7:10], row[10]
 
-    _store(out_refs, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt), fetch,
-                                  pair_alpha, config, UNROLL["vanilla"]))
+    _store(out_refs, tile, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt),
+                                        fetch, pair_alpha, config, UNROLL["vanilla"]))
 
 
 def _call(kernel, n_programs: int, lanes: int, num_warps: int, dt, args):
     from jax.experimental.pallas import triton as pl_triton
 
-    out = jax.ShapeDtypeStruct((n_programs, lanes), dt)
-    spec = pl.BlockSpec((None, lanes), lambda i: (i, 0))
+    out = jax.ShapeDtypeStruct((n_programs, lanes), dt)  # each program writes its own row
     return pl.pallas_call(
         kernel, out_shape=[out] * 5, grid=(n_programs,),
-        out_specs=[spec] * 5,
         compiler_params=pl_triton.CompilerParams(num_warps=num_warps, num_stages=1),
         interpret=interpreted(), name=kernel.func.__name__.strip("_"),
     )(*args)
@@ -226,13 +247,14 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
     tiles_x, tiles_y = tile_grid(width, height)
     n_tiles = tiles_x * tiles_y
     last_pair = bins.gauss.shape[0] - 1
-    rows = gaussian_rows(p)
     valid_pair = bins.tile < n_tiles
+    # Longest lists first: the programs that take longest start first, the short ones fill in.
+    order = jnp.argsort(bins.tile_start - bins.tile_end, stable=True).astype(jnp.int32)
     if vanilla:
         kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
                                    last_pair=last_pair)
         outs = _call(kernel, n_tiles, TILE * TILE, 8, dt,
-                     (bins.tile_start, bins.tile_end, bins.gauss, rows))
+                     (order, bins.tile_start, bins.tile_end, bins.gauss, gaussian_rows(p)))
         strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
     else:
         if config.warp_cull:
@@ -244,7 +266,8 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
         kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
                                    last_pair=last_pair)
         outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt,
-                     (bins.tile_start, bins.tile_end, bins.gauss, masks, rows))
+                     (order, bins.tile_start, bins.tile_end, masks,
+                      pair_records(p, bins, tiles_x, config)))
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
     r, g, b, t, d = (x.reshape(n_tiles, TILE * TILE) for x in outs)
     state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
