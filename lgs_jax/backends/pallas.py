@@ -48,7 +48,7 @@ from ..warp_masks import STRIPS
 from .reference import tiles_to_image
 from .tiles import _origin_offset, pair_masks, pair_vectors
 
-UNROLL = {"localgs": 4, "vanilla": 8}  # pairs staged per iteration (scripts/kernel_profile.py)
+UNROLL = {"localgs": 2, "vanilla": 8}  # pairs staged per iteration (scripts/kernel_profile.py)
 STRIP_PIXELS = 2 * TILE
 ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
 REC = 12  # packed pair record (Local-GS): see `pair_records`
