@@ -4,8 +4,8 @@
         [--backend tiles|pallas] [--repeat N]
 
 For each scene and resolution (the view's camera rescaled), renders the float64 `reference` image,
-then the float32 image of `--backend` (`tiles`, or `pallas` on a GPU) in each exponent form (difference: hoist off; global; local_corner;
-local_center; all exact blending), and writes DIR/render_summary.csv (PSNR, SSIM from
+then the float32 image of `--backend` (`tiles`, or `pallas` on a GPU) in each exponent form
+(difference: hoist off; global; local_corner; local_center; all exact blending), and writes DIR/render_summary.csv (PSNR, SSIM from
 scikit-image, max abs error, share of pixels off by more than 1/255, and the form's forward time:
 median over `--repeat` interleaved rounds of the jitted render, compile excluded), per scene and
 resolution a PNG of where the global and local_corner errors sit, and DIR/tradeoff.png (time

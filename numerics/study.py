@@ -293,6 +293,8 @@ def report(rows, costs, out):
               "A half-precision kernel should evaluate the difference form from float32 "
               "offsets, never the hoisted one; float32 is where the hoist is free."]
     by_cost = {c["form"]: c for c in costs}
+    ratio = lambda key: by_cost["principal_axes"][key] / max(by_cost["local_corner"][key], 1e-12)
+    alpha_err = lambda form: max(r["max_alpha_err"] for r in data if r["form"] == form)
     lines += ["", f"## Cost ({costs[0]['device']}, `python -m numerics.cost`, same run)", "",
               "| form | setup, ns per Gaussian | evaluation, ns per exponent | worst error |",
               "|---|---:|---:|---:|"]
@@ -308,13 +310,13 @@ def report(rows, costs, out):
               f"{by_cost['difference']['eval_ns_per_exponent']:.3f} ns here; whether that shows "
               "in a whole render depends on the backend: numerics/results/render/tradeoff.png). "
               "Never the global expansion: its worst exponent error here is "
-              f"{worst('global'):.3g} (an α off by up to {max(r['max_alpha_err'] for r in data if r['form'] == 'global'):.2g}) and "
+              f"{worst('global'):.3g} (an α off by up to {alpha_err('global'):.2g}) and "
               "it grows with the image.",
               "- principal_axes is the only form that survives κ = 1e6 needles "
               f"({worst('principal_axes'):.3g} vs {worst('local_corner'):.3g}), at "
-              f"{by_cost['principal_axes']['setup_ns_per_gaussian'] / max(by_cost['local_corner']['setup_ns_per_gaussian'], 1e-9):.1f}x "
+              f"{ratio('setup_ns_per_gaussian'):.1f}x "
               "the per-Gaussian setup (a float64 eigendecomposition) and "
-              f"{by_cost['principal_axes']['eval_ns_per_exponent'] / by_cost['local_corner']['eval_ns_per_exponent']:.1f}x "
+              f"{ratio('eval_ns_per_exponent'):.1f}x "
               "the evaluation here. The renderer does not need it: the 0.3 px² dilation caps "
               "screen-space anisotropy at λ_max/0.3, so κ = 1e6 needs σ_max ≈ 550 px, "
               "and at rendering level (numerics/results/render/README.md, H100) the local forms "
