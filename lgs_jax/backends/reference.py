@@ -3,9 +3,15 @@
 Same per-pixel semantics as `brute` (lgs_jax.composite), none of the paper's optimisations:
 tiles are vmapped, each runs a while loop over its (depth, index)-ordered pairs and stops when
 its list ends or every pixel of the tile is done.
+
+Differentiable: `rasterize` is a `jax.custom_vjp` (reverse-mode cannot go through the while
+loop) whose backward, lgs_jax.backends.backward, walks each tile back to front from the final
+transmittance; the forward records where each pixel stopped for it.
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -15,6 +21,7 @@ from ..binning import TILE, TileBins, tile_grid
 from ..composite import PixelState, blend
 from ..config import RasterConfig
 from ..projection import Projected
+from . import backward
 
 
 def tiles_to_image(x, width: int, height: int):
@@ -26,30 +33,71 @@ def tiles_to_image(x, width: int, height: int):
     return x[:height, :width].reshape((height * width,) + rest)
 
 
-def rasterize(p: Projected, bins: TileBins, width: int, height: int,
-              config: RasterConfig) -> PixelState:
-    dt = p.mean2d.dtype
+def tile_pixels(width: int, height: int, dtype):
+    """Pixel centres (px, py), each (n_tiles, 256): every tile's pixels, row-major."""
     tiles_x, tiles_y = tile_grid(width, height)
     local_j, local_i = jnp.meshgrid(jnp.arange(TILE), jnp.arange(TILE))
-    local_j, local_i = local_j.reshape(-1), local_i.reshape(-1)
+    tile = jnp.arange(tiles_x * tiles_y)[:, None]
+    px = ((tile % tiles_x) * TILE + local_j.reshape(-1) + 0.5).astype(dtype)
+    py = ((tile // tiles_x) * TILE + local_i.reshape(-1) + 0.5).astype(dtype)
+    return px, py
 
-    def one_tile(tile_id, start, end):
-        px = ((tile_id % tiles_x) * TILE + local_j + 0.5).astype(dt)
-        py = ((tile_id // tiles_x) * TILE + local_i + 0.5).astype(dt)
 
+def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
+    """Per tile (n_tiles, 256): the composited state and each pixel's stop position (the list
+    index of the Gaussian whose stop test fired, or the tile's end).
+    fields = (mean2d, conic, opacity, rgb, depth)."""
+    mean2d, conic, opacity, rgb, depth = fields
+    dt = mean2d.dtype
+
+    def one_tile(px, py, start, end):
         def cond(carry):
-            k, state = carry
+            k, state, _ = carry
             return (k < end) & ~jnp.all(state.done)
 
         def body(carry):
-            k, state = carry
+            k, state, stop_at = carry
             g = bins.gauss[k]
-            return k + 1, blend(state, p.mean2d[g], p.conic[g], p.opacity[g], p.rgb[g],
-                                p.depth[g], True, px, py, config)
+            new = blend(state, mean2d[g], conic[g], opacity[g], rgb[g], depth[g], True, px, py,
+                        config)
+            return k + 1, new, jnp.where(new.done & ~state.done, k, stop_at)
 
-        _, state = lax.while_loop(cond, body, (start, PixelState.empty(TILE * TILE, dt)))
-        return state
+        init = (start, PixelState.empty(TILE * TILE, dt), jnp.full((TILE * TILE,), end))
+        _, state, stop_at = lax.while_loop(cond, body, init)
+        return state, stop_at
 
-    tile_ids = jnp.arange(tiles_x * tiles_y, dtype=jnp.int32)
-    states = jax.vmap(one_tile)(tile_ids, bins.tile_start, bins.tile_end)
-    return jax.tree.map(lambda x: tiles_to_image(x, width, height), states)
+    return jax.vmap(one_tile)(*pixels, bins.tile_start, bins.tile_end)
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(6, 7, 8))
+def _composite(mean2d, conic, opacity, rgb, depth, bins, width, height, config):
+    pixels = tile_pixels(width, height, mean2d.dtype)
+    state, _ = composite_tiles((mean2d, conic, opacity, rgb, depth), bins, pixels, config)
+    return state.color, state.trans, state.depth
+
+
+def _composite_fwd(mean2d, conic, opacity, rgb, depth, bins, width, height, config):
+    fields = (mean2d, conic, opacity, rgb, depth)
+    state, stop_at = composite_tiles(fields, bins, tile_pixels(width, height, mean2d.dtype),
+                                     config)
+    return (state.color, state.trans, state.depth), (fields, bins, state.trans, stop_at)
+
+
+def _composite_bwd(width, height, config, residuals, cotangents):
+    fields, bins, trans, stop_at = residuals
+    pixels = tile_pixels(width, height, fields[0].dtype)
+    rows = backward.pair_rows(fields, bins, pixels, config, trans, stop_at, *cotangents)
+    per = backward.per_gaussian_sum(rows, bins.gauss, fields[0].shape[0])
+    return per[:, 0:2], per[:, 2:5], per[:, 5], per[:, 6:9], per[:, 9], None
+
+
+_composite.defvjp(_composite_fwd, _composite_bwd)
+
+
+def rasterize(p: Projected, bins: TileBins, width: int, height: int,
+              config: RasterConfig) -> PixelState:
+    """Composite every tile; returns the (H·W,) row-major pixel state (differentiable)."""
+    color, trans, depth = _composite(p.mean2d, p.conic, p.opacity, p.rgb, p.depth, bins, width,
+                                     height, config)
+    state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
+    return jax.tree.map(lambda x: tiles_to_image(x, width, height), state)

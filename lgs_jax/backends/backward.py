@@ -1,0 +1,111 @@
+"""Backward of per-pixel compositing: each tile's list walked back to front from the final
+transmittance, as the original 3DGS backward does (the `reference` backend's custom_vjp).
+
+With w_k = α_k·T_k, a pixel's outputs are C = Σ rgb_k·w_k, D = Σ z_k·w_k and T_N = Π (1 − α_k)
+over the Gaussians blended there. Walking back over them, from T_N:
+
+    T_k = T_{k+1} / (1 − α_k)
+    ∂L/∂rgb_k = w_k·ḡ_C,   ∂L/∂z_k = w_k·ḡ_D
+    ∂L/∂α_k = T_k·(ḡ_C·rgb_k + ḡ_D·z_k) − (ḡ_C·S_C + ḡ_D·S_Z + ḡ_T·T_N) / (1 − α_k)
+    S_C += rgb_k·w_k,  S_Z += z_k·w_k            (the contributions behind k)
+
+then through α = min(cap, o·e^power) (zero where the cap binds) and
+power = −½(a·dx² + c·dy²) − b·dx·dy, dx = μx − px (lgs_jax.composite). Division by 1 − α is safe:
+α <= cap <= 0.999.
+
+Determinism: each step gives every tile one pair row (the pair's gradient summed over the
+tile's 256 pixels, a fixed-order reduction) stored at that pair's own slot; rows are then summed
+per Gaussian by a stable sort on Gaussian id and a segmented scan, whose segment ends are stored
+to distinct Gaussians. No scatter-add anywhere, so no float atomics on GPUs. Residuals are the
+inputs and per-pixel state: O(pixels + pairs), nothing per pixel per Gaussian.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import lax
+
+from ..binning import TileBins
+from ..composite import gaussian_alpha
+from ..config import ALPHA_MIN, RasterConfig
+
+PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
+
+
+def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_at, g_color,
+              g_trans, g_depth):
+    """(capacity, PAIR_COLUMNS) gradient of every pair, walking all tiles back to front in
+    lockstep (step s visits each tile's pair end − 1 − s). fields = (mean2d, conic, opacity,
+    rgb, depth); pixels = (px, py) of shape (n_tiles, 256); trans, stop_at: the forward's final T
+    and stop positions; g_*: cotangents of the per-tile colour, T and depth."""
+    mean2d, conic, opacity, rgb, depth = fields
+    dt = mean2d.dtype
+    cap = bins.gauss.shape[0]
+    px, py = pixels
+    start, end = bins.tile_start, bins.tile_end
+    steps = jnp.max(end - start)
+    alpha_cap = jnp.asarray(config.alpha_cap, dt)
+    t_final = trans
+    g_bg = g_trans * t_final  # ḡ_T·T_N, per pixel
+
+    def body(carry):
+        s, t_next, s_c, s_z, rows = carry
+        k = end - 1 - s
+        active = k >= start
+        kk = jnp.clip(k, 0, cap - 1)
+        g = bins.gauss[kk]
+        m, q, o, c, z = mean2d[g], conic[g], opacity[g], rgb[g], depth[g]
+        dx, dy = m[:, 0:1] - px, m[:, 1:2] - py
+        a, b, cc = q[:, 0:1], q[:, 1:2], q[:, 2:3]
+        power, alpha = gaussian_alpha((m[:, 0:1], m[:, 1:2]), (a, b, cc), o[:, None], px, py,
+                                      alpha_cap)
+        hit = (active[:, None] & (k[:, None] < stop_at) & (power <= 0)
+               & (alpha >= jnp.asarray(ALPHA_MIN, dt)))
+        one_minus = jnp.where(hit, 1 - alpha, 1)
+        t_k = t_next / one_minus
+        w = jnp.where(hit, alpha * t_k, 0)
+        dot_c = jnp.sum(g_color * c[:, None, :], -1)  # ḡ_C·rgb_k
+        dot_s = jnp.sum(g_color * s_c, -1)  # ḡ_C·S_C
+        d_alpha = t_k * (dot_c + g_depth * z[:, None]) - (dot_s + g_depth * s_z + g_bg) / one_minus
+        d_alpha = jnp.where(hit, d_alpha, 0)
+        unclamped = o[:, None] * jnp.exp(power) < alpha_cap
+        d_power = jnp.where(unclamped, d_alpha * alpha, 0)
+        d_o = jnp.where(unclamped, d_alpha * jnp.exp(power), 0)
+        row = jnp.stack([
+            jnp.sum(-d_power * (a * dx + b * dy), -1),  # ∂/∂μx (dx = μx − px)
+            jnp.sum(-d_power * (cc * dy + b * dx), -1),  # ∂/∂μy
+            jnp.sum(-0.5 * d_power * dx * dx, -1),  # ∂/∂a
+            jnp.sum(-d_power * dx * dy, -1),  # ∂/∂b
+            jnp.sum(-0.5 * d_power * dy * dy, -1),  # ∂/∂c
+            jnp.sum(d_o, -1),  # ∂/∂o
+            jnp.sum(w * g_color[..., 0], -1), jnp.sum(w * g_color[..., 1], -1),
+            jnp.sum(w * g_color[..., 2], -1),  # ∂/∂rgb
+            jnp.sum(w * g_depth, -1),  # ∂/∂z
+        ], -1)
+        slot = jnp.where(active, k, cap)  # each tile's own pair: distinct slots, plain stores
+        rows = rows.at[slot].set(row, mode="drop", unique_indices=True)
+        s_c = s_c + w[..., None] * c[:, None, :]
+        s_z = s_z + w * z[:, None]
+        return s + 1, jnp.where(hit, t_k, t_next), s_c, s_z, rows
+
+    init = (jnp.int32(0), t_final, jnp.zeros(g_color.shape, dt), jnp.zeros(t_final.shape, dt),
+            jnp.zeros((cap, PAIR_COLUMNS), dt))
+    return lax.while_loop(lambda c: c[0] < steps, body, init)[4]
+
+
+def per_gaussian_sum(rows, gauss, n: int):
+    """Σ of pair rows per Gaussian id (n, C), deterministically: a stable sort by id, a segmented
+    inclusive scan (fixed association), and one store per segment end (distinct ids)."""
+    order = jnp.argsort(gauss, stable=True)
+    ids, vals = gauss[order], rows[order]
+    starts = jnp.concatenate([jnp.ones((1,), bool), ids[1:] != ids[:-1]])
+
+    def combine(left, right):
+        (fl, vl), (fr, vr) = left, right
+        return fl | fr, jnp.where(fr[..., None], vr, vl + vr)
+
+    _, sums = lax.associative_scan(combine, (starts, vals))
+    ends = jnp.concatenate([ids[1:] != ids[:-1], jnp.ones((1,), bool)])
+    target = jnp.where(ends, ids, n)
+    return jnp.zeros((n, rows.shape[1]), rows.dtype).at[target].set(sums, mode="drop",
+                                                                     unique_indices=True)
