@@ -1,8 +1,10 @@
-"""Command line: `python -m lgs_jax render ...` and `python -m lgs_jax info SCENE.ply`."""
+"""Command line: `python -m lgs_jax render ...`, `python -m lgs_jax info SCENE.ply` and
+`python -m lgs_jax fit --data DIR --steps N --out DIR` (lgs_jax.train)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 
@@ -68,6 +70,20 @@ def _info(args) -> int:
     return 0
 
 
+def _fit(args) -> int:
+    import dataclasses
+
+    from . import train
+
+    settings = dataclasses.replace(train.Settings(), batch=args.batch,
+                                   eval_every=args.eval_every)
+    crop = tuple(args.crop) if args.crop else None
+    result = train.fit(args.data, args.steps, args.out, n_gaussians=args.gaussians,
+                       resume=args.resume, settings=settings, seed=args.seed, crop=crop)
+    print(json.dumps(result, indent=1))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m lgs_jax", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -85,6 +101,18 @@ def main(argv=None) -> int:
     i = sub.add_parser("info", help="print counts, SH degree, bounds and non-finite values")
     i.add_argument("scene")
     i.set_defaults(func=_info)
+    f = sub.add_parser("fit", help="train Gaussians on a NeRF-synthetic folder (ids 0,10,..,90 "
+                                   "held out); writes scene.ply, metrics.jsonl, held-out renders")
+    f.add_argument("--data", required=True, help="folder with transforms_train.json")
+    f.add_argument("--steps", type=int, required=True)
+    f.add_argument("--out", required=True)
+    f.add_argument("--gaussians", type=int, default=20000)
+    f.add_argument("--batch", type=int, default=1, help="views per step")
+    f.add_argument("--eval-every", type=int, default=500)
+    f.add_argument("--crop", type=int, nargs=4, metavar=("X0", "Y0", "W", "H"))
+    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
+    f.set_defaults(func=_fit)
     args = ap.parse_args(argv)
     return args.func(args)
 

@@ -82,6 +82,12 @@ class Camera:
         return dataclasses.replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx,
                                    cy=self.cy * sy, width=int(width), height=int(height))
 
+    def cropped(self, x0: int, y0: int, width: int, height: int) -> "Camera":
+        """The window [x0, x0 + width) x [y0, y0 + height) of this camera's image, as a camera
+        (principal point shifted; pixel (0, 0) of the crop is pixel (x0, y0) here)."""
+        return dataclasses.replace(self, cx=self.cx - x0, cy=self.cy - y0, width=width,
+                                   height=height)
+
 
 def stack_cameras(cameras: list[Camera]) -> Camera:
     """Stack same-size cameras into one batched `Camera` for `jax.vmap`."""
