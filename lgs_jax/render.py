@@ -81,12 +81,15 @@ class RenderStats:
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass
 class RenderOutput:
-    """image (H, W, 3) = C + T·background; alpha (H, W) = 1 − T; depth (H, W) = Σ z·α·T."""
+    """image (H, W, 3) = C + T·background; alpha (H, W) = 1 − T; depth (H, W) = Σ z·α·T;
+    visible (N,) bool: the Gaussians whose alpha ellipse reaches the image (they have tile
+    pairs), i.e. this view's visibility mask, which densification strategies count."""
 
     image: Any
     alpha: Any
     depth: Any
     stats: RenderStats
+    visible: Any = None
 
 
 def next_pow2(n: int) -> int:
@@ -119,9 +122,11 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
 
 @functools.partial(jax.jit, static_argnames=("backend", "config", "capacity"))
 def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
-            capacity: int) -> RenderOutput:
+            capacity: int, screen_offsets=None) -> RenderOutput:
     width, height = cam.width, cam.height
     p = project(g, cam)
+    if screen_offsets is not None:
+        p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     bins = strip_pairs = None
     if backend == "brute":
         state = brute.rasterize(p, width, height, config)
@@ -137,7 +142,13 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     image, alpha, depth = finish(state, background)
     return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
                         depth=depth.reshape(height, width),
-                        stats=_stats(p, backend, capacity, bins, strip_pairs))
+                        stats=_stats(p, backend, capacity, bins, strip_pairs),
+                        visible=_visible(p, width, height))
+
+
+def _visible(p: Projected, width: int, height: int):
+    _, _, nx, ny, _ = binning.tile_rects(p, width, height)
+    return nx * ny > 0
 
 
 def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
@@ -150,11 +161,12 @@ def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
                         interpreted=backend in pallas.KERNELS and pallas.interpreted())
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
-                        stats=stats)
+                        stats=stats, visible=jnp.zeros((0,), bool))
 
 
 def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: str = "reference",
-           config: RasterConfig | None = None, capacity: int | None = None) -> RenderOutput:
+           config: RasterConfig | None = None, capacity: int | None = None,
+           screen_offsets=None) -> RenderOutput:
     """Render `gaussians` through `camera` (conventions.md is the contract every backend meets).
 
     Args:
@@ -169,6 +181,10 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
       config: a `RasterConfig` (static), default `RasterConfig()`.
       capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up to a
         power of two. Under jit/vmap pass an int and check `stats.overflow`.
+      screen_offsets: optional (N, 2) added to the projected means (pixels). Pass zeros and
+        differentiate with respect to it to get ∂L/∂mean2d per Gaussian, the screen-space
+        gradient densification strategies accumulate (with `visible`); binning sees the offset
+        means too, so a non-zero offset renders the shifted scene exactly.
 
     Raises:
       ValueError: a bad argument (the message names it).
@@ -204,7 +220,10 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         if required >= binning.MAX_PAIRS:
             raise CapacityError(required, 0)
         capacity = next_pow2(max(required, 1))
-    out = _render(gaussians, camera, background, backend, config, int(capacity))
+    if screen_offsets is not None and np.shape(screen_offsets) != (gaussians.num, 2):
+        raise ValueError(f"screen_offsets: expected shape ({gaussians.num}, 2), got "
+                         f"{np.shape(screen_offsets)}")
+    out = _render(gaussians, camera, background, backend, config, int(capacity), screen_offsets)
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):
         raise CapacityError(int(out.stats.pairs_required), int(capacity))
     return out
