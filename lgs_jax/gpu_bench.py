@@ -1,7 +1,7 @@
 """GPU benchmark of the Pallas kernels against gsplat 1.5.3, same process, scenes and cameras.
 
     XLA_PYTHON_CLIENT_PREALLOCATE=false python -m lgs_jax.gpu_bench --preset issue5 \\
-        [--data DIR] [--repeat 30] [--csv FILE]
+        [--data DIR] [--repeat 30] [--csv FILE] [--grad]
 
 Rows per scene and camera: `pallas` (Local-GS, exact and fast blending), `pallas_vanilla`,
 `tiles` (XLA; fewer rounds: it is slow on GPUs) and `gsplat` (`rasterization(...,
@@ -13,8 +13,10 @@ shared stages (`project_ms`, `emit_ms` = pair emission, `sort_ms` = tile sort an
 gsplat: projection + SH, intersection, offsets), tile–Gaussian pairs, peak memory (ours: XLA's
 compiled buffer sizes for the e2e program; gsplat: torch's peak allocation in the call), and
 the error against gsplat's image (max abs, PSNR) and, where it fits (`--f64-max-pixels`), against
-the float64 reference. Times are medians of `--repeat` calls after warm-up, each ended by
-`block_until_ready` / `torch.cuda.synchronize`; rows alternate within each round.
+the float64 reference. `--grad` times forward + backward instead (the differentiable backend
+against gsplat's `rasterization` + `backward()`). Times are medians of `--repeat` calls after
+warm-up, each ended by `block_until_ready` / `torch.cuda.synchronize`; rows alternate within
+each round.
 """
 
 from __future__ import annotations
@@ -192,6 +194,59 @@ def _gsplat(case, repeat):
     return row, image[0].float().cpu().numpy()
 
 
+def _grad_rows(case, repeat):
+    """Forward + backward of sum(image · W) w.r.t. all parameters: ours (the differentiable
+    `reference` backend, jitted value_and_grad) and gsplat (rasterization + backward)."""
+    g = jax.device_put(case.scene)
+    cam = jax.device_put(case.camera)
+    w, h = cam.width, cam.height
+    cap = int(render(g, cam).stats.capacity)
+    weights = jax.random.normal(jax.random.key(0), (h, w, 3), jnp.float32)
+    f = jax.jit(jax.value_and_grad(lambda g: jnp.sum(render(g, cam, capacity=cap).image
+                                                     * weights)))
+    mem = f.lower(g).compile().memory_analysis()
+    ours = _median_ms({"fb": lambda: f(g)}, repeat, jax.block_until_ready)["fb"]
+    rows = [dict(scene=case.name, width=w, height=h, row="grad:reference", fwd_bwd_ms=ours,
+                 peak_mb=(mem.temp_size_in_bytes + mem.argument_size_in_bytes
+                          + mem.output_size_in_bytes) / 2**20 if mem else "")]
+    try:
+        import gsplat
+        import torch
+    except Exception as e:  # noqa: BLE001
+        print(f"gsplat unavailable: {e}", file=sys.stderr)
+        return rows
+    dev = torch.device("cuda")
+    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    params = [t(case.scene.means), t(case.scene.quats), t(case.scene.log_scales),
+              t(case.scene.logit_opacities), t(case.scene.sh)]
+    for x in params:
+        x.requires_grad_(True)
+    deg = int(round(np.sqrt(params[4].shape[1]))) - 1
+    viewmat = t(case.camera.viewmat)[None]
+    K = t([[case.camera.fx, 0, case.camera.cx], [0, case.camera.fy, case.camera.cy],
+           [0, 0, 1]])[None]
+    tw = t(np.asarray(weights))
+
+    def step():
+        img = gsplat.rasterization(params[0], params[1], torch.exp(params[2]),
+                                   torch.sigmoid(params[3]), params[4], viewmat, K, w, h,
+                                   sh_degree=deg, packed=False, rasterize_mode="classic")[0]
+        (img[0] * tw).sum().backward()
+
+    step()
+    torch.cuda.synchronize()
+    torch.cuda.reset_peak_memory_stats()
+    base = torch.cuda.memory_allocated()
+    step()
+    torch.cuda.synchronize()
+    peak = (torch.cuda.max_memory_allocated() - base) / 2**20
+    ms = _median_ms({"fb": step}, repeat, lambda _: torch.cuda.synchronize())["fb"]
+    rows.append(dict(scene=case.name, width=w, height=h, row="grad:gsplat", fwd_bwd_ms=ms,
+                     peak_mb=peak))
+    rows[0]["fwd_bwd_vs_gsplat"] = ours / ms
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m lgs_jax.gpu_bench", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -202,6 +257,8 @@ def main(argv=None) -> int:
     ap.add_argument("--slow-repeat", type=int, default=3, help="rounds for the tiles row")
     ap.add_argument("--f64-max-pixels", type=int, default=1280 * 720)
     ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--grad", action="store_true",
+                    help="forward+backward rows instead (differentiable backend vs gsplat)")
     ap.add_argument("--csv")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # the float64 reference; renders stay float32
@@ -212,6 +269,11 @@ def main(argv=None) -> int:
     rows = []
     for spec in specs:
         case = parse_scene(spec)
+        if args.grad:
+            rows += _grad_rows(case, args.repeat)
+            for r in rows[-2:]:
+                print(r, flush=True)
+            continue
         ours, images = _ours(case, args.repeat, args.slow_repeat, args.f64_max_pixels)
         peer = None if args.no_gsplat else _gsplat(case, args.repeat)
         if peer:
