@@ -34,7 +34,9 @@ def pallas_vs_gsplat():
             vals = [float(next(r[key] for r in rows if (r["scene"], r["width"], r["height"])
                                == c and r["row"] == kind)) for c in cases]
             ax.bar(x + (i - 1.5) * 0.2, vals, 0.2, label=kind)
-        ax.set_xticks(x, [f"{s}\n{w}x{h}" for s, w, h in cases], fontsize=7)
+        short = lambda s: s.replace("synthetic1000000", "synth 1M").replace("synthetic3000000",
+                                                                          "synth 3M")
+        ax.set_xticks(x, [f"{short(s)}\n{w}x{h}" for s, w, h in cases], fontsize=7)
         ax.set_ylabel("ms (H100, median of 30)")
         ax.set_title(title)
         ax.grid(axis="y", alpha=0.3)
