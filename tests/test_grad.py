@@ -138,3 +138,20 @@ def test_screen_space_gradients_and_visibility_for_densification():
     _, _, nx, ny, _ = binning.tile_rects(project(g, cam), cam.width, cam.height)
     np.testing.assert_array_equal(visible, np.asarray(nx * ny) > 0)
     assert int(np.sum(np.asarray(nx * ny))) == int(out.stats.pairs_required)
+
+
+@pytest.mark.parametrize("backend", ["tiles", "pallas"])
+def test_forward_only_backends_say_how_to_differentiate(backend):
+    g = scenes.cast(scenes.scene(1), np.float32)
+    cam = scenes.camera()
+    f = lambda means, bg: jnp.sum(lgs_jax.render(g.__class__(means, g.quats, g.log_scales,
+                                                             g.logit_opacities, g.sh), cam,
+                                                 background=bg, backend=backend,
+                                                 capacity=4096).image)
+    bg = jnp.asarray(scenes.BACKGROUND, np.float32)
+    with pytest.raises(NotImplementedError, match="backend='reference'"):
+        jax.grad(f)(jnp.asarray(g.means), bg)
+    # The background's gradient does not pass through the rasterizer: it works (Σ T per pixel).
+    g_bg = jax.grad(f, argnums=1)(jnp.asarray(g.means), bg)
+    out = lgs_jax.render(g, cam, background=bg, backend=backend, capacity=4096)
+    np.testing.assert_allclose(g_bg, np.full(3, np.sum(1 - np.asarray(out.alpha))), rtol=1e-5)
