@@ -62,7 +62,8 @@ def interpreted() -> bool:
 
 
 def gaussian_rows(p: Projected):
-    """(N, ROW) packed per-Gaussian data the kernels load: one row per Gaussian."""
+    """(N, ROW) packed per-Gaussian data the vanilla kernel loads (through each pair's Gaussian
+    id, as the original rasterizer does): one row per Gaussian."""
     o = p.opacity
     cols = [p.mean2d[:, 0], p.mean2d[:, 1], p.conic[:, 0], p.conic[:, 1], p.conic[:, 2],
             jnp.log(o), o, p.rgb[:, 0], p.rgb[:, 1], p.rgb[:, 2], p.depth, jnp.zeros_like(o)]
