@@ -1,7 +1,7 @@
 """`pallas` / `pallas_vanilla` backends against `reference` and `tiles`.
 
 Without a GPU the kernels run in Pallas interpret mode (what CI exercises); on a GPU the same
-tests run the compiled Triton kernels (scripts/gpu_check.sh). `test_kernels_lower_to_triton`
+tests run the compiled Triton kernels (scripts/pallas_gpu_check.sh). `test_kernels_lower_to_triton`
 lowers every kernel variant to Triton IR on any machine (the GPU description is faked), so a
 primitive the Triton lowering lacks fails here, not first on the GPU.
 """
