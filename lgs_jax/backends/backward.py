@@ -32,21 +32,21 @@ from ..config import ALPHA_MIN, RasterConfig
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
 
-def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_at, g_color,
-              g_trans, g_depth):
-    """(capacity, PAIR_COLUMNS) gradient of every pair, walking all tiles back to front in
-    lockstep (step s visits each tile's pair end − 1 − s). fields = (mean2d, conic, opacity,
-    rgb, depth); pixels = (px, py) of shape (n_tiles, 256); trans, stop_at: the forward's final T
-    and stop positions; g_*: cotangents of the per-tile colour, T and depth."""
-    mean2d, conic, opacity, rgb, depth = fields
-    dt = mean2d.dtype
+def walk(bins: TileBins, config: RasterConfig, rgb, depth, trans, stop_at, g_color, g_trans,
+         g_depth, pair_alpha, n_model: int):
+    """(capacity, n_model + 4) gradient rows of every pair, walking all tiles back to front in
+    lockstep (step s visits each tile's pair end − 1 − s).
+
+    `pair_alpha(kk, g)` gives, for pair indices kk (n_tiles,) of Gaussians g, the forward's
+    (α, hit) at every tile pixel (n_tiles, 256) and a function d_alpha -> n_model columns
+    (n_tiles,): the α model's own parameters. The last four columns are ∂L/∂rgb and ∂L/∂z.
+    trans, stop_at: the forward's final T and per-pixel stop pair index (n_tiles, 256); a pair
+    counts at a pixel only before its stop. g_*: cotangents of the per-tile colour, T, depth.
+    """
+    dt = trans.dtype
     cap = bins.gauss.shape[0]
-    px, py = pixels
     start, end = bins.tile_start, bins.tile_end
-    steps = jnp.max(end - start)
-    alpha_cap = jnp.asarray(config.alpha_cap, dt)
-    t_final = trans
-    g_bg = g_trans * t_final  # ḡ_T·T_N, per pixel
+    g_bg = g_trans * trans  # ḡ_T·T_N, per pixel
 
     def body(carry):
         s, t_next, s_c, s_z, rows = carry
@@ -54,30 +54,16 @@ def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_
         active = k >= start
         kk = jnp.clip(k, 0, cap - 1)
         g = bins.gauss[kk]
-        m, q, o, c, z = mean2d[g], conic[g], opacity[g], rgb[g], depth[g]
-        dx, dy = m[:, 0:1] - px, m[:, 1:2] - py
-        a, b, cc = q[:, 0:1], q[:, 1:2], q[:, 2:3]
-        power, alpha = gaussian_alpha((m[:, 0:1], m[:, 1:2]), (a, b, cc), o[:, None], px, py,
-                                      alpha_cap)
-        hit = (active[:, None] & (k[:, None] < stop_at) & (power <= 0)
-               & (alpha >= jnp.asarray(ALPHA_MIN, dt)))
+        c, z = rgb[g], depth[g]
+        alpha, hit, model_grads = pair_alpha(kk, g)
+        hit = hit & active[:, None] & (k[:, None] < stop_at)
         one_minus = jnp.where(hit, 1 - alpha, 1)
         t_k = t_next / one_minus
         w = jnp.where(hit, alpha * t_k, 0)
         dot_c = jnp.sum(g_color * c[:, None, :], -1)  # ḡ_C·rgb_k
         dot_s = jnp.sum(g_color * s_c, -1)  # ḡ_C·S_C
         d_alpha = t_k * (dot_c + g_depth * z[:, None]) - (dot_s + g_depth * s_z + g_bg) / one_minus
-        d_alpha = jnp.where(hit, d_alpha, 0)
-        unclamped = o[:, None] * jnp.exp(power) < alpha_cap
-        d_power = jnp.where(unclamped, d_alpha * alpha, 0)
-        d_o = jnp.where(unclamped, d_alpha * jnp.exp(power), 0)
-        row = jnp.stack([
-            jnp.sum(-d_power * (a * dx + b * dy), -1),  # ∂/∂μx (dx = μx − px)
-            jnp.sum(-d_power * (cc * dy + b * dx), -1),  # ∂/∂μy
-            jnp.sum(-0.5 * d_power * dx * dx, -1),  # ∂/∂a
-            jnp.sum(-d_power * dx * dy, -1),  # ∂/∂b
-            jnp.sum(-0.5 * d_power * dy * dy, -1),  # ∂/∂c
-            jnp.sum(d_o, -1),  # ∂/∂o
+        row = jnp.stack(model_grads(jnp.where(hit, d_alpha, 0)) + [
             jnp.sum(w * g_color[..., 0], -1), jnp.sum(w * g_color[..., 1], -1),
             jnp.sum(w * g_color[..., 2], -1),  # ∂/∂rgb
             jnp.sum(w * g_depth, -1),  # ∂/∂z
@@ -88,9 +74,50 @@ def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_
         s_z = s_z + w * z[:, None]
         return s + 1, jnp.where(hit, t_k, t_next), s_c, s_z, rows
 
-    init = (jnp.int32(0), t_final, jnp.zeros(g_color.shape, dt), jnp.zeros(t_final.shape, dt),
-            jnp.zeros((cap, PAIR_COLUMNS), dt))
-    return lax.while_loop(lambda c: c[0] < steps, body, init)[4]
+    init = (jnp.int32(0), trans, jnp.zeros(g_color.shape, dt), jnp.zeros(trans.shape, dt),
+            jnp.zeros((cap, n_model + 4), dt))
+    return lax.while_loop(lambda c: c[0] < jnp.max(end - start), body, init)[4]
+
+
+def difference_alpha(mean2d, conic, opacity, pixels, config: RasterConfig, gate=None):
+    """The `pair_alpha` of the 3DGS difference form (lgs_jax.composite): six model columns,
+    ∂L/∂(μx, μy, a, b, c, o). `gate(kk)` (optional): which pixels a pair may touch at all."""
+    px, py = pixels
+    dt = mean2d.dtype
+    alpha_cap = jnp.asarray(config.alpha_cap, dt)
+
+    def pair_alpha(kk, g):
+        m, q, o = mean2d[g], conic[g], opacity[g]
+        dx, dy = m[:, 0:1] - px, m[:, 1:2] - py
+        a, b, cc = q[:, 0:1], q[:, 1:2], q[:, 2:3]
+        power, alpha = gaussian_alpha((m[:, 0:1], m[:, 1:2]), (a, b, cc), o[:, None], px, py,
+                                      alpha_cap)
+        hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+        if gate is not None:
+            hit = hit & gate(kk)
+
+        def grads(d_alpha):
+            unclamped = o[:, None] * jnp.exp(power) < alpha_cap
+            d_power = jnp.where(unclamped, d_alpha * alpha, 0)
+            return [jnp.sum(-d_power * (a * dx + b * dy), -1),  # ∂/∂μx (dx = μx − px)
+                    jnp.sum(-d_power * (cc * dy + b * dx), -1),  # ∂/∂μy
+                    jnp.sum(-0.5 * d_power * dx * dx, -1),  # ∂/∂a
+                    jnp.sum(-d_power * dx * dy, -1),  # ∂/∂b
+                    jnp.sum(-0.5 * d_power * dy * dy, -1),  # ∂/∂c
+                    jnp.sum(jnp.where(unclamped, d_alpha * jnp.exp(power), 0), -1)]  # ∂/∂o
+
+        return alpha, hit, grads
+
+    return pair_alpha
+
+
+def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_at, g_color,
+              g_trans, g_depth):
+    """(capacity, PAIR_COLUMNS) gradient rows of the difference form (the reference backend).
+    fields = (mean2d, conic, opacity, rgb, depth); pixels = (px, py), (n_tiles, 256)."""
+    mean2d, conic, opacity, rgb, depth = fields
+    return walk(bins, config, rgb, depth, trans, stop_at, g_color, g_trans, g_depth,
+                difference_alpha(mean2d, conic, opacity, pixels, config), 6)
 
 
 def per_gaussian_sum(rows, gauss, n: int):
