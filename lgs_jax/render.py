@@ -133,9 +133,7 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     else:
         bins = binning.bin_gaussians(p, width, height, capacity)
         if backend == "tiles":
-            state, strip_pairs = tiles.rasterize(jax.lax.stop_gradient(p), bins, width, height,
-                                                 config)
-            state = _forward_only(backend, state, p)
+            state, strip_pairs = tiles.rasterize(p, bins, width, height, config)
         elif backend in pallas.KERNELS:
             state, strip_pairs = pallas.rasterize(jax.lax.stop_gradient(p), bins, width, height,
                                                   config, vanilla=backend == "pallas_vanilla")
@@ -165,8 +163,8 @@ def _forward_only_fwd(backend, state, p):
 def _forward_only_bwd(backend, _, cotangent):
     raise NotImplementedError(
         f"backend={backend!r} renders only (its backward kernel does not exist yet): "
-        "differentiate with backend='reference', which renders the same image and has a "
-        "custom backward (lgs_jax.backends.backward)")
+        "differentiate with backend='tiles' or backend='reference', which render the same "
+        "image and have a custom backward (lgs_jax.backends.backward)")
 
 
 _forward_only.defvjp(_forward_only_fwd, _forward_only_bwd)

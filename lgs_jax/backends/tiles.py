@@ -29,11 +29,19 @@ w_j (j >= k*) with Σ w_j <= T_e, moving colour from background to those Gaussia
 
 i.e. 0.01 (3dgs, cap 0.99) or 0.1 (gsplat, cap 0.999) times the colour range, plus rounding.
 
+Differentiable: `rasterize` is a custom_vjp. The forward records where each pixel stopped (the
+pair whose stop test fired, or the first pair its strip never processed); the backward
+(lgs_jax.backends.backward.walk) walks each tile back to front with the same α model — V·B
+clamped at ln o (`hoisted_alpha`) or the difference form — gated by the same strip masks, and
+chains ∂L/∂V to the Gaussian through Eq. 8.
+
 The hoisted forms clamp ln α at ln o (its exact maximum) instead of the difference form's
 `power > 0` skip: in the expanded form that skip would fire on rounding at Gaussian centres.
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -45,7 +53,8 @@ from ..composite import PixelState, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import FULL_MASK, STRIPS, strip_mask
-from .reference import tiles_to_image
+from . import backward
+from .reference import tile_pixels, tiles_to_image
 
 GROUP = 256  # strips processed together
 CHUNK = 16  # Gaussians per staged batch
@@ -130,20 +139,22 @@ def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
     return alpha, (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
 
 
-def blend_chunk(state: PixelState, alpha, hit, feats, config: RasterConfig) -> PixelState:
+def blend_chunk(state: PixelState, stop_at, alpha, hit, feats, pair, config: RasterConfig):
     """Blend a chunk of Gaussians, in order, over strips of pixels (Algorithm 1).
 
     alpha, hit: (G, n, P) per Gaussian and pixel (Gaussian-major); feats: (G, n, 4) colour and
-    depth per Gaussian. A `lax.scan` over the G Gaussians: each step is one fused elementwise
-    pass over the n·P pixels.
+    depth per Gaussian; pair: (G, n) their pair indices. A `lax.scan` over the G Gaussians: each
+    step is one fused elementwise pass over the n·P pixels. Returns the state and `stop_at`
+    (n, P), updated with the pair index at which a pixel's stop test fired (for the backward).
 
     exact: test_T = T·(1 − α); stop (not blended) if test_T < 1e-4 (<= for gsplat), else
            C += f·α·T, T = test_T: the contract's per-pixel semantics, the reference arithmetic.
     fast:  w = α·T; C += f·w; T −= w for every hit (the paper's branch-free loop); no per-pixel
            stop: the caller ends a strip when all its pixels have T < 1e-4.
     """
-    def step(st: PixelState, x):
-        a, h, f = x
+    def step(carry, x):
+        st, stop_at = carry
+        a, h, f, k = x
         f = f[:, None, :]  # (n, 1, 4)
         if config.blend == "exact":
             h = h & ~st.done
@@ -153,13 +164,14 @@ def blend_chunk(state: PixelState, alpha, hit, feats, config: RasterConfig) -> P
             w = jnp.where(take, a * st.trans, 0)
             trans = jnp.where(take, test_t, st.trans)
             done = st.done | (h & stop)
+            stop_at = jnp.where(h & stop, k[:, None], stop_at)
         else:
             w = jnp.where(h, a * st.trans, 0)
             trans, done = st.trans - w, st.done
-        return PixelState(color=st.color + w[..., None] * f[..., :3], trans=trans,
-                          depth=st.depth + w * f[..., 3], done=done), None
+        return (PixelState(color=st.color + w[..., None] * f[..., :3], trans=trans,
+                           depth=st.depth + w * f[..., 3], done=done), stop_at), None
 
-    return lax.scan(step, state, (alpha, hit, feats))[0]
+    return lax.scan(step, (state, stop_at), (alpha, hit, feats, pair))[0]
 
 
 def strip_lists(bins: TileBins, masks, warp_cull: bool):
@@ -209,10 +221,12 @@ def _strip_pixels(sid, tiles_x: int, dtype):
     return tuple(v.astype(dtype) for v in (lx, ly, px, py))
 
 
-def rasterize(p: Projected, bins: TileBins, width: int, height: int,
-              config: RasterConfig) -> tuple[PixelState, jax.Array]:
-    """Returns the (H·W,) pixel state and the number of strip–Gaussian pairs processed."""
+def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
+    """Per tile (n_tiles, 256): the state, each pixel's stop pair index (the pair whose stop test
+    fired, or the first pair its strip never processed; capacity if neither) and the number of
+    strip–Gaussian pairs."""
     dt = p.mean2d.dtype
+    cap = bins.gauss.shape[0]
     tiles_x, tiles_y = tile_grid(width, height)
     n_strips = tiles_x * tiles_y * STRIPS
     n_groups = -(-n_strips // GROUP)
@@ -243,23 +257,33 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int,
                 return more & ~jnp.all(state.done, -1)
             return more & ~jnp.all(stops(state.trans, config), -1)
 
+        def record_strip_stops(c, state, stop_at):
+            """Strips that stopped with pairs left: those pairs were never blended."""
+            left = (c * CHUNK < cnt) & ~active(c, state)
+            first = jnp.clip(lookup(sid, jnp.full((GROUP, 1), c * CHUNK)), 0, cap - 1)
+            return jnp.where(left[:, None] & (stop_at == cap), first, stop_at)
+
         def cond(carry):
-            c, state = carry
+            c, state, _ = carry
             return (c < n_chunks) & jnp.any(active(c, state))
 
         def body(carry):
-            c, state = carry
+            c, state, stop_at = carry
+            stop_at = record_strip_stops(c, state, stop_at)
             j = c * CHUNK + jnp.arange(CHUNK, dtype=jnp.int32)
             valid = (j[None, :] < cnt[:, None]) & active(c, state)[:, None]
-            k = jnp.clip(lookup(sid, j[None, :]), 0, bins.gauss.shape[0] - 1)  # (GROUP, CHUNK)
+            k = jnp.clip(lookup(sid, j[None, :]), 0, cap - 1)  # (GROUP, CHUNK)
             g = bins.gauss[k]
             alpha, hit = evaluate(p, g, pair_v[k] if config.hoist else None, basis, px, py,
                                   config)
             hit = hit & valid.T[:, :, None]
-            return c + 1, blend_chunk(state, alpha, hit, feats[g.T], config)
+            state, stop_at = blend_chunk(state, stop_at, alpha, hit, feats[g.T], k.T, config)
+            return c + 1, state, stop_at
 
-        init = PixelState.empty((GROUP, STRIP_PIXELS), dt)
-        return lax.while_loop(cond, body, (jnp.int32(0), init))[1]
+        init = (jnp.int32(0), PixelState.empty((GROUP, STRIP_PIXELS), dt),
+                jnp.full((GROUP, STRIP_PIXELS), cap, jnp.int32))
+        c, state, stop_at = lax.while_loop(cond, body, init)
+        return state, record_strip_stops(c, state, stop_at)
 
     def group_cond(carry):
         gi, _ = carry
@@ -267,16 +291,114 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int,
 
     def group_body(carry):
         gi, out = carry
-        state = run_group(gi)
         out = jax.tree.map(lambda o, s: lax.dynamic_update_slice_in_dim(o, s, gi * GROUP, 0),
-                           out, state)
+                           out, run_group(gi))
         return gi + 1, out
 
-    out = PixelState.empty((n_groups * GROUP, STRIP_PIXELS), dt)
+    out = (PixelState.empty((n_groups * GROUP, STRIP_PIXELS), dt),
+           jnp.full((n_groups * GROUP, STRIP_PIXELS), cap, jnp.int32))
     out = lax.while_loop(group_cond, group_body, (jnp.int32(0), out))[1]
     inverse = jnp.argsort(order[:n_strips]).astype(jnp.int32)  # strip id -> sorted position
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
-    state = jax.tree.map(lambda x: x[inverse].reshape((tiles_x * tiles_y, TILE * TILE)
-                                                      + x.shape[2:]), out)
-    state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)
-    return state, jnp.sum(counts)
+    state, stop_at = jax.tree.map(lambda x: x[inverse].reshape((tiles_x * tiles_y, TILE * TILE)
+                                                               + x.shape[2:]), out)
+    return state, stop_at, jnp.sum(counts)
+
+
+def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
+    """The backward's `pair_alpha` (lgs_jax.backends.backward.walk) of the hoisted form:
+    ln α = min(V·B, ln o) per pixel (Eq. 10), α = min(cap, e^{ln α}); seven model columns,
+    ∂L/∂V (Eq. 8's six components, ∂(V·B)/∂V = B) and ∂L/∂ln o (where the clamp binds).
+    vectors: (capacity, 7) from `pair_vectors`; basis: (n_tiles, 256, 6)."""
+    dt = vectors.dtype
+    alpha_cap = jnp.asarray(config.alpha_cap, dt)
+    ln_min = jnp.log(jnp.asarray(ALPHA_MIN, dt))
+
+    def pair_alpha(kk, g):
+        v = vectors[kk]
+        raw = jnp.einsum("tpk,tk->tp", basis, v[:, :6], precision=HIGHEST)
+        ln_a = jnp.minimum(raw, v[:, 6:7])
+        e = jnp.exp(ln_a)
+        alpha, hit = jnp.minimum(alpha_cap, e), ln_a >= ln_min
+        if gate is not None:
+            hit = hit & gate(kk)
+
+        def grads(d_alpha):
+            d_ln = jnp.where(e < alpha_cap, d_alpha * alpha, 0)
+            on_v = raw <= v[:, 6:7]
+            d_raw = jnp.where(on_v, d_ln, 0)
+            return ([jnp.sum(d_raw * basis[..., i], -1) for i in range(6)]
+                    + [jnp.sum(jnp.where(on_v, 0, d_ln), -1)])
+
+        return alpha, hit, grads
+
+    return pair_alpha
+
+
+def _backward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+              trans, stop_at, cotangents):
+    """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth): the backward walk
+    with the forward's own arithmetic (hoisted or difference form) and strip masks."""
+    dt = p.mean2d.dtype
+    tiles_x, _ = tile_grid(width, height)
+    px, py = tile_pixels(width, height, dt)
+    gate = None
+    if config.warp_cull:
+        masks = pair_masks(p, bins, tiles_x, config)
+        strip = (jnp.arange(TILE * TILE) // STRIP_PIXELS).astype(jnp.int32)
+        gate = lambda kk: ((masks[kk][:, None] >> strip[None]) & 1) == 1
+    common = (bins, config, p.rgb, p.depth, trans, stop_at) + tuple(cotangents)
+    if not config.hoist:
+        rows = backward.walk(*common, backward.difference_alpha(
+            p.mean2d, p.conic, p.opacity, (px, py), config, gate), 6)
+    else:
+        k = jnp.arange(TILE * TILE)
+        lx = jnp.broadcast_to(k % TILE + 0.5, px.shape).astype(dt)
+        ly = jnp.broadcast_to(k // TILE + 0.5, px.shape).astype(dt)
+        basis = pixel_basis(lx, ly, px, py, config)
+        rows = backward.walk(*common, hoisted_alpha(pair_vectors(p, bins, tiles_x, config), basis,
+                                                    config, gate), 7)
+        g, t = bins.gauss, bins.tile
+        origin = tile_origin(t % tiles_x, t // tiles_x, config, dt)
+        o = p.opacity[g]
+        _, vjp = jax.vjp(lambda m, q, lo: hoist.hoist(m, q, lo, origin), p.mean2d[g], p.conic[g],
+                         jnp.log(jnp.where(o > 0, o, 1)))
+        d_mean, d_conic, d_log_o = vjp(rows[:, :6])
+        d_o = jnp.where(o > 0, (d_log_o + rows[:, 6]) / jnp.where(o > 0, o, 1), 0)
+        rows = jnp.concatenate([d_mean, d_conic, d_o[:, None], rows[:, 7:]], -1)
+    return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(7, 8, 9))
+def _composite(mean2d, conic, opacity, rgb, depth, aux, bins, width, height, config):
+    p = Projected(mean2d, aux[0], conic, depth, opacity, rgb, aux[1], aux[2])
+    state, _, strip_pairs = _forward(p, bins, width, height, config)
+    return state.color, state.trans, state.depth, strip_pairs
+
+
+def _composite_fwd(mean2d, conic, opacity, rgb, depth, aux, bins, width, height, config):
+    p = Projected(mean2d, aux[0], conic, depth, opacity, rgb, aux[1], aux[2])
+    state, stop_at, strip_pairs = _forward(p, bins, width, height, config)
+    return ((state.color, state.trans, state.depth, strip_pairs),
+            (p, bins, state.trans, stop_at))
+
+
+def _composite_bwd(width, height, config, residuals, cotangents):
+    p, bins, trans, stop_at = residuals
+    per = _backward(p, bins, width, height, config, trans, stop_at, cotangents[:3])
+    return per[:, 0:2], per[:, 2:5], per[:, 5], per[:, 6:9], per[:, 9], None, None
+
+
+_composite.defvjp(_composite_fwd, _composite_bwd)
+
+
+def rasterize(p: Projected, bins: TileBins, width: int, height: int,
+              config: RasterConfig) -> tuple[PixelState, jax.Array]:
+    """Returns the (H·W,) pixel state (differentiable: a custom_vjp whose backward walks each
+    tile back to front with this backend's own α arithmetic and strip masks) and the number of
+    strip–Gaussian pairs processed."""
+    color, trans, depth, strip_pairs = _composite(
+        p.mean2d, p.conic, p.opacity, p.rgb, p.depth, (p.cov2d, p.valid, p.invalid), bins,
+        width, height, config)
+    state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
+    return jax.tree.map(lambda x: tiles_to_image(x, width, height), state), strip_pairs
