@@ -98,11 +98,12 @@ def test_float32_gradients_are_close_to_float64():
         assert rel < 1e-3, (name, rel)
 
 
-def test_gradients_are_deterministic_and_compose_with_jit_and_vmap():
+@pytest.mark.parametrize("backend", ["reference", "tiles"])
+def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
     g = scenes.cast(scenes.scene(2), np.float32)
     bg = jnp.asarray(scenes.BACKGROUND, np.float32)
     weights = _weights(np.float32)
-    step = jax.jit(jax.grad(lambda g, c: _loss(g, c, bg, "reference", C(), weights)))
+    step = jax.jit(jax.grad(lambda g, c: _loss(g, c, bg, backend, C(), weights)))
     cams = [scenes.camera(yaw=y) for y in (0.0, 0.15)]
     first, again = step(g, cams[0]), step(g, cams[0])
     for name in FIELDS:
