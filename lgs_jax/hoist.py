@@ -31,6 +31,16 @@ def hoist(mean2d, conic, log_opacity, origin):
                                  log_opacity), axis=-1)
 
 
+def dot_basis(v, basis):
+    """V·B (Eq. 10) as six elementwise products summed left to right: v (..., 6) and basis
+    (..., 6) broadcast. No matrix unit, so no TF32 and no contraction order that depends on the
+    batch shape: the tiles forward and its backward get the same bits (under vmap too)."""
+    out = v[..., 0] * basis[..., 0]
+    for i in range(1, 6):
+        out = out + v[..., i] * basis[..., i]
+    return out
+
+
 def evaluate_terms(v, x, y):
     """ln α = A·x'² + B·x'y' + C·y'² + D·x' + E·y' + F (Eq. 10) from the six terms of Eq. 8, in
     this summation order (kernels; the tiles backend takes the same sum as a batched product)."""

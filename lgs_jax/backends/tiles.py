@@ -9,10 +9,11 @@ Work scales with the pairs a scene has, not with its worst tile: strips are sort
 length and processed in groups of GROUP strips; a group runs only as many CHUNK-Gaussian steps as
 its longest list needs (empty strips run none) and stops early once all its pixels are done.
 
-Per staged chunk, ln α for GROUP x 32 pixels x CHUNK Gaussians is one batched product of the
-pixel basis with the hoisted vectors (Eq. 9–10) at Precision.HIGHEST (TF32 would break exactness
-on GPUs), or the difference form when `hoist` is off; the chunk is then blended in order
-(Algorithm 1, `blend_chunk`):
+Per staged chunk, ln α for GROUP x 32 pixels x CHUNK Gaussians is the pixel basis times the
+hoisted vectors (Eq. 9–10) as six fused elementwise products (`hoist.dot_basis`: no matrix unit,
+so no TF32 on GPUs, and the backward reproduces the forward's bits under any batching), or the
+difference form when `hoist` is off; the chunk is then blended in order (Algorithm 1,
+`blend_chunk`):
 
   exact: per-pixel semantics of the contract: a pixel stops at the first Gaussian with
          T·(1 − α) < 1e-4 (which is not blended); alpha tests are masks.
@@ -59,7 +60,6 @@ from .reference import tile_pixels, tiles_to_image
 GROUP = 256  # strips processed together
 CHUNK = 16  # Gaussians per staged batch
 STRIP_PIXELS = 2 * TILE
-HIGHEST = lax.Precision.HIGHEST
 
 
 def _origin_offset(config: RasterConfig) -> float:
@@ -119,7 +119,7 @@ def pixel_basis(lx, ly, px, py, config: RasterConfig):
 def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
     """(α, hit) of Gaussians g (n, G) at the pixels of n strips (n, P): arrays (G, n, P).
 
-    hoist: with v (n, G, 7) from `pair_vectors`, ln α = basis·V (Eq. 10) at Precision.HIGHEST,
+    hoist: with v (n, G, 7) from `pair_vectors`, ln α = basis·V (Eq. 10, `hoist.dot_basis`),
     clamped at ln o; α = min(cap, e^{ln α});
     hit = ln α >= ln(1/255) (the test in the log domain). Difference form otherwise, exactly as
     lgs_jax.composite: hit = power <= 0 and α >= 1/255.
@@ -127,7 +127,7 @@ def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
     dt = p.mean2d.dtype
     cap = jnp.asarray(config.alpha_cap, dt)
     if config.hoist:
-        ln_a = jnp.einsum("spk,sgk->gsp", basis, v[..., :6], precision=HIGHEST)
+        ln_a = hoist.dot_basis(jnp.swapaxes(v, 0, 1)[:, :, None, :6], basis[None])
         ln_a = jnp.minimum(ln_a, v[..., 6].T[:, :, None])
         return jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt))
     m, q = jnp.swapaxes(p.mean2d[g], 0, 1), jnp.swapaxes(p.conic[g], 0, 1)  # (G, n, ...)
@@ -316,7 +316,7 @@ def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
 
     def pair_alpha(kk, g):
         v = vectors[kk]
-        raw = jnp.einsum("tpk,tk->tp", basis, v[:, :6], precision=HIGHEST)
+        raw = hoist.dot_basis(v[:, None, :6], basis)
         ln_a = jnp.minimum(raw, v[:, 6:7])
         e = jnp.exp(ln_a)
         alpha, hit = jnp.minimum(alpha_cap, e), ln_a >= ln_min
