@@ -79,7 +79,8 @@ def _fit(args) -> int:
                                    eval_every=args.eval_every)
     crop = tuple(args.crop) if args.crop else None
     result = train.fit(args.data, args.steps, args.out, n_gaussians=args.gaussians,
-                       resume=args.resume, settings=settings, seed=args.seed, crop=crop)
+                       resume=args.resume, settings=settings, seed=args.seed, crop=crop,
+                       backend=args.backend)
     print(json.dumps(result, indent=1))
     return 0
 
@@ -111,6 +112,8 @@ def main(argv=None) -> int:
     f.add_argument("--eval-every", type=int, default=500)
     f.add_argument("--crop", type=int, nargs=4, metavar=("X0", "Y0", "W", "H"))
     f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--backend", default="reference", choices=["reference", "tiles"],
+                   help="differentiable backend (tiles: faster on CPUs)")
     f.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
     f.set_defaults(func=_fit)
     args = ap.parse_args(argv)

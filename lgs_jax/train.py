@@ -1,6 +1,7 @@
 """A small 3DGS training loop on optax: fixed Gaussian count, L1 + D-SSIM, per-group Adam.
 
     python -m lgs_jax fit --data ../shared/data/lego_train --steps N --out DIR [--resume]
+        [--backend reference|tiles]
 
 Pieces (each usable alone):
   `ssim`            SSIM with an 11x11 Gaussian window (σ = 1.5), reflect padding, the map
@@ -15,7 +16,7 @@ Pieces (each usable alone):
                     progress line, metrics log (JSONL), checkpoints (scene as INRIA PLY plus the
                     optimizer state, so a run resumes), held-out evaluation with scikit-image
                     PSNR/SSIM and renders of the held-out views.
-Gradients come from the `reference` backend's custom_vjp (lgs_jax.backends.backward).
+Gradients come from the `reference` or `tiles` backend's custom_vjp (lgs_jax.backends.backward).
 """
 
 from __future__ import annotations
@@ -176,15 +177,16 @@ def _restore(out, opt_state):
     return meta, params, jax.tree.unflatten(jax.tree.structure(opt_state), leaves)
 
 
-def evaluate(g: Gaussians, cams, images, background, capacity, out_dir=None, ids=None):
+def evaluate(g: Gaussians, cams, images, background, capacity, out_dir=None, ids=None,
+             backend="reference"):
     """Mean PSNR and SSIM (scikit-image) over views; renders saved as PNG when out_dir is set."""
     import matplotlib.image
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
     psnrs, ssims = [], []
     for i, (cam, target) in enumerate(zip(cams, images)):
-        img = np.clip(np.asarray(render(g, cam, background=background, capacity=capacity).image),
-                      0, 1)
+        img = np.clip(np.asarray(render(g, cam, background=background, backend=backend,
+                                        capacity=capacity).image), 0, 1)
         psnrs.append(peak_signal_noise_ratio(target, img, data_range=1.0))
         ssims.append(structural_similarity(target, img, channel_axis=-1, data_range=1.0))
         if out_dir:
@@ -193,10 +195,12 @@ def evaluate(g: Gaussians, cams, images, background, capacity, out_dir=None, ids
 
 
 def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool = False,
-        settings: Settings = Settings(), seed: int = 0, crop=None, log=print):
+        settings: Settings = Settings(), seed: int = 0, crop=None, backend: str = "reference",
+        log=print):
     """Train on a NeRF-synthetic folder (ids 0, 10, ..., 90 held out); returns the final metrics.
 
-    `crop` = (x0, y0, w, h) trains and evaluates on a window of every image (for quick tests).
+    `crop` = (x0, y0, w, h) trains and evaluates on a window of every image (for quick tests);
+    `backend`: a differentiable backend ("reference" or "tiles").
     """
     os.makedirs(out, exist_ok=True)
     cams, images, ids = load_nerf(data)
@@ -228,7 +232,7 @@ def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool 
                                                    settings.sh_every)[None, :, None])
 
         def one(cam, target):
-            o = render(g, cam, background=bg, capacity=capacity)
+            o = render(g, cam, background=bg, backend=backend, capacity=capacity)
             return loss_fn(o.image, target), o.stats
 
         losses, stats = jax.vmap(one)(cams, targets)
@@ -263,17 +267,17 @@ def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool 
             _progress(step - start, steps - start, loss, t0)
         if step % settings.eval_every == 0 or step == steps:
             psnr, ssim_v = evaluate(_join(params), [cams[i] for i in test_idx], images[test_idx],
-                                    bg, capacity)
+                                    bg, capacity, backend=backend)
             with open(log_path, "a") as f:
                 f.write(json.dumps(dict(step=step, heldout_psnr=psnr, heldout_ssim=ssim_v)) + "\n")
             log(f"\nstep {step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim_v:.4f}")
         if step % settings.checkpoint_every == 0 or step == steps:
             _save(out, step, params, opt_state, capacity)
     psnr, ssim_v = evaluate(_join(params), [cams[i] for i in test_idx], images[test_idx], bg,
-                            capacity, out_dir=out, ids=ids[test_idx])
+                            capacity, out_dir=out, ids=ids[test_idx], backend=backend)
     seconds = time.perf_counter() - t0
     result = dict(steps=steps, heldout_psnr=psnr, heldout_ssim=ssim_v, seconds=seconds,
                   ms_per_step=1e3 * seconds / max(steps - start, 1), gaussians=n_gaussians,
-                  device=jax.devices()[0].device_kind)
+                  backend=backend, device=jax.devices()[0].device_kind)
     json.dump(result, open(os.path.join(out, "result.json"), "w"), indent=1)
     return result

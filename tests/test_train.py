@@ -68,7 +68,7 @@ def test_loss_falls_on_a_tiny_crop(data_dir):
 def test_fit_writes_outputs_and_resumes(data_dir, tmp_path):
     out = str(tmp_path / "run")
     args = ["fit", "--data", _data_dir(data_dir), "--steps", "4", "--out", out, "--gaussians",
-            "256", "--eval-every", "2", "--crop", "80", "80", "32", "32"]
+            "256", "--eval-every", "2", "--crop", "80", "80", "32", "32", "--backend", "tiles"]
     assert cli.main(args) == 0
     for name in ("scene.ply", "optimizer.npz", "checkpoint.json", "metrics.jsonl",
                  "result.json", "heldout_r_0.png"):
