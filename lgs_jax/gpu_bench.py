@@ -123,6 +123,18 @@ def _psnr(err):
     return float("inf") if mse == 0 else -10 * np.log10(mse)
 
 
+def _torch_peak_mb(f):
+    """Peak CUDA memory (MiB) torch allocates during one call of f, above what it held before."""
+    import torch
+
+    torch.cuda.synchronize()
+    torch.cuda.reset_peak_memory_stats()
+    base = torch.cuda.memory_allocated()
+    f()
+    torch.cuda.synchronize()
+    return (torch.cuda.max_memory_allocated() - base) / 2**20
+
+
 def _gsplat(case, repeat):
     """gsplat 1.5.3's forward on the same scene and camera: (row, image) or None."""
     try:
@@ -179,12 +191,7 @@ def _gsplat(case, repeat):
         return rasterize_to_pixels(m2d, conics, colors, op, w, h, 16, offs, flatten_ids)
 
     image = full()
-    torch.cuda.synchronize()
-    torch.cuda.reset_peak_memory_stats()
-    base = torch.cuda.memory_allocated()
-    full()
-    torch.cuda.synchronize()
-    peak = (torch.cuda.max_memory_allocated() - base) / 2**20
+    peak = _torch_peak_mb(full)
     times = _median_ms({"e2e": full, "project": proj, "isect": isect, "offsets": offsets,
                         "raster": raster}, repeat, sync)
     row = dict(scene=case.name, width=w, height=h, gaussians=g.num, row="gsplat",
@@ -234,12 +241,7 @@ def _grad_rows(case, repeat):
         (img[0] * tw).sum().backward()
 
     step()
-    torch.cuda.synchronize()
-    torch.cuda.reset_peak_memory_stats()
-    base = torch.cuda.memory_allocated()
-    step()
-    torch.cuda.synchronize()
-    peak = (torch.cuda.max_memory_allocated() - base) / 2**20
+    peak = _torch_peak_mb(step)
     ms = _median_ms({"fb": step}, repeat, lambda _: torch.cuda.synchronize())["fb"]
     rows.append(dict(scene=case.name, width=w, height=h, row="grad:gsplat", fwd_bwd_ms=ms,
                      peak_mb=peak))
