@@ -22,12 +22,16 @@ inputs and per-pixel state: O(pixels + pairs), nothing per pixel per Gaussian.
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
 from jax import lax
 
 from ..binning import TileBins
 from ..composite import gaussian_alpha
 from ..config import ALPHA_MIN, RasterConfig
+from ..projection import Projected
 
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
@@ -136,3 +140,36 @@ def per_gaussian_sum(rows, gauss, n: int):
     target = jnp.where(ends, ids, n)
     return jnp.zeros((n, rows.shape[1]), rows.dtype).at[target].set(sums, mode="drop",
                                                                      unique_indices=True)
+
+
+def differentiable(forward, gradients):
+    """A rasterizer with a custom backward, from its two halves (both per tile, (n_tiles, 256)):
+
+      forward(p, bins, width, height, config) -> (state, stop_at, extra, saved): the composited
+        PixelState, each pixel's stop pair index, anything else to return (`extra`) and what the
+        backward reuses (`saved`, O(pairs)).
+      gradients(p, bins, width, height, config, trans, stop_at, saved, (ḡ_C, ḡ_T, ḡ_D)) -> (N, 10)
+        per-Gaussian ∂L/∂(mean2d, conic, opacity, rgb, depth) (PAIR_COLUMNS order).
+
+    Returns composite(p, bins, width, height, config) -> (color, trans, depth, extra), per tile.
+    Reverse-mode cannot go through the forward's while loops; this is the only way in.
+    """
+    @functools.partial(jax.custom_vjp, nondiff_argnums=(2, 3, 4))
+    def composite(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
+        state, _, extra, _ = forward(p, bins, width, height, config)
+        return state.color, state.trans, state.depth, extra
+
+    def composite_fwd(p, bins, width, height, config):
+        state, stop_at, extra, saved = forward(p, bins, width, height, config)
+        return ((state.color, state.trans, state.depth, extra),
+                (p, bins, state.trans, stop_at, saved))
+
+    def composite_bwd(width, height, config, residuals, cotangents):
+        p, bins, trans, stop_at, saved = residuals
+        per = gradients(p, bins, width, height, config, trans, stop_at, saved, cotangents[:3])
+        grad_p = Projected(mean2d=per[:, 0:2], cov2d=None, conic=per[:, 2:5], depth=per[:, 9],
+                           opacity=per[:, 5], rgb=per[:, 6:9], valid=None, invalid=None)
+        return grad_p, None
+
+    composite.defvjp(composite_fwd, composite_bwd)
+    return composite

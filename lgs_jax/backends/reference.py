@@ -11,8 +11,6 @@ transmittance; the forward records where each pixel stopped for it.
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 from jax import lax
@@ -69,35 +67,27 @@ def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
     return jax.vmap(one_tile)(*pixels, bins.tile_start, bins.tile_end)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(6, 7, 8))
-def _composite(mean2d, conic, opacity, rgb, depth, bins, width, height, config):
-    pixels = tile_pixels(width, height, mean2d.dtype)
-    state, _ = composite_tiles((mean2d, conic, opacity, rgb, depth), bins, pixels, config)
-    return state.color, state.trans, state.depth
-
-
-def _composite_fwd(mean2d, conic, opacity, rgb, depth, bins, width, height, config):
-    fields = (mean2d, conic, opacity, rgb, depth)
-    state, stop_at = composite_tiles(fields, bins, tile_pixels(width, height, mean2d.dtype),
+def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
+    fields = (p.mean2d, p.conic, p.opacity, p.rgb, p.depth)
+    state, stop_at = composite_tiles(fields, bins, tile_pixels(width, height, p.mean2d.dtype),
                                      config)
-    return (state.color, state.trans, state.depth), (fields, bins, state.trans, stop_at)
+    return state, stop_at, None, None
 
 
-def _composite_bwd(width, height, config, residuals, cotangents):
-    fields, bins, trans, stop_at = residuals
-    pixels = tile_pixels(width, height, fields[0].dtype)
-    rows = backward.pair_rows(fields, bins, pixels, config, trans, stop_at, *cotangents)
-    per = backward.per_gaussian_sum(rows, bins.gauss, fields[0].shape[0])
-    return per[:, 0:2], per[:, 2:5], per[:, 5], per[:, 6:9], per[:, 9], None
+def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+               trans, stop_at, saved, cotangents):
+    fields = (p.mean2d, p.conic, p.opacity, p.rgb, p.depth)
+    rows = backward.pair_rows(fields, bins, tile_pixels(width, height, p.mean2d.dtype), config,
+                              trans, stop_at, *cotangents)
+    return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
 
 
-_composite.defvjp(_composite_fwd, _composite_bwd)
+_composite = backward.differentiable(_forward, _gradients)
 
 
 def rasterize(p: Projected, bins: TileBins, width: int, height: int,
               config: RasterConfig) -> PixelState:
     """Composite every tile; returns the (H·W,) row-major pixel state (differentiable)."""
-    color, trans, depth = _composite(p.mean2d, p.conic, p.opacity, p.rgb, p.depth, bins, width,
-                                     height, config)
+    color, trans, depth, _ = _composite(p, bins, width, height, config)
     state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
     return jax.tree.map(lambda x: tiles_to_image(x, width, height), state)

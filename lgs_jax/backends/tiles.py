@@ -42,8 +42,6 @@ The hoisted forms clamp ln α at ln o (its exact maximum) instead of the differe
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 from jax import lax
@@ -223,8 +221,8 @@ def _strip_pixels(sid, tiles_x: int, dtype):
 
 def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
     """Per tile (n_tiles, 256): the state, each pixel's stop pair index (the pair whose stop test
-    fired, or the first pair its strip never processed; capacity if neither) and the number of
-    strip–Gaussian pairs."""
+    fired, or the first pair its strip never processed; capacity if neither), the number of
+    strip–Gaussian pairs, and (masks, pair vectors) for the backward (None where switched off)."""
     dt = p.mean2d.dtype
     cap = bins.gauss.shape[0]
     tiles_x, tiles_y = tile_grid(width, height)
@@ -302,7 +300,7 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
     state, stop_at = jax.tree.map(lambda x: x[inverse].reshape((tiles_x * tiles_y, TILE * TILE)
                                                                + x.shape[2:]), out)
-    return state, stop_at, jnp.sum(counts)
+    return state, stop_at, jnp.sum(counts), (masks, pair_v)
 
 
 def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
@@ -335,16 +333,16 @@ def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
     return pair_alpha
 
 
-def _backward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
-              trans, stop_at, cotangents):
+def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+               trans, stop_at, saved, cotangents):
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth): the backward walk
-    with the forward's own arithmetic (hoisted or difference form) and strip masks."""
+    with the forward's own arithmetic (hoisted or difference form) and its strip masks."""
+    masks, pair_v = saved
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
     px, py = tile_pixels(width, height, dt)
     gate = None
     if config.warp_cull:
-        masks = pair_masks(p, bins, tiles_x, config)
         strip = (jnp.arange(TILE * TILE) // STRIP_PIXELS).astype(jnp.int32)
         gate = lambda kk: ((masks[kk][:, None] >> strip[None]) & 1) == 1
     common = (bins, config, p.rgb, p.depth, trans, stop_at) + tuple(cotangents)
@@ -356,8 +354,7 @@ def _backward(p: Projected, bins: TileBins, width: int, height: int, config: Ras
         lx = jnp.broadcast_to(k % TILE + 0.5, px.shape).astype(dt)
         ly = jnp.broadcast_to(k // TILE + 0.5, px.shape).astype(dt)
         basis = pixel_basis(lx, ly, px, py, config)
-        rows = backward.walk(*common, hoisted_alpha(pair_vectors(p, bins, tiles_x, config), basis,
-                                                    config, gate), 7)
+        rows = backward.walk(*common, hoisted_alpha(pair_v, basis, config, gate), 7)
         g, t = bins.gauss, bins.tile
         origin = tile_origin(t % tiles_x, t // tiles_x, config, dt)
         o = p.opacity[g]
@@ -369,27 +366,7 @@ def _backward(p: Projected, bins: TileBins, width: int, height: int, config: Ras
     return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(7, 8, 9))
-def _composite(mean2d, conic, opacity, rgb, depth, aux, bins, width, height, config):
-    p = Projected(mean2d, aux[0], conic, depth, opacity, rgb, aux[1], aux[2])
-    state, _, strip_pairs = _forward(p, bins, width, height, config)
-    return state.color, state.trans, state.depth, strip_pairs
-
-
-def _composite_fwd(mean2d, conic, opacity, rgb, depth, aux, bins, width, height, config):
-    p = Projected(mean2d, aux[0], conic, depth, opacity, rgb, aux[1], aux[2])
-    state, stop_at, strip_pairs = _forward(p, bins, width, height, config)
-    return ((state.color, state.trans, state.depth, strip_pairs),
-            (p, bins, state.trans, stop_at))
-
-
-def _composite_bwd(width, height, config, residuals, cotangents):
-    p, bins, trans, stop_at = residuals
-    per = _backward(p, bins, width, height, config, trans, stop_at, cotangents[:3])
-    return per[:, 0:2], per[:, 2:5], per[:, 5], per[:, 6:9], per[:, 9], None, None
-
-
-_composite.defvjp(_composite_fwd, _composite_bwd)
+_composite = backward.differentiable(_forward, _gradients)
 
 
 def rasterize(p: Projected, bins: TileBins, width: int, height: int,
@@ -397,8 +374,6 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int,
     """Returns the (H·W,) pixel state (differentiable: a custom_vjp whose backward walks each
     tile back to front with this backend's own α arithmetic and strip masks) and the number of
     strip–Gaussian pairs processed."""
-    color, trans, depth, strip_pairs = _composite(
-        p.mean2d, p.conic, p.opacity, p.rgb, p.depth, (p.cov2d, p.valid, p.invalid), bins,
-        width, height, config)
+    color, trans, depth, strip_pairs = _composite(p, bins, width, height, config)
     state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
     return jax.tree.map(lambda x: tiles_to_image(x, width, height), state), strip_pairs
