@@ -53,12 +53,17 @@ def gaussian_alpha(mean2d, conic, opacity, px, py, cap):
     return power, alpha
 
 
+def passes(power, alpha):
+    """The contract's alpha test of the difference form: power <= 0 and α >= 1/255."""
+    return (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, alpha.dtype))
+
+
 def blend(state: PixelState, mean2d, conic, opacity, rgb, depth, active, px, py,
           config: RasterConfig) -> PixelState:
     """Composite one Gaussian over pixels (px, py); `active` (scalar bool) gates it entirely."""
     dt = state.trans.dtype
     power, alpha = gaussian_alpha(mean2d, conic, opacity, px, py, jnp.asarray(config.alpha_cap, dt))
-    hit = active & ~state.done & (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+    hit = active & ~state.done & passes(power, alpha)
     test_t = state.trans * (1 - alpha)
     stop = stops(test_t, config)
     take = hit & ~stop

@@ -29,8 +29,8 @@ import jax.numpy as jnp
 from jax import lax
 
 from ..binning import TileBins
-from ..composite import gaussian_alpha
-from ..config import ALPHA_MIN, RasterConfig
+from ..composite import gaussian_alpha, passes
+from ..config import RasterConfig
 from ..projection import Projected
 
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
@@ -96,7 +96,7 @@ def difference_alpha(mean2d, conic, opacity, pixels, config: RasterConfig, gate=
         a, b, cc = q[:, 0:1], q[:, 1:2], q[:, 2:3]
         power, alpha = gaussian_alpha((m[:, 0:1], m[:, 1:2]), (a, b, cc), o[:, None], px, py,
                                       alpha_cap)
-        hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+        hit = passes(power, alpha)
         if gate is not None:
             hit = hit & gate(kk)
 

@@ -41,7 +41,7 @@ from jax.experimental import pallas as pl
 
 from .. import hoist
 from ..binning import TILE, TileBins, tile_grid
-from ..composite import PixelState, stops
+from ..composite import PixelState, gaussian_alpha, passes, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import STRIPS
@@ -191,11 +191,8 @@ def _localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
             ln_a = jnp.minimum(hoist.evaluate_terms(rec[:6], x, y), rec[6])
             alpha, hit = jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= ln_min
         else:
-            mx, my, a, b, c, o = rec[:6]
-            dx, dy = mx - px, my - py
-            power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-            alpha = jnp.minimum(cap, o * jnp.exp(power))
-            hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+            power, alpha = gaussian_alpha(rec[0:2], rec[2:5], rec[5], px, py, cap)
+            hit = passes(power, alpha)
         return alpha, hit, rec[7:10], rec[10]
 
     # With warp culling, the strip's mask bit decides (a warp-uniform branch, Sec. III-C).
@@ -219,11 +216,8 @@ def _vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_ref
 
     def pair_alpha(gi):
         row = [rows_ref[gi, c] for c in range(ROW - 1)]
-        dx, dy = row[0] - px, row[1] - py
-        power = -0.5 * (row[2] * dx * dx + row[4] * dy * dy) - row[3] * dx * dy
-        alpha = jnp.minimum(cap, row[6] * jnp.exp(power))
-        hit = (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
-        return alpha, hit, row[7:10], row[10]
+        power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], px, py, cap)
+        return alpha, passes(power, alpha), row[7:10], row[10]
 
     _store(out_refs, tile, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt),
                                         fetch, pair_alpha, config, UNROLL["vanilla"]))

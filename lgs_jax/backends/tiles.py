@@ -48,7 +48,7 @@ from jax import lax
 
 from .. import hoist
 from ..binning import TILE, TileBins, padded_ellipse, tile_grid
-from ..composite import PixelState, stops
+from ..composite import PixelState, gaussian_alpha, passes, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import FULL_MASK, STRIPS, strip_mask
@@ -129,12 +129,10 @@ def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
         ln_a = jnp.minimum(ln_a, v[..., 6].T[:, :, None])
         return jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt))
     m, q = jnp.swapaxes(p.mean2d[g], 0, 1), jnp.swapaxes(p.conic[g], 0, 1)  # (G, n, ...)
-    dx = m[:, :, None, 0] - px[None]
-    dy = m[:, :, None, 1] - py[None]
-    a, b, c = (q[:, :, None, i] for i in range(3))
-    power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-    alpha = jnp.minimum(cap, p.opacity[g].T[:, :, None] * jnp.exp(power))
-    return alpha, (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
+    power, alpha = gaussian_alpha((m[:, :, None, 0], m[:, :, None, 1]),
+                                  tuple(q[:, :, None, i] for i in range(3)),
+                                  p.opacity[g].T[:, :, None], px[None], py[None], cap)
+    return alpha, passes(power, alpha)
 
 
 def blend_chunk(state: PixelState, stop_at, alpha, hit, feats, pair, config: RasterConfig):
