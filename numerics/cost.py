@@ -73,12 +73,8 @@ def scene(n, seed=0):
     rng = np.random.default_rng(seed)
     mean = rng.uniform(-24, 40, (n, 2))
     lam = rng.uniform(0.3, 200, (n, 2))
-    th = rng.uniform(0, np.pi, n)
-    c, s = np.cos(th), np.sin(th)
-    cov = np.stack([c * c * lam[:, 0] + s * s * lam[:, 1], c * s * (lam[:, 0] - lam[:, 1]),
-                    s * s * lam[:, 0] + c * c * lam[:, 1]], -1)
-    det = cov[:, 0] * cov[:, 2] - cov[:, 1] ** 2
-    conic = np.stack([cov[:, 2], -cov[:, 1], cov[:, 0]], -1) / det[:, None]
+    cov = forms.covariance(lam[:, 0], lam[:, 1], rng.uniform(0, np.pi, n))
+    conic = forms.conic(cov)
     log_o = np.log(rng.uniform(0.05, 1, n))
     f32 = lambda x: jnp.asarray(x, jnp.float32)
     out = {}

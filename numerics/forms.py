@@ -44,6 +44,21 @@ def tile_origin(form: str, pixel):
     return xp.zeros_like(pixel)
 
 
+def covariance(lam_major, lam_minor, theta):
+    """2x2 covariances (..., 3) as (xx, xy, yy) with eigenvalues (λ_major, λ_minor), the major
+    axis at angle θ (NumPy)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * c * lam_major + s * s * lam_minor, c * s * (lam_major - lam_minor),
+                     s * s * lam_major + c * c * lam_minor], -1)
+
+
+def conic(cov):
+    """Conic (a, b, c) = Σ⁻¹ entries of covariances (..., 3), in the covariance's dtype (as the
+    projection computes it)."""
+    det = cov[..., 0] * cov[..., 2] - cov[..., 1] * cov[..., 1]
+    return np.stack([cov[..., 2] / det, -cov[..., 1] / det, cov[..., 0] / det], -1)
+
+
 def principal_axes(cov):
     """(λ₁, λ₂, e₁) of 2x2 covariances (..., 3) as (xx, xy, yy), computed in float64:
     λ₁ >= λ₂, e₁ the unit eigenvector of λ₁ (e₂ = e₁ rotated by 90°). NumPy or JAX arrays (JAX

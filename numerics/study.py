@@ -63,24 +63,16 @@ def sample(rng, n, resolution, offset, kappa, opacity=None):
     scale = (t1 * t1 / lam[:, 0] + t2 * t2 / lam[:, 1]) / level
     lam = lam * scale[:, None]
     lam = np.maximum(lam, 0.3 + 1e-3 * rng.uniform(0, 1, (n, 2)))  # the dilation floor
-    cov = np.stack([c * c * lam[:, 0] + s * s * lam[:, 1], c * s * (lam[:, 0] - lam[:, 1]),
-                    s * s * lam[:, 0] + c * c * lam[:, 1]], -1)
-    return pixel + d, pixel, cov, log_o
-
-
-def conic_of(cov):
-    """Conic (a, b, c) from covariances, in the covariance's dtype (as the projection does)."""
-    det = cov[:, 0] * cov[:, 2] - cov[:, 1] * cov[:, 1]
-    return np.stack([cov[:, 2] / det, -cov[:, 1] / det, cov[:, 0] / det], -1)
+    return pixel + d, pixel, forms.covariance(lam[:, 0], lam[:, 1], theta), log_o
 
 
 def measure(rng, n, resolution, offset, kappa, opacity=None):
     mean, pixel, cov, log_o = sample(rng, n, resolution, offset, kappa, opacity)
-    exact = forms.log_alpha("difference", mean, pixel, conic_of(cov), log_o)
+    exact = forms.log_alpha("difference", mean, pixel, forms.conic(cov), log_o)
     f32 = lambda x: np.asarray(x, np.float32)
     up = lambda x: np.asarray(x, np.float64)
     cov32 = f32(cov)
-    args32 = (f32(mean), f32(pixel), conic_of(cov32), f32(log_o))
+    args32 = (f32(mean), f32(pixel), forms.conic(cov32), f32(log_o))
     axes64 = forms.principal_axes(cov)
     axes32 = tuple(f32(a) for a in axes64)
     alpha64 = np.minimum(0.99, np.exp(exact))
@@ -116,10 +108,10 @@ def low_precision_rows(rng, n):
             for offset in (0, 16, 64):
                 for kappa in (1.0, 1e2):
                     mean, pixel, cov, log_o = sample(rng, n, resolution, offset, kappa)
-                    exact = forms.log_alpha("difference", mean, pixel, conic_of(cov), log_o)
+                    exact = forms.log_alpha("difference", mean, pixel, forms.conic(cov), log_o)
                     f32 = lambda x: np.asarray(x, np.float32)
                     mean32, pixel32, log_o32 = f32(mean), f32(pixel), f32(log_o)
-                    conic32 = conic_of(f32(cov))
+                    conic32 = forms.conic(f32(cov))
                     d = half(mean32 - pixel32)
                     a, b, c = (half(conic32[:, k]) for k in range(3))
                     got = {"difference": half(log_o32) + (

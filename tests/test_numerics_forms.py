@@ -19,11 +19,8 @@ M = 16
 def _gaussians(dtype, log_kappa, theta, log_lmin, offset, angle, pixel_xy, logit):
     lmin = 0.3 + np.exp(log_lmin)
     lmax = lmin * np.exp(log_kappa)
-    c, s = np.cos(theta), np.sin(theta)
-    cov = np.stack([c * c * lmax + s * s * lmin, c * s * (lmax - lmin),
-                    s * s * lmax + c * c * lmin], -1)
-    det = cov[:, 0] * cov[:, 2] - cov[:, 1] ** 2
-    conic = np.stack([cov[:, 2], -cov[:, 1], cov[:, 0]], -1) / det[:, None]
+    cov = forms.covariance(lmax, lmin, theta)
+    conic = forms.conic(cov)
     pixel = np.floor(pixel_xy) + 0.5
     mean = pixel + offset[:, None] * np.stack([np.cos(angle), np.sin(angle)], -1)
     log_o = -np.log1p(np.exp(-logit))
