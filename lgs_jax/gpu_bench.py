@@ -27,6 +27,7 @@ import os
 import statistics
 import sys
 import time
+import types
 
 import jax
 import jax.numpy as jnp
@@ -135,33 +136,52 @@ def _torch_peak_mb(f):
     return (torch.cuda.max_memory_allocated() - base) / 2**20
 
 
+def _gsplat_peer(case):
+    """gsplat's view of a case: to_torch(x) (a float32 CUDA tensor), the camera as gsplat takes
+    it (viewmat (1, 4, 4), K (1, 3, 3), near, far) and the SH degree, and render(means, quats,
+    scales, opacities, sh): `gsplat.rasterization`'s image (1, H, W, 3) through that camera
+    (packed=False, classic)."""
+    import gsplat
+    import torch
+
+    dev = torch.device("cuda")
+    cam = case.camera
+    to_torch = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    viewmat = to_torch(cam.viewmat)[None]
+    K = to_torch([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
+    deg = int(round(np.sqrt(case.scene.sh.shape[1]))) - 1
+    near, far = float(cam.near), float(cam.far)
+
+    def render(means, quats, scales, opacities, sh):
+        return gsplat.rasterization(means, quats, scales, opacities, sh, viewmat, K, cam.width,
+                                    cam.height, near_plane=near, far_plane=far, sh_degree=deg,
+                                    packed=False, rasterize_mode="classic")[0]
+
+    return types.SimpleNamespace(to_torch=to_torch, viewmat=viewmat, K=K, near=near, far=far,
+                                 deg=deg, render=render)
+
+
 def _gsplat(case, repeat):
     """gsplat 1.5.3's forward on the same scene and camera: (row, image) or None."""
     try:
-        import gsplat
         import torch
         from gsplat.cuda._wrapper import (fully_fused_projection, isect_offset_encode,
                                           isect_tiles, rasterize_to_pixels, spherical_harmonics)
     except Exception as e:  # noqa: BLE001 - any import failure means no peer
         print(f"gsplat unavailable: {e}", file=sys.stderr)
         return None
-    dev = torch.device("cuda")
     g, cam = case.scene, case.camera
-    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    peer = _gsplat_peer(case)
+    t, viewmat, K, deg = peer.to_torch, peer.viewmat, peer.K, peer.deg
+    near, far = peer.near, peer.far
     means, quats = t(g.means), t(g.quats)
     scales, opac = torch.exp(t(g.log_scales)), torch.sigmoid(t(g.logit_opacities))
     sh = t(g.sh)
-    deg = int(round(np.sqrt(sh.shape[1]))) - 1
-    viewmat = t(cam.viewmat)[None]
-    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
     w, h = cam.width, cam.height
-    near, far = float(cam.near), float(cam.far)
     sync = lambda _: torch.cuda.synchronize()
 
     def full():
-        return gsplat.rasterization(means, quats, scales, opac, sh, viewmat, K, w, h,
-                                    near_plane=near, far_plane=far, sh_degree=deg, packed=False,
-                                    rasterize_mode="classic")[0]
+        return peer.render(means, quats, scales, opac, sh)
 
     def proj():
         radii, m2d, depths, conics, _ = fully_fused_projection(
@@ -217,27 +237,22 @@ def _grad_rows(case, repeat):
                  peak_mb=(mem.temp_size_in_bytes + mem.argument_size_in_bytes
                           + mem.output_size_in_bytes) / 2**20 if mem else "")]
     try:
-        import gsplat
         import torch
-    except Exception as e:  # noqa: BLE001
+
+        peer = _gsplat_peer(case)
+    except Exception as e:  # noqa: BLE001 - any import failure means no peer
         print(f"gsplat unavailable: {e}", file=sys.stderr)
         return rows
-    dev = torch.device("cuda")
-    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    t = peer.to_torch
     params = [t(case.scene.means), t(case.scene.quats), t(case.scene.log_scales),
               t(case.scene.logit_opacities), t(case.scene.sh)]
     for x in params:
         x.requires_grad_(True)
-    deg = int(round(np.sqrt(params[4].shape[1]))) - 1
-    viewmat = t(case.camera.viewmat)[None]
-    K = t([[case.camera.fx, 0, case.camera.cx], [0, case.camera.fy, case.camera.cy],
-           [0, 0, 1]])[None]
     tw = t(np.asarray(weights))
 
     def step():
-        img = gsplat.rasterization(params[0], params[1], torch.exp(params[2]),
-                                   torch.sigmoid(params[3]), params[4], viewmat, K, w, h,
-                                   sh_degree=deg, packed=False, rasterize_mode="classic")[0]
+        img = peer.render(params[0], params[1], torch.exp(params[2]), torch.sigmoid(params[3]),
+                          params[4])
         (img[0] * tw).sum().backward()
 
     step()

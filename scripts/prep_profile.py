@@ -1,6 +1,6 @@
 """Time each XLA pre-pass stage on the GPU (guitar, 1280x720 and 3840x2160), median of 30."""
 import statistics, sys, time
-import jax, jax.numpy as jnp, numpy as np
+import jax, jax.numpy as jnp
 from jax import lax
 sys.path.insert(0, ".")
 import lgs_jax

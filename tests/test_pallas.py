@@ -14,7 +14,6 @@ import pytest
 from hypothesis import given, strategies as st
 
 import lgs_jax
-from lgs_jax.backends import pallas
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import assert_render_close

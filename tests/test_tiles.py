@@ -15,7 +15,7 @@ from lgs_jax import binning, hoist
 from lgs_jax.backends import tiles
 from lgs_jax.projection import project
 from lgs_jax.warp_masks import STRIPS, tight_box
-from tests import oracle, scenes
+from tests import scenes
 from tests.compare import assert_render_close
 
 C = lgs_jax.RasterConfig
