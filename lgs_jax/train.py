@@ -246,7 +246,9 @@ def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool 
         return optax.apply_updates(params, updates), opt_state, loss, stats
 
     rng = np.random.default_rng(seed + start)
-    log_path = os.path.join(out, "metrics.jsonl")
+    log_file = open(os.path.join(out, "metrics.jsonl"), "a", buffering=1)  # line-buffered
+    record = lambda **row: log_file.write(json.dumps(row) + "\n")
+    test_cams = [cams[i] for i in test_idx]
     t0 = time.perf_counter()
     step = start
     while step < steps:
@@ -260,21 +262,21 @@ def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool 
             continue
         params, opt_state, loss = new[0], new[1], float(new[2])
         step += 1
-        with open(log_path, "a") as f:
-            f.write(json.dumps(dict(step=step, loss=loss,
-                                    seconds=time.perf_counter() - t0)) + "\n")
+        record(step=step, loss=loss, seconds=time.perf_counter() - t0)
         if step % 25 == 0 or step == steps:
             _progress(step - start, steps - start, loss, t0)
-        if step % settings.eval_every == 0 or step == steps:
-            psnr, ssim_v = evaluate(_join(params), [cams[i] for i in test_idx], images[test_idx],
-                                    bg, capacity, backend=backend)
-            with open(log_path, "a") as f:
-                f.write(json.dumps(dict(step=step, heldout_psnr=psnr, heldout_ssim=ssim_v)) + "\n")
+        if step % settings.eval_every == 0 and step < steps:  # the last step's is below
+            psnr, ssim_v = evaluate(_join(params), test_cams, images[test_idx], bg, capacity,
+                                    backend=backend)
+            record(step=step, heldout_psnr=psnr, heldout_ssim=ssim_v)
             log(f"\nstep {step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim_v:.4f}")
         if step % settings.checkpoint_every == 0 or step == steps:
             _save(out, step, params, opt_state, capacity)
-    psnr, ssim_v = evaluate(_join(params), [cams[i] for i in test_idx], images[test_idx], bg,
-                            capacity, out_dir=out, ids=ids[test_idx], backend=backend)
+    psnr, ssim_v = evaluate(_join(params), test_cams, images[test_idx], bg, capacity,
+                            out_dir=out, ids=ids[test_idx], backend=backend)
+    record(step=step, heldout_psnr=psnr, heldout_ssim=ssim_v)
+    log_file.close()
+    log(f"\nstep {step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim_v:.4f}")
     seconds = time.perf_counter() - t0
     result = dict(steps=steps, heldout_psnr=psnr, heldout_ssim=ssim_v, seconds=seconds,
                   ms_per_step=1e3 * seconds / max(steps - start, 1), gaussians=n_gaussians,
