@@ -22,7 +22,7 @@ import numpy as np
 
 from . import binning
 from .backends import brute, pallas, reference, tiles
-from .composite import PixelState, finish
+from .composite import finish
 from .config import RasterConfig
 from .projection import Projected, project
 from .scene import Camera, Gaussians, validate_camera, validate_gaussians
@@ -135,9 +135,8 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
         if backend == "tiles":
             state, strip_pairs = tiles.rasterize(p, bins, width, height, config)
         elif backend in pallas.KERNELS:
-            state, strip_pairs = pallas.rasterize(jax.lax.stop_gradient(p), bins, width, height,
-                                                  config, vanilla=backend == "pallas_vanilla")
-            state = _forward_only(backend, state, p)
+            state, strip_pairs = pallas.rasterize(p, bins, width, height, config,
+                                                  vanilla=backend == "pallas_vanilla")
         else:
             state = reference.rasterize(p, bins, width, height, config)
     image, alpha, depth = finish(state, background)
@@ -145,29 +144,6 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
                         depth=depth.reshape(height, width),
                         stats=_stats(p, backend, capacity, bins, strip_pairs),
                         visible=_visible(p, width, height))
-
-
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0,))
-def _forward_only(backend: str, state: PixelState, p: Projected) -> PixelState:
-    """`state` (rendered from stop_gradient(p)), tied to `p` so that differentiating through the
-    rasterizer reaches this backward, which explains instead of failing deep inside a while loop
-    or a Pallas call (and instead of a silent zero). Gradients that do not pass through the
-    rasterizer (e.g. w.r.t. the background alone) are unaffected."""
-    return state
-
-
-def _forward_only_fwd(backend, state, p):
-    return state, None
-
-
-def _forward_only_bwd(backend, _, cotangent):
-    raise NotImplementedError(
-        f"backend={backend!r} renders only (its backward kernel does not exist yet): "
-        "differentiate with backend='tiles' or backend='reference', which render the same "
-        "image and have a custom backward (lgs_jax.backends.backward)")
-
-
-_forward_only.defvjp(_forward_only_fwd, _forward_only_bwd)
 
 
 def _visible(p: Projected, width: int, height: int):

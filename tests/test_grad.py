@@ -1,11 +1,13 @@
-"""Gradients of `render` (the `reference` backend's custom_vjp) against autodiff through `brute`
-(float64), central finite differences, float32, determinism, vmap and jit."""
+"""Gradients of `render` (the custom_vjps of `reference`, `tiles` and the Pallas backends) against
+autodiff through `brute` (float64), each other, central finite differences, float32,
+determinism, vmap and jit. The Pallas backward kernel's own unit test against the tiles walk is
+in tests/test_pallas.py."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax.projection import project
@@ -98,7 +100,7 @@ def test_float32_gradients_are_close_to_float64():
         assert rel < 1e-3, (name, rel)
 
 
-@pytest.mark.parametrize("backend", ["reference", "tiles"])
+@pytest.mark.parametrize("backend", ["reference", "tiles", "pallas"])
 def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
     g = scenes.cast(scenes.scene(2), np.float32)
     bg = jnp.asarray(scenes.BACKGROUND, np.float32)
@@ -178,18 +180,35 @@ def test_tiles_float32_gradients_are_close_to_float64():
         assert np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30) < 1e-3, name
 
 
-@pytest.mark.parametrize("backend", ["pallas", "pallas_vanilla"])
-def test_forward_only_backends_say_how_to_differentiate(backend):
-    g = scenes.cast(scenes.scene(1), np.float32)
-    cam = scenes.camera()
-    f = lambda means, bg: jnp.sum(lgs_jax.render(g.__class__(means, g.quats, g.log_scales,
-                                                             g.logit_opacities, g.sh), cam,
-                                                 background=bg, backend=backend,
-                                                 capacity=4096).image)
-    bg = jnp.asarray(scenes.BACKGROUND, np.float32)
-    with pytest.raises(NotImplementedError, match="backend='tiles' or backend='reference'"):
-        jax.grad(f)(jnp.asarray(g.means), bg)
-    # The background's gradient does not pass through the rasterizer: it works (Σ T per pixel).
-    g_bg = jax.grad(f, argnums=1)(jnp.asarray(g.means), bg)
-    out = lgs_jax.render(g, cam, background=bg, backend=backend, capacity=4096)
-    np.testing.assert_allclose(g_bg, np.full(3, np.sum(1 - np.asarray(out.alpha))), rtol=1e-5)
+PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
+          "global": ("pallas", C(local_coords=False)), "gsplat": ("pallas", C("gsplat")),
+          "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat"))}
+
+
+@pytest.mark.parametrize("name", PALLAS)
+@settings(max_examples=3)  # interpret mode: the kernels run serially, one program at a time
+@given(seed=st.integers(0, 2**32 - 1))
+def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
+    """The Pallas backward (kernel in interpret mode on CPU) through `render`, against the
+    reference backward, on every adversarial kind: equal to rounding, nothing lost."""
+    g = scenes.scene(seed)
+    cam = scenes.camera(dtype=np.float64)
+    backend, config = PALLAS[name]
+    (gp, bgp), (gr, bgr) = (_grads(g, cam, b, c) for b, c in
+                            ((backend, config), ("reference", C(config.convention))))
+    invalid = np.asarray(project(g, cam).invalid)
+    for field in FIELDS:
+        want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gp, field))
+        assert np.all(np.isfinite(got)) and np.all(got[invalid] == 0), field
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * max(np.abs(want).max(), 1.0),
+                                   err_msg=field)
+    np.testing.assert_allclose(bgp, bgr, rtol=0, atol=1e-9 * max(np.abs(bgr).max(), 1.0))
+
+
+def test_pallas_float32_gradients_are_close_to_float64():
+    g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
+    (a, _) = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())
+    (b, _) = _grads(scenes.cast(g64, np.float32), scenes.camera(), "pallas", C(), np.float32)
+    for name in FIELDS:
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
+        assert np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30) < 1e-3, name

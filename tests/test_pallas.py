@@ -11,7 +11,7 @@ import itertools
 import jax
 import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax.projection import project
@@ -124,10 +124,48 @@ def test_empty_and_background_only_scenes():
         np.asarray(scenes.BACKGROUND, np.float32), out.image.shape))
 
 
+BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "local_center",
+                                         "global", "gsplat")},
+            "fast": C(blend="fast"), "fast_gsplat": C("gsplat", blend="fast")}
+
+
+@pytest.mark.parametrize("name", BACKWARD)
+@settings(max_examples=4)  # interpret mode: the kernels run serially, one program at a time
+@given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float64, np.float32]))
+def test_backward_kernel_equals_the_tiles_walk(name, seed, dtype):
+    """The backward kernel against its plain-jnp counterpart (`tiles._gradients`: the same walk
+    in XLA) on the same residuals (this kernel's forward: final T, stop pairs, masks, records)
+    and random cotangents, both blending modes (`fast` has no reference image to compare with:
+    this is where its backward is checked)."""
+    from lgs_jax import binning
+    from lgs_jax.backends import pallas, tiles
+
+    config = BACKWARD[name]
+    g = scenes.cast(scenes.scene(seed), dtype)
+    cam = scenes.camera(dtype=dtype)
+    p = project(g, cam)
+    bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
+    args = (p, bins, cam.width, cam.height, config)
+    state, stop_at, _, (masks, records) = pallas._forward(*args, vanilla=False)
+    rng = np.random.default_rng(seed % 2**16)
+    cot = tuple(rng.normal(size=x.shape).astype(dtype)
+                for x in (state.color, state.trans, state.depth))
+    got = pallas._gradients(*args, state.trans, stop_at, (masks, records), cot, vanilla=False)
+    want = tiles._gradients(*args, state.trans, stop_at,
+                            (masks, records[:, :7] if config.hoist else None), cot)
+    got, want = np.asarray(got), np.asarray(want)
+    assert np.all(np.isfinite(got))
+    tol = 1e-9 if dtype == np.float64 else 1e-4
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol * max(np.abs(want).max(), 1.0))
+    # Same Gaussians get gradient (float64: no rounding to zero by chance).
+    if dtype == np.float64:
+        np.testing.assert_array_equal(np.any(got != 0, 1), np.any(want != 0, 1))
+
+
 @pytest.mark.parametrize("backend,config", [("pallas", c) for c in LOCALGS.values()]
                          + [("pallas", C(blend="fast")), ("pallas_vanilla", C())], ids=str)
 def test_kernels_lower_to_triton(backend, config, monkeypatch):
-    """Every kernel variant lowers through the Pallas Triton lowering (to Triton IR, for an
+    """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering (to Triton IR, for an
     H100), so CI catches what the GPU would reject at lowering time."""
     from jax._src.pallas.triton import gpu_info
 
@@ -136,10 +174,12 @@ def test_kernels_lower_to_triton(backend, config, monkeypatch):
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
     g = scenes.cast(scenes.scene(0), np.float32)
-    f = jax.jit(lambda g, c: lgs_jax.render(g, c, backend=backend, config=config,
-                                            capacity=4096).image)
+    image = lambda g, c: lgs_jax.render(g, c, backend=backend, config=config,
+                                        capacity=4096).image
+    # The forward and the backward kernel (grad of a loss runs both).
+    f = jax.jit(jax.value_and_grad(lambda g, c: jax.numpy.sum(image(g, c) ** 2)))
     try:
         text = f.trace(g, scenes.camera()).lower(lowering_platforms=("cuda",)).as_text()
     finally:
         jax.clear_caches()  # and drop those traces before other tests run kernels
-    assert "__gpu$xla.gpu.triton" in text
+    assert text.count("__gpu$xla.gpu.triton") >= 2

@@ -1,9 +1,10 @@
-"""`pallas` and `pallas_vanilla` backends: the rasterization stage as Pallas (Triton) kernels.
+"""`pallas` and `pallas_vanilla` backends: the rasterization stage as Pallas (Triton) kernels,
+forward and backward.
 
 Projection, binning and sorting stay in XLA (shared with the `tiles` backend). The plain-jnp
 counterpart of each kernel, which the tests compare them with, is `lgs_jax.backends.tiles` (same
-masks, same hoisted arithmetic, same blending semantics) and `lgs_jax.backends.reference`
-(per-pixel semantics).
+masks, same hoisted arithmetic, same blending semantics, same backward walk) and
+`lgs_jax.backends.reference` (per-pixel semantics).
 
 Local-GS kernel (`backend="pallas"`, Sec. III): one program per 16x2 strip, `num_warps=1`, so a
 program is one warp and its 32 lanes are the strip's pixels. It walks its tile's pairs in order,
@@ -20,17 +21,30 @@ blended in order, so the serial chain per pair is the blend alone.
 Vanilla kernel (`backend="pallas_vanilla"`, the original 3DGS rasterizer): one program per 16x16
 tile with 8 warps (256 lanes), the difference form, per-pixel termination, and a tile-wide early
 exit when every pixel is done. It ignores the Local-GS switches (it is the baseline the paper
-measures against) but honours `convention`.
+measures against) but honours `convention` and `blend`.
 
-Both use exact per-pixel blending semantics (lgs_jax.composite) unless `blend="fast"` (Local-GS
-only). Programs run tiles in order of decreasing list length (longest-first scheduling: the
-slowest programs start first and short ones fill in behind them; each writes its own output
-row). Without a GPU the kernels run in Pallas interpret mode (slow, meant for tests);
-`stats.kernel` names the kernel that ran, `stats.interpreted` says whether it was interpreted.
+Both use exact per-pixel blending semantics (lgs_jax.composite) unless `blend="fast"`. Programs
+run tiles in order of decreasing list length (longest-first scheduling: the slowest programs
+start first and short ones fill in behind them; each writes its own output row). Both kernels
+also write each pixel's stop pair (the pair whose stop test fired, or the first pair its program
+never processed), which is all the backward needs besides the final T.
+
+Backward kernel (both backends): one program per tile, 256 lanes (8 warps), walking the tile's
+pairs back to front from the last pair any pixel blended, with the forward's own α arithmetic
+(hoisted V·B clamped at ln o, or the difference form) and strip masks: the walk of
+lgs_jax.backends.backward (equations there). Per pair, the per-pixel gradient terms are reduced
+over the tile in one (256, 16) column reduction and stored as that pair's row: each pair belongs
+to one tile, so every row has one writer (no atomics; rows of pairs never visited stay zero).
+Rows are then chained to the Gaussian (Eq. 8 for the hoisted form, `tiles.chain_hoisted_rows`)
+and summed per Gaussian by `backward.per_gaussian_sum` (sort + segmented scan): deterministic.
+
+Without a GPU the kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel`
+names the kernel that ran, `stats.interpreted` says whether it was interpreted.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 
@@ -45,13 +59,16 @@ from ..composite import PixelState, gaussian_alpha, passes, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import STRIPS
+from . import backward
 from .reference import tiles_to_image
-from .tiles import _origin_offset, pair_masks, pair_vectors
+from .tiles import _origin_offset, chain_hoisted_rows, pair_masks, pair_vectors
 
 UNROLL = {"localgs": 2, "vanilla": 8}  # pairs staged per iteration (scripts/kernel_profile.py)
 STRIP_PIXELS = 2 * TILE
+TILE_PIXELS = TILE * TILE
 ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
 REC = 12  # packed pair record (Local-GS): see `pair_records`
+GRAD_COLUMNS = 16  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z, padding
 KERNELS = {"pallas": "localgs-triton", "pallas_vanilla": "vanilla-triton"}
 
 
@@ -87,14 +104,43 @@ def pair_records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfi
     return jnp.concatenate([head, tail], -1)
 
 
-def _blend(state, alpha, hit, rgb, z, config: RasterConfig):
-    """One Gaussian over a lane vector of pixels; state = (r, g, b, T, D, done).
+def _frame(tile, k, tiles_x: int, config: RasterConfig, dt):
+    """Coordinates of lanes k of `tile` (pixel index k = 16·row + column within the tile; a
+    strip's lanes are 32 consecutive k): the hoisting frame (x', y') and the pixel centre
+    (px, py). Tile-local centres are exact in any float."""
+    lx, ly = (k % TILE).astype(dt) + 0.5, (k // TILE).astype(dt) + 0.5
+    px = ((tile % tiles_x) * TILE).astype(dt) + lx
+    py = ((tile // tiles_x) * TILE).astype(dt) + ly
+    if not config.local_coords:
+        return (px, py), (px, py)
+    off = _origin_offset(config)
+    return (lx - off, ly - off), (px, py)
+
+
+def _record_alpha(rec, frame, pixel, config: RasterConfig):
+    """(α, hit, aux) of one pair record at a lane vector of pixels: ln α = min(V·B, ln o)
+    (Eq. 10) with hit = ln α >= ln(1/255), or the difference form (lgs_jax.composite). `aux`
+    is what the backward's derivative needs (ln α and V·B, or power)."""
+    dt = frame[0].dtype
+    cap = jnp.asarray(config.alpha_cap, dt)
+    if config.hoist:
+        raw = hoist.evaluate_terms(rec[:6], *frame)
+        ln_a = jnp.minimum(raw, rec[6])
+        alpha = jnp.minimum(cap, jnp.exp(ln_a))
+        return alpha, ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt)), (ln_a, raw)
+    power, alpha = gaussian_alpha(rec[0:2], rec[2:5], rec[5], *pixel, cap)
+    return alpha, passes(power, alpha), power
+
+
+def _blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
+    """One Gaussian (pair index `pair`) over a lane vector of pixels; state = (r, g, b, T, D,
+    done, stop pair).
 
     exact: the contract (lgs_jax.composite.blend): a hit whose T·(1 − α) passes the stop test
-    ends the pixel unblended; otherwise C += rgb·α·T, T = T·(1 − α).
+    ends the pixel unblended (and records `pair`); otherwise C += rgb·α·T, T = T·(1 − α).
     fast: w = α·T; C += rgb·w; T −= w for every hit (Sec. III-D).
     """
-    r, g, b, t, d, done = state
+    r, g, b, t, d, done, stop_at = state
     if config.blend == "exact":
         hit = hit & ~done
         test_t = t * (1 - alpha)
@@ -102,10 +148,11 @@ def _blend(state, alpha, hit, rgb, z, config: RasterConfig):
         take = hit & ~stop
         w = jnp.where(take, alpha * t, 0)
         t, done = jnp.where(take, test_t, t), done | (hit & stop)
+        stop_at = jnp.where(hit & stop, pair, stop_at)
     else:
         w = jnp.where(hit, alpha * t, 0)
         t = t - w
-    return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, done
+    return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, done, stop_at
 
 
 def _running(state, config: RasterConfig):
@@ -115,16 +162,18 @@ def _running(state, config: RasterConfig):
     return jnp.min(stops(state[3], config).astype(jnp.int32)) == 0
 
 
-def _staged_loop(start, end, state, fetch, pair_alpha, config: RasterConfig, unroll: int,
+def _staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterConfig, unroll: int,
                  take=None):
-    """Walk pairs [start, end) `unroll` at a time while some lane still blends.
+    """Walk pairs [start, end) `unroll` at a time while some lane still blends; returns
+    (r, g, b, T, D, stop pair) per lane.
 
     `fetch(j)` loads pair j's small index data (Gaussian id, mask bit) one iteration ahead.
     Each iteration evaluates its `unroll` pairs first (`pair_alpha(fetched) -> (α, hit, rgb, z)`,
     independent of the pixel state, so their loads and arithmetic overlap) and then blends them
     in order. `take(fetched)` (optional) says whether a pair concerns this program at all (its
     mask bit): pairs without it do not blend, and a group with none is skipped by one
-    program-uniform branch.
+    program-uniform branch. A lane's stop pair is where its stop test fired (exact), else the
+    first pair the loop did not process (`end` or beyond when it ran to the end).
     """
     def cond(carry):
         j, _, st = carry
@@ -137,8 +186,8 @@ def _staged_loop(start, end, state, fetch, pair_alpha, config: RasterConfig, unr
 
         def group(st):
             evaluated = [pair_alpha(f) for f in cur]
-            for (alpha, hit, rgb, z), ok in zip(evaluated, takes):
-                st = _blend(st, alpha, hit & ok, rgb, z, config)
+            for u, ((alpha, hit, rgb, z), ok) in enumerate(zip(evaluated, takes)):
+                st = _blend(st, alpha, hit & ok, rgb, z, j + u, config)
             return st
 
         if take is None:
@@ -146,20 +195,19 @@ def _staged_loop(start, end, state, fetch, pair_alpha, config: RasterConfig, unr
         return j + unroll, nxt, lax.cond(functools.reduce(jnp.logical_or, takes), group,
                                          lambda st: st, st)
 
-    first = [fetch(start + u) for u in range(unroll)]
-    return lax.while_loop(cond, body, (start, first, state))[2]
-
-
-def _empty(lanes: int, dt):
-    """(r, g, b, T, D, done) of lanes with nothing blended (lgs_jax.composite.PixelState.empty)."""
     zero = jnp.zeros((lanes,), dt)
-    return zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), bool)
+    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), bool),
+             jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
+    first = [fetch(start + u) for u in range(unroll)]
+    j, _, st = lax.while_loop(cond, body, (start, first, empty))
+    stop_at = jnp.minimum(st[6], j) if config.blend == "exact" else jnp.full((lanes,), j)
+    return st[:5] + (stop_at,)
 
 
-def _store(refs, row, state):
-    """Write (r, g, b, T, D) to row `row` of the (programs, lanes) outputs."""
-    for ref, x in zip(refs, state[:5]):
-        ref[row, :] = x
+def _store(refs, row, outputs):
+    """Write (r, g, b, T, D, stop pair) to row `row` of the (programs, lanes) outputs."""
+    for ref, x in zip(refs, outputs):
+        ref[row, :] = x.astype(ref.dtype)
 
 
 def _localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
@@ -167,18 +215,8 @@ def _localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
     dt = rec_ref.dtype
     pid = pl.program_id(0)
     tile, s = order_ref[pid // STRIPS], pid % STRIPS
-    k = lax.iota(jnp.int32, STRIP_PIXELS)
-    lx = (k % TILE).astype(dt) + 0.5  # tile-local pixel centres (exact in any float)
-    ly = (2 * s + k // TILE).astype(dt) + 0.5
-    corner_x, corner_y = ((tile % tiles_x) * TILE).astype(dt), ((tile // tiles_x) * TILE).astype(dt)
-    if config.local_coords:
-        off = _origin_offset(config)
-        x, y = lx - off, ly - off
-    else:
-        x, y = corner_x + lx, corner_y + ly
-    px, py = corner_x + lx, corner_y + ly
-    cap = jnp.asarray(config.alpha_cap, dt)
-    ln_min = jnp.log(jnp.asarray(ALPHA_MIN, dt))
+    frame, pixel = _frame(tile, s * STRIP_PIXELS + lax.iota(jnp.int32, STRIP_PIXELS), tiles_x,
+                          config, dt)
     bit = jnp.left_shift(jnp.int32(1), s)
 
     def fetch(j):
@@ -187,28 +225,21 @@ def _localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
 
     def pair_alpha(fetched):
         rec = [rec_ref[fetched[0], c] for c in range(REC - 1)]
-        if config.hoist:  # V (Eq. 8), hoisted once per pair: ln α = V·B (Eq. 10) <= ln o
-            ln_a = jnp.minimum(hoist.evaluate_terms(rec[:6], x, y), rec[6])
-            alpha, hit = jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= ln_min
-        else:
-            power, alpha = gaussian_alpha(rec[0:2], rec[2:5], rec[5], px, py, cap)
-            hit = passes(power, alpha)
+        alpha, hit, _ = _record_alpha(rec, frame, pixel, config)
         return alpha, hit, rec[7:10], rec[10]
 
     # With warp culling, the strip's mask bit decides (a warp-uniform branch, Sec. III-C).
     take = (lambda fetched: fetched[1]) if config.warp_cull else None
     _store(out_refs, tile * STRIPS + s,
-           _staged_loop(start_ref[tile], end_ref[tile], _empty(STRIP_PIXELS, dt), fetch,
-                        pair_alpha, config, UNROLL["localgs"], take))
+           _staged_loop(start_ref[tile], end_ref[tile], STRIP_PIXELS, dt, fetch, pair_alpha, config,
+                        UNROLL["localgs"], take))
 
 
 def _vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
                     config: RasterConfig, tiles_x: int, last_pair: int):
     dt = rows_ref.dtype
     tile = order_ref[pl.program_id(0)]
-    k = lax.iota(jnp.int32, TILE * TILE)
-    px = ((tile % tiles_x) * TILE + k % TILE).astype(dt) + 0.5
-    py = ((tile // tiles_x) * TILE + k // TILE).astype(dt) + 0.5
+    _, (px, py) = _frame(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt)
     cap = jnp.asarray(config.alpha_cap, dt)
 
     def fetch(j):
@@ -219,38 +250,48 @@ def _vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_ref
         power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], px, py, cap)
         return alpha, passes(power, alpha), row[7:10], row[10]
 
-    _store(out_refs, tile, _staged_loop(start_ref[tile], end_ref[tile], _empty(TILE * TILE, dt),
-                                        fetch, pair_alpha, config, UNROLL["vanilla"]))
+    _store(out_refs, tile, _staged_loop(start_ref[tile], end_ref[tile], TILE_PIXELS, dt, fetch,
+                                        pair_alpha, config, UNROLL["vanilla"]))
+
+
+def _compiler_params(num_warps: int):
+    from jax.experimental.pallas import triton as pl_triton
+
+    return pl_triton.CompilerParams(num_warps=num_warps, num_stages=1)
 
 
 def _call(kernel, n_programs: int, lanes: int, num_warps: int, dt, args):
-    from jax.experimental.pallas import triton as pl_triton
-
     out = jax.ShapeDtypeStruct((n_programs, lanes), dt)  # each program writes its own row
+    stop = jax.ShapeDtypeStruct((n_programs, lanes), jnp.int32)
     return pl.pallas_call(
-        kernel, out_shape=[out] * 5, grid=(n_programs,),
-        compiler_params=pl_triton.CompilerParams(num_warps=num_warps, num_stages=1),
-        interpret=interpreted(), name=kernel.func.__name__.strip("_"),
+        kernel, out_shape=[out] * 5 + [stop], grid=(n_programs,),
+        compiler_params=_compiler_params(num_warps), interpret=interpreted(),
+        name=kernel.func.__name__.strip("_"),
     )(*args)
 
 
-def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
-              vanilla: bool = False) -> tuple[PixelState, jax.Array]:
-    """Returns the (H·W,) pixel state and the strip–Gaussian pairs the kernel had to visit
-    (with warp culling: the pairs' set mask bits; otherwise 8 per pair)."""
+def _longest_first(bins: TileBins):
+    """Tiles in order of decreasing list length (stable)."""
+    return jnp.argsort(bins.tile_start - bins.tile_end, stable=True).astype(jnp.int32)
+
+
+def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+             vanilla: bool):
+    """Per tile (n_tiles, 256): the state, each pixel's stop pair, the strip–Gaussian pairs the
+    kernel had to visit, and (masks, records) for the backward."""
     dt = p.mean2d.dtype
     tiles_x, tiles_y = tile_grid(width, height)
     n_tiles = tiles_x * tiles_y
     last_pair = bins.gauss.shape[0] - 1
     valid_pair = bins.tile < n_tiles
-    # Longest lists first: the programs that take longest start first, the short ones fill in.
-    order = jnp.argsort(bins.tile_start - bins.tile_end, stable=True).astype(jnp.int32)
+    order = _longest_first(bins)
     if vanilla:
         kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
                                    last_pair=last_pair)
-        outs = _call(kernel, n_tiles, TILE * TILE, 8, dt,
+        outs = _call(kernel, n_tiles, TILE_PIXELS, 8, dt,
                      (order, bins.tile_start, bins.tile_end, bins.gauss, gaussian_rows(p)))
         strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
+        saved = (None, pair_records(p, bins, tiles_x, _vanilla_model(config)))
     else:
         if config.warp_cull:
             masks = pair_masks(p, bins, tiles_x, config)
@@ -258,13 +299,132 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
         else:
             masks = jnp.zeros((1,), jnp.int32)
             strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
+        records = pair_records(p, bins, tiles_x, config)
         kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
                                    last_pair=last_pair)
         outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt,
-                     (order, bins.tile_start, bins.tile_end, masks,
-                      pair_records(p, bins, tiles_x, config)))
+                     (order, bins.tile_start, bins.tile_end, masks, records))
+        saved = (masks if config.warp_cull else None, records)
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
-    r, g, b, t, d = (x.reshape(n_tiles, TILE * TILE) for x in outs)
+    r, g, b, t, d, stop_at = (x.reshape(n_tiles, TILE_PIXELS) for x in outs)
     state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
                        done=jnp.zeros(t.shape, bool))
+    return state, stop_at, strip_pairs, saved
+
+
+def _vanilla_model(config: RasterConfig) -> RasterConfig:
+    """The switches the vanilla kernel's arithmetic corresponds to: the difference form on the
+    tile's whole list (its backward is the Local-GS backward kernel with these)."""
+    return dataclasses.replace(config, hoist=False, warp_cull=False)
+
+
+def _columns(values, lanes: int, dt):
+    """Σ over lanes of each of `values` (lane vectors), as one (lanes, GRAD_COLUMNS) column
+    reduction (one cross-warp reduction per pair instead of one per value)."""
+    col = lax.broadcasted_iota(jnp.int32, (lanes, GRAD_COLUMNS), 1)
+    m = jnp.zeros((lanes, GRAD_COLUMNS), dt)
+    for c, v in enumerate(values):
+        if v is not None:
+            m = jnp.where(col == c, v[:, None], m)
+    return jnp.sum(m, axis=0)
+
+
+def _backward_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, trans_ref, stop_ref,
+                     g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, _zeros_ref, rows_ref, *,
+                     config: RasterConfig, tiles_x: int):
+    """One tile's backward walk (lgs_jax.backends.backward.walk, equations there): rows_ref[k]
+    = the pair's gradient summed over the tile's pixels, for every pair some pixel blended."""
+    dt = rec_ref.dtype
+    tile = order_ref[pl.program_id(0)]
+    k = lax.iota(jnp.int32, TILE_PIXELS)
+    frame, pixel = _frame(tile, k, tiles_x, config, dt)
+    bit = jnp.left_shift(jnp.int32(1), k // STRIP_PIXELS)  # each lane's strip
+    cap = jnp.asarray(config.alpha_cap, dt)
+    t_final, stop_at = trans_ref[tile, :], stop_ref[tile, :]
+    g_r, g_g, g_b, g_t, g_d = (ref[tile, :] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
+                                                          g_d_ref))
+    g_bg = g_t * t_final
+    start = start_ref[tile]
+    last = jnp.minimum(end_ref[tile], jnp.max(stop_at))  # pairs at or after it: no pixel blended
+
+    def body(i, carry):
+        t_next, s_r, s_g, s_b, s_z = carry
+        j = last - 1 - i
+        rec = [rec_ref[j, c] for c in range(REC - 1)]
+        alpha, hit, aux = _record_alpha(rec, frame, pixel, config)
+        hit = hit & (j < stop_at)
+        if config.warp_cull:
+            hit = hit & ((mask_ref[j] & bit) != 0)
+        one_minus = jnp.where(hit, 1 - alpha, 1)
+        t_k = t_next / one_minus
+        w = jnp.where(hit, alpha * t_k, 0)
+        rgb, z = rec[7:10], rec[10]
+        dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
+        dot_s = g_r * s_r + g_g * s_g + g_b * s_b
+        d_alpha = jnp.where(hit, t_k * (dot_c + g_d * z)
+                            - (dot_s + g_d * s_z + g_bg) / one_minus, 0)
+        if config.hoist:  # ∂(V·B)/∂V = B; the clamp at ln o passes ∂ to ln o instead
+            ln_a, raw = aux
+            d_ln = jnp.where(jnp.exp(ln_a) < cap, d_alpha * alpha, 0)
+            on_v = raw <= rec[6]
+            d_raw = jnp.where(on_v, d_ln, 0)
+            x, y = frame
+            model = [d_raw * (x * x), d_raw * (x * y), d_raw * (y * y), d_raw * x, d_raw * y,
+                     d_raw, jnp.where(on_v, 0, d_ln)]
+        else:  # the difference form: backward.difference_alpha
+            power = aux
+            unclamped = rec[5] * jnp.exp(power) < cap
+            d_power = jnp.where(unclamped, d_alpha * alpha, 0)
+            dx, dy = rec[0] - pixel[0], rec[1] - pixel[1]
+            a, b, c = rec[2:5]
+            model = [-d_power * (a * dx + b * dy), -d_power * (c * dy + b * dx),
+                     -0.5 * d_power * dx * dx, -d_power * dx * dy, -0.5 * d_power * dy * dy,
+                     jnp.where(unclamped, d_alpha * jnp.exp(power), 0), None]
+        rows_ref[j, :] = _columns(model + [w * g_r, w * g_g, w * g_b, w * g_d], TILE_PIXELS, dt)
+        return (jnp.where(hit, t_k, t_next), s_r + w * rgb[0], s_g + w * rgb[1],
+                s_b + w * rgb[2], s_z + w * z)
+
+    zero = jnp.zeros((TILE_PIXELS,), dt)
+    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (t_final, zero, zero, zero, zero))
+
+
+def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+               trans, stop_at, saved, cotangents, vanilla: bool):
+    """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth) from the backward
+    kernel's pair rows."""
+    masks, records = saved
+    if vanilla:
+        config = _vanilla_model(config)
+    dt = p.mean2d.dtype
+    tiles_x, tiles_y = tile_grid(width, height)
+    g_color, g_trans, g_depth = cotangents
+    kernel = functools.partial(_backward_kernel, config=config, tiles_x=tiles_x)
+    zeros = jnp.zeros((bins.gauss.shape[0], GRAD_COLUMNS), dt)
+    rows = pl.pallas_call(
+        kernel, out_shape=jax.ShapeDtypeStruct(zeros.shape, dt), grid=(tiles_x * tiles_y,),
+        input_output_aliases={12: 0},  # pairs no pixel blended keep their zero row
+        compiler_params=_compiler_params(8), interpret=interpreted(), name="localgs_backward",
+    )(_longest_first(bins), bins.tile_start, bins.tile_end,
+      jnp.zeros((1,), jnp.int32) if masks is None else masks, records, trans, stop_at,
+      g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans, g_depth, zeros)
+    rows = jnp.where((bins.tile < tiles_x * tiles_y)[:, None], rows, 0)
+    if config.hoist:
+        rows = chain_hoisted_rows(p, bins, rows[:, :11], tiles_x, config)
+    else:
+        rows = jnp.concatenate([rows[:, :6], rows[:, 7:11]], -1)
+    return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
+
+
+_COMPOSITE = {vanilla: backward.differentiable(functools.partial(_forward, vanilla=vanilla),
+                                               functools.partial(_gradients, vanilla=vanilla))
+              for vanilla in (False, True)}
+
+
+def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+              vanilla: bool = False) -> tuple[PixelState, jax.Array]:
+    """Returns the (H·W,) pixel state (differentiable: a custom_vjp whose backward is the
+    backward kernel) and the strip–Gaussian pairs the kernel had to visit (with warp culling:
+    the pairs' set mask bits; otherwise 8 per pair)."""
+    color, trans, depth, strip_pairs = _COMPOSITE[vanilla](p, bins, width, height, config)
+    state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
     return jax.tree.map(lambda x: tiles_to_image(x, width, height), state), strip_pairs

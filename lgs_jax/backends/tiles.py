@@ -353,15 +353,21 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
         ly = jnp.broadcast_to(k // TILE + 0.5, px.shape).astype(dt)
         basis = pixel_basis(lx, ly, px, py, config)
         rows = backward.walk(*common, hoisted_alpha(pair_v, basis, config, gate), 7)
-        g, t = bins.gauss, bins.tile
-        origin = tile_origin(t % tiles_x, t // tiles_x, config, dt)
-        o = p.opacity[g]
-        _, vjp = jax.vjp(lambda m, q, lo: hoist.hoist(m, q, lo, origin), p.mean2d[g], p.conic[g],
-                         jnp.log(jnp.where(o > 0, o, 1)))
-        d_mean, d_conic, d_log_o = vjp(rows[:, :6])
-        d_o = jnp.where(o > 0, (d_log_o + rows[:, 6]) / jnp.where(o > 0, o, 1), 0)
-        rows = jnp.concatenate([d_mean, d_conic, d_o[:, None], rows[:, 7:]], -1)
+        rows = chain_hoisted_rows(p, bins, rows, tiles_x, config)
     return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
+
+
+def chain_hoisted_rows(p: Projected, bins: TileBins, rows, tiles_x: int, config: RasterConfig):
+    """Pair rows (∂L/∂V, ∂L/∂ln o from the clamp, ∂L/∂rgb, ∂L/∂z: capacity x 11) chained to
+    the pair's Gaussian through Eq. 8 (the vjp of `hoist.hoist`): (capacity, PAIR_COLUMNS)."""
+    g, t = bins.gauss, bins.tile
+    origin = tile_origin(t % tiles_x, t // tiles_x, config, p.mean2d.dtype)
+    o = p.opacity[g]
+    _, vjp = jax.vjp(lambda m, q, lo: hoist.hoist(m, q, lo, origin), p.mean2d[g], p.conic[g],
+                     jnp.log(jnp.where(o > 0, o, 1)))
+    d_mean, d_conic, d_log_o = vjp(rows[:, :6])
+    d_o = jnp.where(o > 0, (d_log_o + rows[:, 6]) / jnp.where(o > 0, o, 1), 0)
+    return jnp.concatenate([d_mean, d_conic, d_o[:, None], rows[:, 7:]], -1)
 
 
 _composite = backward.differentiable(_forward, _gradients)
