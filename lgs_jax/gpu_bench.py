@@ -221,47 +221,79 @@ def _gsplat(case, repeat):
     return row, image[0].float().cpu().numpy()
 
 
-def _grad_rows(case, repeat):
-    """Forward + backward of sum(image · W) w.r.t. all parameters: ours (the differentiable
-    `reference` backend, jitted value_and_grad) and gsplat (rasterization + backward)."""
+GRAD_ROWS = {"pallas": ("pallas", C()), "pallas:fast": ("pallas", C(blend="fast")),
+             "pallas_vanilla": ("pallas_vanilla", C()), "tiles": ("tiles", C()),
+             "reference": ("reference", C())}
+
+
+def _grad_rows(case, repeat, slow_repeat):
+    """Forward + backward of sum(image · W) w.r.t. all parameters: each differentiable backend
+    (jitted value_and_grad; `tiles` and `reference` for `slow_repeat` rounds) and gsplat
+    (rasterization + backward()), alternating within each round; plus our forward alone, and
+    whether two gradient calls give the same bits."""
     g = jax.device_put(case.scene)
     cam = jax.device_put(case.camera)
     w, h = cam.width, cam.height
     cap = int(render(g, cam).stats.capacity)
     weights = jax.random.normal(jax.random.key(0), (h, w, 3), jnp.float32)
-    f = jax.jit(jax.value_and_grad(lambda g: jnp.sum(render(g, cam, capacity=cap).image
-                                                     * weights)))
-    mem = f.lower(g).compile().memory_analysis()
-    ours = _median_ms({"fb": lambda: f(g)}, repeat, jax.block_until_ready)["fb"]
-    rows = [dict(scene=case.name, width=w, height=h, row="grad:reference", fwd_bwd_ms=ours,
-                 peak_mb=(mem.temp_size_in_bytes + mem.argument_size_in_bytes
-                          + mem.output_size_in_bytes) / 2**20 if mem else "")]
+    fns, fwd, rows = {}, {}, {}
+    for name, (backend, config) in GRAD_ROWS.items():
+        image = lambda g, b=backend, c=config: render(g, cam, backend=b, config=c,
+                                                      capacity=cap).image
+        f = jax.jit(jax.value_and_grad(lambda g, image=image: jnp.sum(image(g) * weights)))
+        fwd_f = jax.jit(image)
+        fwd_f(g).block_until_ready()
+        mem = f.lower(g).compile().memory_analysis()
+        first, again = f(g)[1], f(g)[1]
+        same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
+                                                                 jax.tree.leaves(again)))
+        fns[name] = lambda f=f: jax.block_until_ready(f(g))
+        fwd[name] = lambda f=fwd_f: jax.block_until_ready(f(g))
+        rows[name] = dict(scene=case.name, width=w, height=h, row=f"grad:{name}",
+                          peak_mb=(mem.temp_size_in_bytes + mem.argument_size_in_bytes
+                                   + mem.output_size_in_bytes) / 2**20 if mem else "",
+                          bitwise_repeatable=same)
     try:
         import torch
 
         peer = _gsplat_peer(case)
     except Exception as e:  # noqa: BLE001 - any import failure means no peer
         print(f"gsplat unavailable: {e}", file=sys.stderr)
-        return rows
-    t = peer.to_torch
-    params = [t(case.scene.means), t(case.scene.quats), t(case.scene.log_scales),
-              t(case.scene.logit_opacities), t(case.scene.sh)]
-    for x in params:
-        x.requires_grad_(True)
-    tw = t(np.asarray(weights))
+        peer = None
+    if peer is not None:
+        t = peer.to_torch
+        params = [t(case.scene.means), t(case.scene.quats), t(case.scene.log_scales),
+                  t(case.scene.logit_opacities), t(case.scene.sh)]
+        for x in params:
+            x.requires_grad_(True)
+        tw = t(np.asarray(weights))
 
-    def step():
-        img = peer.render(params[0], params[1], torch.exp(params[2]), torch.sigmoid(params[3]),
-                          params[4])
-        (img[0] * tw).sum().backward()
+        def gsplat_fwd():
+            img = peer.render(params[0], params[1], torch.exp(params[2]),
+                              torch.sigmoid(params[3]), params[4])
+            torch.cuda.synchronize()
+            return img
 
-    step()
-    peak = _torch_peak_mb(step)
-    ms = _median_ms({"fb": step}, repeat, lambda _: torch.cuda.synchronize())["fb"]
-    rows.append(dict(scene=case.name, width=w, height=h, row="grad:gsplat", fwd_bwd_ms=ms,
-                     peak_mb=peak))
-    rows[0]["fwd_bwd_vs_gsplat"] = ours / ms
-    return rows
+        def gsplat_step():
+            (gsplat_fwd()[0] * tw).sum().backward()
+            torch.cuda.synchronize()
+
+        gsplat_step()
+        fns["gsplat"], fwd["gsplat"] = gsplat_step, gsplat_fwd
+        rows["gsplat"] = dict(scene=case.name, width=w, height=h, row="grad:gsplat",
+                              peak_mb=_torch_peak_mb(gsplat_step))
+    slow = {"tiles", "reference"}
+    for part, key in ((fns, "fwd_bwd_ms"), (fwd, "fwd_ms")):
+        times = _median_ms({k: v for k, v in part.items() if k not in slow}, repeat, lambda _: 0)
+        times.update(_median_ms({k: v for k, v in part.items() if k in slow}, slow_repeat,
+                                lambda _: 0))
+        for name, ms in times.items():
+            rows[name][key] = ms
+    for r in rows.values():
+        r["bwd_ms"] = r["fwd_bwd_ms"] - r["fwd_ms"]
+        if peer is not None:
+            r["fwd_bwd_vs_gsplat"] = r["fwd_bwd_ms"] / rows["gsplat"]["fwd_bwd_ms"]
+    return list(rows.values())
 
 
 def main(argv=None) -> int:
@@ -287,9 +319,10 @@ def main(argv=None) -> int:
     for spec in specs:
         case = parse_scene(spec)
         if args.grad:
-            rows += _grad_rows(case, args.repeat)
-            for r in rows[-2:]:
-                print(r, flush=True)
+            grad = _grad_rows(case, args.repeat, args.slow_repeat)
+            for r in grad:
+                print(_format_grad(r), flush=True)
+            rows += grad
             continue
         ours, images = _ours(case, args.repeat, args.slow_repeat, args.f64_max_pixels)
         peer = None if args.no_gsplat else _gsplat(case, args.repeat)
@@ -312,6 +345,15 @@ def main(argv=None) -> int:
             wr.writeheader()
             wr.writerows(rows)
     return 0
+
+
+def _format_grad(r):
+    ratio = f" | vs gsplat {r['fwd_bwd_vs_gsplat']:7.2f}" if "fwd_bwd_vs_gsplat" in r else ""
+    same = {True: " bitwise repeatable", False: " NOT bitwise repeatable", None: ""}[
+        r.get("bitwise_repeatable")]
+    return (f"{r['scene']:>16s} {r['width']}x{r['height']} {r['row']:<20s} fwd+bwd "
+            f"{r['fwd_bwd_ms']:9.3f} ms (fwd {r['fwd_ms']:8.3f} bwd {r['bwd_ms']:8.3f}) peak "
+            f"{r['peak_mb']:8.1f} MB{ratio}{same}")
 
 
 def _format(r):
