@@ -61,7 +61,10 @@ def _preset(data):
 
 
 def _median_ms(fns, repeat, sync):
-    """{name: median ms} over `repeat` rounds, each round calling every fn once, in turn."""
+    """{name: median ms} over `repeat` rounds, each round calling every fn once, in turn (after
+    one untimed warm-up round)."""
+    for f in fns.values():
+        sync(f())
     times = {name: [] for name in fns}
     for _ in range(repeat):
         for name, f in fns.items():
@@ -226,7 +229,7 @@ GRAD_ROWS = {"pallas": ("pallas", C()), "pallas:fast": ("pallas", C(blend="fast"
              "reference": ("reference", C())}
 
 
-def _grad_rows(case, repeat, slow_repeat):
+def _grad_rows(case, repeat, slow_repeat, names=tuple(GRAD_ROWS)):
     """Forward + backward of sum(image · W) w.r.t. all parameters: each differentiable backend
     (jitted value_and_grad; `tiles` and `reference` for `slow_repeat` rounds) and gsplat
     (rasterization + backward()), alternating within each round; plus our forward alone, and
@@ -237,7 +240,8 @@ def _grad_rows(case, repeat, slow_repeat):
     cap = int(render(g, cam).stats.capacity)
     weights = jax.random.normal(jax.random.key(0), (h, w, 3), jnp.float32)
     fns, fwd, rows = {}, {}, {}
-    for name, (backend, config) in GRAD_ROWS.items():
+    for name in names:
+        backend, config = GRAD_ROWS[name]
         image = lambda g, b=backend, c=config: render(g, cam, backend=b, config=c,
                                                       capacity=cap).image
         f = jax.jit(jax.value_and_grad(lambda g, image=image: jnp.sum(image(g) * weights)))
@@ -308,6 +312,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-gsplat", action="store_true")
     ap.add_argument("--grad", action="store_true",
                     help="forward+backward rows instead (differentiable backend vs gsplat)")
+    ap.add_argument("--grad-rows", default=",".join(GRAD_ROWS),
+                    help=f"comma-separated rows for --grad, of {','.join(GRAD_ROWS)}")
     ap.add_argument("--csv")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # the float64 reference; renders stay float32
@@ -319,7 +325,7 @@ def main(argv=None) -> int:
     for spec in specs:
         case = parse_scene(spec)
         if args.grad:
-            grad = _grad_rows(case, args.repeat, args.slow_repeat)
+            grad = _grad_rows(case, args.repeat, args.slow_repeat, args.grad_rows.split(","))
             for r in grad:
                 print(_format_grad(r), flush=True)
             rows += grad

@@ -14,7 +14,7 @@ timeout "${TEST_TIMEOUT:-240}" python3 -m pytest -q -p no:cacheprovider -n 4 \
 echo "tests exit: ${PIPESTATUS[0]}"
 d=carry/data
 timeout "${BENCH_TIMEOUT:-300}" python3 -m lgs_jax.gpu_bench --grad --repeat 20 \
-  --slow-repeat 3 --csv "$out/grad_bench.csv" \
+  --slow-repeat 3 --grad-rows "${GRAD_ROWS:-pallas,pallas:fast,pallas_vanilla}" --csv "$out/grad_bench.csv" \
   --scene "guitar=$d/guitar/guitar.ply:$d/guitar/orbit_cameras.json@1280x720" \
   --scene "lego_sh3=$d/lego_sh3/lego_sh3.ply:$d/lego_sh3/lego_cameras.json@800x800" \
   --scene "lego200=$d/lego_sh3/lego_sh3.ply:$d/lego_sh3/lego_cameras.json@200x200" \
