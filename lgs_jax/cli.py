@@ -112,8 +112,9 @@ def main(argv=None) -> int:
     f.add_argument("--eval-every", type=int, default=500)
     f.add_argument("--crop", type=int, nargs=4, metavar=("X0", "Y0", "W", "H"))
     f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--backend", default="reference", choices=["reference", "tiles"],
-                   help="differentiable backend (tiles: faster on CPUs)")
+    f.add_argument("--backend", default=None,
+                   choices=["reference", "tiles", "pallas", "pallas_vanilla"],
+                   help="differentiable backend (default: pallas on GPUs, tiles elsewhere)")
     f.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
     f.set_defaults(func=_fit)
     args = ap.parse_args(argv)

@@ -1,7 +1,7 @@
 """A small 3DGS training loop on optax: fixed Gaussian count, L1 + D-SSIM, per-group Adam.
 
     python -m lgs_jax fit --data ../shared/data/lego_train --steps N --out DIR [--resume]
-        [--backend reference|tiles]
+        [--backend reference|tiles|pallas|pallas_vanilla]
 
 Pieces (each usable alone):
   `ssim`            SSIM with an 11x11 Gaussian window (σ = 1.5), reflect padding, the map
@@ -16,7 +16,9 @@ Pieces (each usable alone):
                     progress line, metrics log (JSONL), checkpoints (scene as INRIA PLY plus the
                     optimizer state, so a run resumes), held-out evaluation with scikit-image
                     PSNR/SSIM and renders of the held-out views.
-Gradients come from the `reference` or `tiles` backend's custom_vjp (lgs_jax.backends.backward).
+Gradients come from the chosen backend's custom_vjp (lgs_jax.backends.backward; the Pallas
+backends' backward kernel on GPUs). The default is `pallas` on GPUs and `tiles` elsewhere (the
+Pallas kernels run interpreted, slowly, without a GPU).
 """
 
 from __future__ import annotations
@@ -195,13 +197,16 @@ def evaluate(g: Gaussians, cams, images, background, capacity, out_dir=None, ids
 
 
 def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool = False,
-        settings: Settings = Settings(), seed: int = 0, crop=None, backend: str = "reference",
+        settings: Settings = Settings(), seed: int = 0, crop=None, backend: str | None = None,
         log=print):
     """Train on a NeRF-synthetic folder (ids 0, 10, ..., 90 held out); returns the final metrics.
 
     `crop` = (x0, y0, w, h) trains and evaluates on a window of every image (for quick tests);
-    `backend`: a differentiable backend ("reference" or "tiles").
+    `backend`: a differentiable backend ("reference", "tiles", "pallas", "pallas_vanilla");
+    None: "pallas" on GPUs, "tiles" elsewhere.
     """
+    if backend is None:
+        backend = "pallas" if jax.default_backend() == "gpu" else "tiles"
     os.makedirs(out, exist_ok=True)
     cams, images, ids = load_nerf(data)
     bg = jnp.ones(3, jnp.float32)

@@ -111,12 +111,16 @@ def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
     for name in FIELDS:
         np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
     batched = jax.jit(jax.vmap(step, in_axes=(None, 0)))(g, lgs_jax.stack_cameras(cams))
-    atol = 0 if jax.default_backend() == "cpu" else 1e-6  # GPU: 1-ulp fusion caveat (§3)
+    # Bitwise on CPUs for this scene. On GPUs XLA fuses the batched projection differently
+    # (1-ulp differences), which can flip one pixel's alpha test and move a gradient by that
+    # pixel's contribution (measured 3e-4 of the scale on this scene): BENCHMARKS.md §5.
+    rel = 0 if jax.default_backend() == "cpu" else 1e-3
     for i, cam in enumerate(cams):
         single = step(g, cam)
         for name in FIELDS:
-            np.testing.assert_allclose(getattr(batched, name)[i], getattr(single, name),
-                                       rtol=0, atol=atol, err_msg=name)
+            want = np.asarray(getattr(single, name))
+            np.testing.assert_allclose(getattr(batched, name)[i], want, rtol=0,
+                                       atol=rel * np.abs(want).max(), err_msg=name)
 
 
 def test_screen_space_gradients_and_visibility_for_densification():

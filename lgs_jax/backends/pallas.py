@@ -69,7 +69,6 @@ TILE_PIXELS = TILE * TILE
 ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
 REC = 12  # packed pair record (Local-GS): see `pair_records`
 GRAD_COLUMNS = 16  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z, padding
-BACKWARD = {"prefetch": True, "skip_empty": True}  # backward kernel (scripts/backward_profile.py)
 KERNELS = {"pallas": "localgs-triton", "pallas_vanilla": "vanilla-triton"}
 
 
@@ -348,13 +347,14 @@ def _backward_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, trans_ref
     start = start_ref[tile]
     last = jnp.minimum(end_ref[tile], jnp.max(stop_at))  # pairs at or after it: no pixel blended
 
-    def fetch(j):
-        jj = jnp.maximum(j, 0)
-        return (tuple(rec_ref[jj, c] for c in range(REC - 1)),
-                mask_ref[jj] if config.warp_cull else None)
-
-    def visit(j, rec, alpha, hit, aux, carry):
+    def body(i, carry):
         t_next, s_r, s_g, s_b, s_z = carry
+        j = last - 1 - i
+        rec = [rec_ref[j, c] for c in range(REC - 1)]
+        alpha, hit, aux = _record_alpha(rec, frame, pixel, config)
+        hit = hit & (j < stop_at)
+        if config.warp_cull:
+            hit = hit & ((mask_ref[j] & bit) != 0)
         one_minus = jnp.where(hit, 1 - alpha, 1)
         t_k = t_next / one_minus
         w = jnp.where(hit, alpha * t_k, 0)
@@ -384,28 +384,8 @@ def _backward_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, trans_ref
         return (jnp.where(hit, t_k, t_next), s_r + w * rgb[0], s_g + w * rgb[1],
                 s_b + w * rgb[2], s_z + w * z)
 
-    def body(i, carry):
-        state, cur = carry
-        j = last - 1 - i
-        if BACKWARD["prefetch"]:  # the next (earlier) pair's record loads during this one
-            nxt = fetch(j - 1)
-        else:
-            cur = nxt = fetch(j)
-        rec, mask = cur
-        alpha, hit, aux = _record_alpha(rec, frame, pixel, config)
-        hit = hit & (j < stop_at)
-        if config.warp_cull:
-            hit = hit & ((mask & bit) != 0)
-        if BACKWARD["skip_empty"]:  # no pixel of the tile blended it: its row stays zero
-            state = lax.cond(jnp.max(hit.astype(jnp.int32)) > 0,
-                             lambda st: visit(j, rec, alpha, hit, aux, st), lambda st: st, state)
-        else:
-            state = visit(j, rec, alpha, hit, aux, state)
-        return state, nxt
-
     zero = jnp.zeros((TILE_PIXELS,), dt)
-    lax.fori_loop(0, jnp.maximum(last - start, 0), body,
-                  ((t_final, zero, zero, zero, zero), fetch(last - 1)))
+    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (t_final, zero, zero, zero, zero))
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
