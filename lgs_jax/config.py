@@ -30,6 +30,10 @@ class RasterConfig:
       local_coords: hoist in tile-local coordinates (Eq. 1–3); False expands in global screen
         coordinates (the paper's "w/o Local Coord", Table V).
       origin: tile-local origin, "corner" (the paper's Eq. 1) or "center" of the 16x16 tile.
+
+    Implementation (the `pallas` backends only; same image either way):
+      kernel: "triton" or "mosaic" (Mosaic GPU) Pallas kernels for the forward; "auto" takes
+        the one measured faster on the H100 (lgs_jax.backends.pallas.IMPL).
     """
 
     convention: Literal["3dgs", "gsplat"] = "3dgs"
@@ -38,6 +42,7 @@ class RasterConfig:
     warp_cull: bool = True
     local_coords: bool = True
     origin: Literal["corner", "center"] = "corner"
+    kernel: Literal["auto", "triton", "mosaic"] = "auto"
 
     def __post_init__(self):
         if self.convention not in _ALPHA_CAP:
@@ -47,6 +52,9 @@ class RasterConfig:
             raise ValueError(f"config.blend: expected 'exact' or 'fast', got {self.blend!r}")
         if self.origin not in ("corner", "center"):
             raise ValueError(f"config.origin: expected 'corner' or 'center', got {self.origin!r}")
+        if self.kernel not in ("auto", "triton", "mosaic"):
+            raise ValueError(f"config.kernel: expected 'auto', 'triton' or 'mosaic', "
+                             f"got {self.kernel!r}")
         for name in ("hoist", "warp_cull", "local_coords"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"config.{name}: expected a bool, got {getattr(self, name)!r}")

@@ -48,6 +48,12 @@ OURS = {  # row -> (backend, config, rasterize stage)
                        lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(warp_cull=False))),
     "pallas_vanilla": ("pallas_vanilla", C(),
                        lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(), vanilla=True)),
+    "pallas:mosaic": ("pallas", C(kernel="mosaic"),
+                      lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(kernel="mosaic"))),
+    "pallas:mosaic:fast": ("pallas", C(kernel="mosaic", blend="fast"), lambda p, b, w, h:
+                           pallas.rasterize(p, b, w, h, C(kernel="mosaic", blend="fast"))),
+    "pallas_vanilla:mosaic": ("pallas_vanilla", C(kernel="mosaic"), lambda p, b, w, h:
+                              pallas.rasterize(p, b, w, h, C(kernel="mosaic"), vanilla=True)),
     "tiles": ("tiles", C(), lambda p, b, w, h: tiles.rasterize(p, b, w, h, C())),
 }
 
@@ -74,7 +80,7 @@ def _median_ms(fns, repeat, sync):
     return {name: 1e3 * statistics.median(t) for name, t in times.items()}
 
 
-def _ours(case, repeat, slow_repeat, f64_max_pixels):
+def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     g = jax.device_put(case.scene)
     cam = jax.device_put(case.camera)
     w, h = cam.width, cam.height
@@ -90,28 +96,35 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels):
     stage_fns = {"project": lambda: proj(g, cam), "emit": lambda: emit(p),
                  "sort": lambda: sort(t, gi)}
     stages = _median_ms(stage_fns, repeat, jax.block_until_ready)
-    e2e, raster, images, memory = {}, {}, {}, {}
-    for name, (backend, config, stage) in OURS.items():
+    images, memory, fns, slow_fns = {}, {}, {}, {}
+    for name in names:
+        backend, config, stage = OURS[name]
         f = jax.jit(lambda g, c, b=backend, cf=config: render(g, c, backend=b, config=cf,
                                                                capacity=cap).image)
         r = jax.jit(lambda p, b, st=stage: st(p, b, w, h)[0].color)
-        images[name] = np.asarray(f(g, cam))
-        jax.block_until_ready(r(p, bins))
+        try:
+            images[name] = np.asarray(f(g, cam))
+            jax.block_until_ready(r(p, bins))
+        except Exception as e:  # noqa: BLE001 - report the row that does not compile, go on
+            print(f"{case.name} {name}: failed: {type(e).__name__}: {str(e)[:300]}",
+                  file=sys.stderr, flush=True)
+            continue
         mem = f.lower(g, cam).compile().memory_analysis()
         memory[name] = None if mem is None else (mem.temp_size_in_bytes + mem.argument_size_in_bytes
                                                  + mem.output_size_in_bytes)
-        n = slow_repeat if name == "tiles" else repeat
-        times = _median_ms({"e2e": lambda: f(g, cam), "raster": lambda: r(p, bins)}, n,
-                           jax.block_until_ready)
-        e2e[name], raster[name] = times["e2e"], times["raster"]
+        target = slow_fns if name == "tiles" else fns
+        target[f"e2e:{name}"] = lambda f=f: f(g, cam)
+        target[f"raster:{name}"] = lambda r=r: r(p, bins)
+    times = _median_ms(fns, repeat, jax.block_until_ready)  # all rows alternate in each round
+    times.update(_median_ms(slow_fns, slow_repeat, jax.block_until_ready))
     truth = None
     if w * h <= f64_max_pixels:
         g64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), g)
         truth = np.asarray(render(g64, cam, capacity=cap).image)
     rows = []
-    for name in OURS:
+    for name in images:
         row = dict(scene=case.name, width=w, height=h, gaussians=case.scene.num, row=name,
-                   raster_ms=raster[name], e2e_ms=e2e[name], project_ms=stages["project"],
+                   raster_ms=times[f"raster:{name}"], e2e_ms=times[f"e2e:{name}"], project_ms=stages["project"],
                    emit_ms=stages["emit"], sort_ms=stages["sort"],
                    pairs=int(first.stats.pairs_required), peak_mb=memory[name] / 2**20
                    if memory[name] else "")
@@ -312,6 +325,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-gsplat", action="store_true")
     ap.add_argument("--grad", action="store_true",
                     help="forward+backward rows instead (differentiable backend vs gsplat)")
+    ap.add_argument("--rows", default=",".join(OURS),
+                    help=f"comma-separated forward rows, of {','.join(OURS)}")
     ap.add_argument("--grad-rows", default=",".join(GRAD_ROWS),
                     help=f"comma-separated rows for --grad, of {','.join(GRAD_ROWS)}")
     ap.add_argument("--csv")
@@ -330,7 +345,8 @@ def main(argv=None) -> int:
                 print(_format_grad(r), flush=True)
             rows += grad
             continue
-        ours, images = _ours(case, args.repeat, args.slow_repeat, args.f64_max_pixels)
+        ours, images = _ours(case, args.repeat, args.slow_repeat, args.f64_max_pixels,
+                             args.rows.split(","))
         peer = None if args.no_gsplat else _gsplat(case, args.repeat)
         if peer:
             row, image = peer
@@ -339,7 +355,7 @@ def main(argv=None) -> int:
                 r.update(max_err_gsplat=float(err.max()), psnr_gsplat=_psnr(err),
                          e2e_vs_gsplat=r["e2e_ms"] / row["e2e_ms"])
             ours.append(row)
-        vanilla = next(r for r in ours if r["row"] == "pallas_vanilla")
+        vanilla = next((r for r in ours if r["row"] == "pallas_vanilla"), ours[0])
         for r in ours:
             r["raster_speedup_vs_vanilla"] = vanilla["raster_ms"] / r["raster_ms"]
         rows += ours

@@ -60,7 +60,8 @@ class RenderStats:
       capacity: size of the pair buffer used.
       overflow: pairs_required > capacity (the image lacks the farthest pairs).
       backend: name of the backend that rendered (static).
-      kernel: the Pallas kernel that ran ("localgs-triton", "vanilla-triton"; "" for the XLA
+      kernel: the Pallas forward kernel that ran ("localgs-triton", "localgs-mosaic",
+        "vanilla-triton", "vanilla-mosaic"; "" for the XLA
         backends) (static).
       interpreted: the Pallas kernel ran in interpret mode (no GPU) (static).
     """
@@ -106,8 +107,12 @@ def _count(g: Gaussians, cam: Camera, width: int, height: int):
     return binning.count_pairs(project(g, cam), width, height)
 
 
-def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
-           strip_pairs=None) -> RenderStats:
+def _kernel(backend: str, config: RasterConfig) -> str:
+    return pallas.kernel_name(backend, config) if backend in pallas.KERNELS else ""
+
+
+def _stats(p: Projected, backend: str, config: RasterConfig, capacity: int,
+           bins: binning.TileBins | None, strip_pairs=None) -> RenderStats:
     i32 = functools.partial(jnp.sum, dtype=jnp.int32)
     zero = jnp.int32(0)
     return RenderStats(
@@ -116,7 +121,7 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
         pairs_required=bins.pairs_required if bins else zero,
         strip_pairs=zero if strip_pairs is None else strip_pairs.astype(jnp.int32),
         capacity=jnp.int32(capacity), overflow=bins.overflow if bins else jnp.bool_(False),
-        backend=backend, kernel=pallas.KERNELS.get(backend, ""),
+        backend=backend, kernel=_kernel(backend, config),
         interpreted=backend in pallas.KERNELS and pallas.interpreted())
 
 
@@ -142,7 +147,7 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     image, alpha, depth = finish(state, background)
     return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
                         depth=depth.reshape(height, width),
-                        stats=_stats(p, backend, capacity, bins, strip_pairs),
+                        stats=_stats(p, backend, config, capacity, bins, strip_pairs),
                         visible=_visible(p, width, height))
 
 
@@ -151,13 +156,14 @@ def _visible(p: Projected, width: int, height: int):
     return nx * ny > 0
 
 
-def _empty_render(cam: Camera, background, dtype, backend: str) -> RenderOutput:
+def _empty_render(cam: Camera, background, dtype, backend: str,
+                  config: RasterConfig) -> RenderOutput:
     h, w = cam.height, cam.width
     zero = jnp.int32(0)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
                         pairs_required=zero, strip_pairs=zero, capacity=zero,
                         overflow=jnp.bool_(False), backend=backend,
-                        kernel=pallas.KERNELS.get(backend, ""),
+                        kernel=_kernel(backend, config),
                         interpreted=backend in pallas.KERNELS and pallas.interpreted())
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
@@ -207,7 +213,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
                                  or not 0 < capacity <= binning.MAX_PAIRS):
         raise ValueError(f"capacity: expected an int in [1, 2^31 - 1] or None, got {capacity!r}")
     if gaussians.num == 0:
-        return _empty_render(camera, background, dt, backend)
+        return _empty_render(camera, background, dt, backend, config)
     traced = _is_traced((gaussians, camera, background))
     if backend == "brute":
         capacity = 0  # no pair buffer

@@ -1,11 +1,12 @@
 """`pallas` / `pallas_vanilla` backends against `reference` and `tiles`.
 
 Without a GPU the kernels run in Pallas interpret mode (what CI exercises); on a GPU the same
-tests run the compiled Triton kernels (scripts/pallas_gpu_check.sh). `test_kernels_lower_to_triton`
+tests run the compiled kernels (scripts/pallas_gpu_check.sh). `test_kernels_lower_for_the_gpu`
 lowers every kernel variant to Triton IR on any machine (the GPU description is faked), so a
 primitive the Triton lowering lacks fails here, not first on the GPU.
 """
 
+import dataclasses
 import itertools
 
 import jax
@@ -14,6 +15,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lgs_jax
+from lgs_jax.backends import pallas
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import assert_render_close
@@ -39,7 +41,7 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
     config = LOCALGS[name]
     ref = scenes.render(g, cam, "reference", C(config.convention))
     out = scenes.render(g, cam, "pallas", config)
-    assert out.stats.kernel == "localgs-triton"
+    assert out.stats.kernel == f"localgs-{pallas.IMPL['localgs']}"
     assert out.stats.interpreted == (jax.default_backend() != "gpu")
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=1e-9, what=field)
@@ -73,7 +75,7 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     cam = scenes.camera(dtype=dtype)
     ref = scenes.render(g, cam, "reference", C(convention))
     out = scenes.render(g, cam, "pallas_vanilla", C(convention))
-    assert out.stats.kernel == "vanilla-triton"
+    assert out.stats.kernel == f"vanilla-{pallas.IMPL['vanilla']}"
     atol = 1e-9 if dtype == np.float64 else 1e-6
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=atol,
@@ -81,15 +83,42 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
                             flip_atol=2.0, what=field)
 
 
-@pytest.mark.parametrize("convention", ["3dgs", "gsplat"])
+MOSAIC = {**{n: ("pallas", c) for n, c in LOCALGS.items()},
+          "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat"))}
+
+
+@pytest.mark.parametrize("name", MOSAIC)
+@settings(max_examples=3)  # interpret mode: one program at a time
+@given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
+def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
+    """The Mosaic GPU forward kernels (a warpgroup per half tile) run the Triton kernels'
+    arithmetic in the same order with exact blending: the same image, alpha, depth and stop
+    pairs, bit for bit (in interpret mode; on the GPU the two compilers may contract
+    multiply-adds differently: scripts/mosaic_gpu_check.sh compares them there)."""
+    backend, config = MOSAIC[name]
+    g = scenes.cast(scenes.scene(seed), dtype)
+    cam = scenes.camera(dtype=dtype)
+    outs = {k: scenes.render(g, cam, backend, dataclasses.replace(config, kernel=k))
+            for k in ("triton", "mosaic")}
+    assert outs["mosaic"].stats.kernel == pallas.KERNELS[backend] + "-mosaic"
+    tol = 0 if pallas.interpreted() else (1e-9 if dtype == np.float64 else 1e-5)
+    for field in ("image", "alpha", "depth"):
+        np.testing.assert_allclose(getattr(outs["mosaic"], field), getattr(outs["triton"], field),
+                                   rtol=0, atol=tol, err_msg=field)
+
+
+@pytest.mark.parametrize("convention,kernel", list(itertools.product(["3dgs", "gsplat"],
+                                                                     ["triton", "mosaic"])))
 @given(seed=st.integers(0, 2**32 - 1))
-def test_fast_blending_kernel_stays_within_its_bound(convention, seed):
-    """|fast − exact| <= 1e-4/(1 − cap)·max|rgb − background| (lgs_jax.backends.tiles)."""
+def test_fast_blending_kernel_stays_within_its_bound(convention, kernel, seed):
+    """|fast − exact| <= 1e-4/(1 − cap)·max|rgb − background| (lgs_jax.backends.tiles); the
+    Mosaic kernel stops per half tile instead of per strip, which blends only more of the
+    remaining T < 1e-4 and stays within the same bound."""
     g = scenes.scene(seed, kinds=("normal", "opaque", "layers", "tiny"))
     cam = scenes.camera(dtype=np.float64)
     bg = np.array(scenes.BACKGROUND)
     exact = scenes.render(g, cam, "reference", C(convention))
-    fast = scenes.render(g, cam, "pallas", C(convention, blend="fast"))
+    fast = scenes.render(g, cam, "pallas", C(convention, blend="fast", kernel=kernel))
     bound = 1e-4 / (1 - C(convention).alpha_cap)
     rgb = np.asarray(project(g, cam).rgb)
     colour_range = np.abs(rgb[:, None, :] - bg).max() if len(rgb) else 0.0
@@ -163,10 +192,15 @@ def test_backward_kernel_equals_the_tiles_walk(name, seed, dtype):
 
 
 @pytest.mark.parametrize("backend,config", [("pallas", c) for c in LOCALGS.values()]
-                         + [("pallas", C(blend="fast")), ("pallas_vanilla", C())], ids=str)
-def test_kernels_lower_to_triton(backend, config, monkeypatch):
-    """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering (to Triton IR, for an
-    H100), so CI catches what the GPU would reject at lowering time."""
+                         + [("pallas", C(blend="fast")), ("pallas_vanilla", C())]
+                         + [("pallas", C(kernel="mosaic")),
+                            ("pallas", C(kernel="mosaic", blend="fast")),
+                            ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False)),
+                            ("pallas_vanilla", C(kernel="mosaic"))], ids=str)
+def test_kernels_lower_for_the_gpu(backend, config, monkeypatch):
+    """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering
+    (to Triton IR, for an H100) or the Mosaic GPU lowering, so CI catches what the GPU would
+    reject at lowering time (e.g. Mosaic GPU's missing bool-vector negation)."""
     from jax._src.pallas.triton import gpu_info
 
     jax.clear_caches()  # `render`'s traces are cached per config: retrace with GPU lowering
@@ -182,4 +216,7 @@ def test_kernels_lower_to_triton(backend, config, monkeypatch):
         text = f.trace(g, scenes.camera()).lower(lowering_platforms=("cuda",)).as_text()
     finally:
         jax.clear_caches()  # and drop those traces before other tests run kernels
-    assert text.count("__gpu$xla.gpu.triton") >= 2
+    if pallas.implementation(backend, config) == "mosaic":  # the forward; the backward: Triton
+        assert "mosaic_gpu" in text and "__gpu$xla.gpu.triton" in text
+    else:
+        assert text.count("__gpu$xla.gpu.triton") >= 2

@@ -59,7 +59,7 @@ from ..composite import PixelState, gaussian_alpha, passes, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import STRIPS
-from . import backward
+from . import backward, mosaic
 from .reference import tiles_to_image
 from .tiles import _origin_offset, chain_hoisted_rows, pair_masks, pair_vectors
 
@@ -69,13 +69,24 @@ TILE_PIXELS = TILE * TILE
 ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
 REC = 12  # packed pair record (Local-GS): see `pair_records`
 GRAD_COLUMNS = 16  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z, padding
-KERNELS = {"pallas": "localgs-triton", "pallas_vanilla": "vanilla-triton"}
+KERNELS = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
+IMPL = {"localgs": "triton", "vanilla": "triton"}  # config.kernel="auto" (BENCHMARKS.md §6)
 
 
 def interpreted() -> bool:
     """Whether the kernels run in interpret mode (no GPU backend; LGS_JAX_PALLAS_LOWER=gpu forces
     GPU lowering, for `tests/test_pallas.py`'s lowering check on machines without a GPU)."""
     return jax.default_backend() != "gpu" and os.environ.get("LGS_JAX_PALLAS_LOWER") != "gpu"
+
+
+def implementation(backend: str, config: RasterConfig) -> str:
+    """"triton" or "mosaic": the forward kernel implementation `backend` runs with `config`."""
+    return IMPL[KERNELS[backend]] if config.kernel == "auto" else config.kernel
+
+
+def kernel_name(backend: str, config: RasterConfig) -> str:
+    """The forward kernel `render` reports in `stats.kernel`, e.g. "localgs-mosaic"."""
+    return f"{KERNELS[backend]}-{implementation(backend, config)}"
 
 
 def gaussian_rows(p: Projected):
@@ -134,7 +145,7 @@ def _record_alpha(rec, frame, pixel, config: RasterConfig):
 
 def _blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
     """One Gaussian (pair index `pair`) over a lane vector of pixels; state = (r, g, b, T, D,
-    done, stop pair).
+    done, stop pair), `done` as int32 0/1 (Mosaic GPU holds no 1-bit registers).
 
     exact: the contract (lgs_jax.composite.blend): a hit whose T·(1 − α) passes the stop test
     ends the pixel unblended (and records `pair`); otherwise C += rgb·α·T, T = T·(1 − α).
@@ -142,12 +153,12 @@ def _blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
     """
     r, g, b, t, d, done, stop_at = state
     if config.blend == "exact":
-        hit = hit & ~done
+        hit = hit & (done == 0)
         test_t = t * (1 - alpha)
         stop = stops(test_t, config)
-        take = hit & ~stop
+        take = hit ^ (hit & stop)  # = hit & ~stop (Mosaic GPU cannot negate a bool vector)
         w = jnp.where(take, alpha * t, 0)
-        t, done = jnp.where(take, test_t, t), done | (hit & stop)
+        t, done = jnp.where(take, test_t, t), jnp.where(hit & stop, 1, done)
         stop_at = jnp.where(hit & stop, pair, stop_at)
     else:
         w = jnp.where(hit, alpha * t, 0)
@@ -158,7 +169,7 @@ def _blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
 def _running(state, config: RasterConfig):
     """Whether any lane still blends: the program-uniform loop condition."""
     if config.blend == "exact":
-        return jnp.min(state[5].astype(jnp.int32)) == 0
+        return jnp.min(state[5]) == 0
     return jnp.min(stops(state[3], config).astype(jnp.int32)) == 0
 
 
@@ -196,7 +207,7 @@ def _staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCo
                                          lambda st: st, st)
 
     zero = jnp.zeros((lanes,), dt)
-    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), bool),
+    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
              jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
     first = [fetch(start + u) for u in range(unroll)]
     j, _, st = lax.while_loop(cond, body, (start, first, empty))
@@ -286,10 +297,15 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
     valid_pair = bins.tile < n_tiles
     order = _longest_first(bins)
     if vanilla:
-        kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
-                                   last_pair=last_pair)
-        outs = _call(kernel, n_tiles, TILE_PIXELS, 8, dt,
-                     (order, bins.tile_start, bins.tile_end, bins.gauss, gaussian_rows(p)))
+        args = (order, bins.tile_start, bins.tile_end, bins.gauss, gaussian_rows(p))
+        if implementation("pallas_vanilla", config) == "mosaic":
+            kernel = functools.partial(mosaic.vanilla_kernel, config=config, tiles_x=tiles_x,
+                                       last_pair=last_pair)
+            outs = mosaic.call(kernel, n_tiles, dt, args, interpreted())
+        else:
+            kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
+                                       last_pair=last_pair)
+            outs = _call(kernel, n_tiles, TILE_PIXELS, 8, dt, args)
         strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
         saved = (None, pair_records(p, bins, tiles_x, _vanilla_model(config)))
     else:
@@ -300,10 +316,15 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
             masks = jnp.zeros((1,), jnp.int32)
             strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
         records = pair_records(p, bins, tiles_x, config)
-        kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
-                                   last_pair=last_pair)
-        outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt,
-                     (order, bins.tile_start, bins.tile_end, masks, records))
+        args = (order, bins.tile_start, bins.tile_end, masks, records)
+        if implementation("pallas", config) == "mosaic":
+            kernel = functools.partial(mosaic.localgs_kernel, config=config, tiles_x=tiles_x,
+                                       last_pair=last_pair)
+            outs = mosaic.call(kernel, n_tiles, dt, args, interpreted())
+        else:
+            kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
+                                       last_pair=last_pair)
+            outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt, args)
         saved = (masks if config.warp_cull else None, records)
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
     r, g, b, t, d, stop_at = (x.reshape(n_tiles, TILE_PIXELS) for x in outs)

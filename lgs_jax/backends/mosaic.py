@@ -1,0 +1,128 @@
+"""The Local-GS and vanilla forward kernels on Mosaic GPU (`jax.experimental.pallas.mosaic_gpu`),
+the Pallas GPU backend JAX supports going forward; `lgs_jax.backends.pallas` holds the Triton
+versions, the shared per-pair arithmetic (`_record_alpha`, `_blend`, `_staged_loop`) and the
+backward kernel, and picks between the two implementations (`pallas.IMPL`).
+
+Mapping. One block per 16x16 tile (tiles in longest-list-first order) with two Pallas threads:
+a Mosaic GPU thread is a 128-lane warpgroup, so each warpgroup owns 8 rows of the tile, i.e.
+four 16x2 strips, one per hardware warp (lane l of warpgroup w is tile pixel 128·w + l; a
+warp's 32 lanes are one strip). Each warpgroup walks the tile's pairs on its own and stops as
+soon as its 128 pixels are done, so half-tiles exit independently. The strip-mask bit of a
+pair is tested per lane (each lane's strip); as a lane predicate it is uniform within each
+warp, so the hardware never diverges inside a warp, but Pallas:MGPU has no way to *skip* work
+per warp inside a warpgroup (`plgpu.warp_map` runs scalar per-warp code, not array code), so
+the α of a pair whose bit is clear for some of the warpgroup's strips is still computed there;
+a group of pairs with no bit set in any of the warpgroup's strips is skipped by a branch.
+
+Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
+images are the same to the bit wherever both compile the same operations; the per-pixel stop
+pairs feed the same backward kernel.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ..binning import TILE
+from ..config import RasterConfig
+from ..warp_masks import STRIPS
+
+WG_LANES = 128  # a Mosaic GPU (Pallas) thread: one warpgroup
+WARPGROUPS = TILE * TILE // WG_LANES
+
+
+def _interpret_params():
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+
+    return plgpu.InterpretGPUParams()
+
+
+def call(kernel, n_tiles: int, dt, args, interpret: bool):
+    """Run `kernel(*refs)` on a (n_tiles,) grid of blocks of WARPGROUPS warpgroups (axes "tile"
+    and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair."""
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+
+    out = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), dt)
+    stop = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), jnp.int32)
+
+    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], grid=(n_tiles,),
+                        grid_names=("tile",), num_threads=WARPGROUPS, thread_name="wg",
+                        interpret=_interpret_params() if interpret else None,
+                        kernel_name=kernel.func.__name__)(*args)
+
+
+def lanes(wg):
+    """Tile pixel index of each lane of warpgroup `wg` and its strip (0..7)."""
+    k = lax.broadcasted_iota(jnp.int32, (WG_LANES,), 0) + wg * WG_LANES
+    return k, k // (2 * TILE)
+
+
+def store(refs, tile, wg, outputs):
+    """Write this warpgroup's half of row `tile` of the (n_tiles, 256) outputs."""
+    from jax.experimental import pallas as pl
+
+    for ref, x in zip(refs, outputs):
+        ref[tile, pl.ds(wg * WG_LANES, WG_LANES)] = x.astype(ref.dtype)
+
+
+def strip_bits(wg):
+    """The mask bits of warpgroup `wg`'s four strips (for the group-skip branch)."""
+    per_wg = STRIPS // WARPGROUPS
+    return jnp.left_shift(jnp.int32((1 << per_wg) - 1), wg * per_wg)
+
+
+def localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
+                   config: RasterConfig, tiles_x: int, last_pair: int):
+    """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup."""
+    from .pallas import REC, UNROLL, _frame, _record_alpha, _staged_loop
+
+    dt = rec_ref.dtype
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    k, strip = lanes(wg)
+    frame, pixel = _frame(tile, k, tiles_x, config, dt)
+    bit = jnp.left_shift(jnp.int32(1), strip)
+    mine = strip_bits(wg)
+
+    def fetch(j):
+        jj = jnp.minimum(j, last_pair)
+        return jj, mask_ref[jj] if config.warp_cull else None
+
+    def pair_alpha(fetched):
+        rec = [rec_ref[fetched[0], c] for c in range(REC - 1)]
+        alpha, hit, _ = _record_alpha(rec, frame, pixel, config)
+        if config.warp_cull:
+            hit = hit & ((fetched[1] & bit) != 0)
+        return alpha, hit, rec[7:10], rec[10]
+
+    take = (lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull else None
+    store(out_refs, tile, wg,
+          _staged_loop(start_ref[tile], end_ref[tile], WG_LANES, dt, fetch, pair_alpha, config,
+                       UNROLL["localgs"], take))
+
+
+def vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
+                   config: RasterConfig, tiles_x: int, last_pair: int):
+    """The original 3DGS forward (lgs_jax.backends.pallas, module docstring), one warpgroup."""
+    from ..composite import gaussian_alpha, passes
+    from .pallas import ROW, UNROLL, _frame, _staged_loop
+
+    dt = rows_ref.dtype
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    k, _ = lanes(wg)
+    _, (px, py) = _frame(tile, k, tiles_x, config, dt)
+    cap = jnp.asarray(config.alpha_cap, dt)
+
+    def fetch(j):
+        return gauss_ref[jnp.minimum(j, last_pair)]
+
+    def pair_alpha(gi):
+        row = [rows_ref[gi, c] for c in range(ROW - 1)]
+        power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], px, py, cap)
+        return alpha, passes(power, alpha), row[7:10], row[10]
+
+    store(out_refs, tile, wg, _staged_loop(start_ref[tile], end_ref[tile], WG_LANES, dt, fetch,
+                                           pair_alpha, config, UNROLL["vanilla"]))

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Mosaic GPU session: the Pallas tests on the GPU (Mosaic GPU and Triton kernels compiled), then
+# the forward benchmark with Triton and Mosaic GPU rows and gsplat 1.5.3 in the same process.
+# Run from the repository root on the device machine (scenes in carry/data, the gsplat wheel in
+# carry/wheels); logs and CSV to $OUT.
+set -uo pipefail
+out="${OUT:-out}"; mkdir -p "$out"
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+  --target /tmp/site carry/wheels/*.whl
+export PYTHONPATH="/tmp/site:$PWD" LGS_JAX_DATA="$PWD/carry/data" PYTHONUNBUFFERED=1
+export XLA_PYTHON_CLIENT_PREALLOCATE=false HYPOTHESIS_PROFILE="${HYPOTHESIS_PROFILE:-dev}"
+timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 tests/test_pallas.py \
+  -k "mosaic or fast or kernel_equals" 2>&1 | tee "$out/mosaic_gpu_tests.log" | tail -4
+echo "tests exit: ${PIPESTATUS[0]}"
+d=carry/data
+g="guitar=$d/guitar/guitar.ply:$d/guitar/orbit_cameras.json"
+l="lego_sh3=$d/lego_sh3/lego_sh3.ply:$d/lego_sh3/lego_cameras.json"
+timeout "${BENCH_TIMEOUT:-330}" python3 -m lgs_jax.gpu_bench --repeat 20 --csv "$out/mosaic_bench.csv" \
+  --rows "${ROWS:-pallas,pallas:fast,pallas:mosaic,pallas:mosaic:fast,pallas_vanilla,pallas_vanilla:mosaic}" \
+  --scene "$g@1280x720" --scene "$g@3840x2160" --scene "$l@800x800" --scene "$l@3200x3200" \
+  --scene "synthetic:1000000@1280x720" 2>&1 | grep -v "Warning\|to_torch" | tee "$out/mosaic_bench.log"
