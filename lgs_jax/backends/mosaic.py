@@ -3,11 +3,13 @@ the Pallas GPU backend JAX supports going forward; `lgs_jax.backends.pallas` hol
 versions, the shared per-pair arithmetic (`_record_alpha`, `_blend`, `_staged_loop`) and the
 backward kernel, and picks between the two implementations (`pallas.IMPL`).
 
-Mapping. One block per 16x16 tile (tiles in longest-list-first order) with two Pallas threads:
-a Mosaic GPU thread is a 128-lane warpgroup, so each warpgroup owns 8 rows of the tile, i.e.
-four 16x2 strips, one per hardware warp (lane l of warpgroup w is tile pixel 128·w + l; a
-warp's 32 lanes are one strip). Each warpgroup walks the tile's pairs on its own and stops as
-soon as its 128 pixels are done, so half-tiles exit independently. The strip-mask bit of a
+Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup; a 16x16 tile is two of them,
+each owning 8 rows, i.e. four 16x2 strips, one per hardware warp (lane l of half w is tile pixel
+128·w + l; a warp's 32 lanes are one strip). Each half tile is its own one-warpgroup block
+(grid (tiles in longest-list-first order, 2)): it walks the tile's pairs and stops as soon as
+its 128 pixels are done. (Two warpgroups in one block with independent early exits crashed on
+the H100 with CUDA_ERROR_ILLEGAL_INSTRUCTION on real scenes: the loop's cross-warp reductions
+synchronise the block, so both warpgroups must run the same number of iterations.) The strip-mask bit of a
 pair is tested per lane (each lane's strip); as a lane predicate it is uniform within each
 warp, so the hardware never diverges inside a warp, but Pallas:MGPU has no way to *skip* work
 per warp inside a warpgroup (`plgpu.warp_map` runs scalar per-warp code, not array code), so
@@ -40,15 +42,15 @@ def _interpret_params():
 
 
 def call(kernel, n_tiles: int, dt, args, interpret: bool):
-    """Run `kernel(*refs)` on a (n_tiles,) grid of blocks of WARPGROUPS warpgroups (axes "tile"
+    """Run `kernel(*refs)` on a (n_tiles, WARPGROUPS) grid of one-warpgroup blocks (axes "tile"
     and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
     out = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), dt)
     stop = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), jnp.int32)
 
-    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], grid=(n_tiles,),
-                        grid_names=("tile",), num_threads=WARPGROUPS, thread_name="wg",
+    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], grid=(n_tiles, WARPGROUPS),
+                        grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name=kernel.func.__name__)(*args)
 
