@@ -33,12 +33,20 @@ from ..warp_masks import STRIPS
 
 WG_LANES = 128  # a Mosaic GPU (Pallas) thread: one warpgroup
 WARPGROUPS = TILE * TILE // WG_LANES
+UNROLL = {"localgs": 2, "vanilla": 8}  # pairs staged per iteration (scripts/mosaic_profile.py)
+GROUP_SKIP = True  # Local-GS: skip a staged group none of the warpgroup's strips takes
 
 
 def _interpret_params():
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
     return plgpu.InterpretGPUParams()
+
+
+def ranges(bins):
+    """(n_tiles, 2) [start, end) per tile as one fresh buffer: Mosaic GPU requires 256-byte
+    aligned operands, and XLA may pass `tile_end` (a slice of the ranges scan) at an offset."""
+    return jnp.stack([bins.tile_start, bins.tile_end], -1)
 
 
 def call(kernel, n_tiles: int, dt, args, interpret: bool):
@@ -75,10 +83,10 @@ def strip_bits(wg):
     return jnp.left_shift(jnp.int32((1 << per_wg) - 1), wg * per_wg)
 
 
-def localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
+def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *out_refs,
                    config: RasterConfig, tiles_x: int, last_pair: int):
     """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup."""
-    from .pallas import REC, UNROLL, _frame, _record_alpha, _staged_loop
+    from .pallas import REC, _frame, _record_alpha, _staged_loop
 
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
@@ -99,17 +107,18 @@ def localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
             hit = hit & ((fetched[1] & bit) != 0)
         return alpha, hit, rec[7:10], rec[10]
 
-    take = (lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull else None
+    take = ((lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull and GROUP_SKIP
+            else None)
     store(out_refs, tile, wg,
-          _staged_loop(start_ref[tile], end_ref[tile], WG_LANES, dt, fetch, pair_alpha, config,
-                       UNROLL["localgs"], take))
+          _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt, fetch, pair_alpha,
+                       config, UNROLL["localgs"], take))
 
 
-def vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
+def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
                    config: RasterConfig, tiles_x: int, last_pair: int):
     """The original 3DGS forward (lgs_jax.backends.pallas, module docstring), one warpgroup."""
     from ..composite import gaussian_alpha, passes
-    from .pallas import ROW, UNROLL, _frame, _staged_loop
+    from .pallas import ROW, _frame, _staged_loop
 
     dt = rows_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
@@ -126,5 +135,5 @@ def vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs
         power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], px, py, cap)
         return alpha, passes(power, alpha), row[7:10], row[10]
 
-    store(out_refs, tile, wg, _staged_loop(start_ref[tile], end_ref[tile], WG_LANES, dt, fetch,
-                                           pair_alpha, config, UNROLL["vanilla"]))
+    store(out_refs, tile, wg, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt,
+                                           fetch, pair_alpha, config, UNROLL["vanilla"]))

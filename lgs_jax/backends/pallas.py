@@ -297,15 +297,17 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
     valid_pair = bins.tile < n_tiles
     order = _longest_first(bins)
     if vanilla:
-        args = (order, bins.tile_start, bins.tile_end, bins.gauss, gaussian_rows(p))
+        data = (bins.gauss, gaussian_rows(p))
         if implementation("pallas_vanilla", config) == "mosaic":
             kernel = functools.partial(mosaic.vanilla_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
-            outs = mosaic.call(kernel, n_tiles, dt, args, interpreted())
+            outs = mosaic.call(kernel, n_tiles, dt, (order, mosaic.ranges(bins)) + data,
+                               interpreted())
         else:
             kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
-            outs = _call(kernel, n_tiles, TILE_PIXELS, 8, dt, args)
+            outs = _call(kernel, n_tiles, TILE_PIXELS, 8, dt,
+                         (order, bins.tile_start, bins.tile_end) + data)
         strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
         saved = (None, pair_records(p, bins, tiles_x, _vanilla_model(config)))
     else:
@@ -316,15 +318,16 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
             masks = jnp.zeros((1,), jnp.int32)
             strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
         records = pair_records(p, bins, tiles_x, config)
-        args = (order, bins.tile_start, bins.tile_end, masks, records)
         if implementation("pallas", config) == "mosaic":
             kernel = functools.partial(mosaic.localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
-            outs = mosaic.call(kernel, n_tiles, dt, args, interpreted())
+            outs = mosaic.call(kernel, n_tiles, dt, (order, mosaic.ranges(bins), masks, records),
+                               interpreted())
         else:
             kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
-            outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt, args)
+            outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt,
+                         (order, bins.tile_start, bins.tile_end, masks, records))
         saved = (masks if config.warp_cull else None, records)
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
     r, g, b, t, d, stop_at = (x.reshape(n_tiles, TILE_PIXELS) for x in outs)

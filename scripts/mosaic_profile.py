@@ -1,0 +1,67 @@
+"""Mosaic GPU forward kernels (lgs_jax.backends.mosaic) per UNROLL and GROUP_SKIP against the
+Triton kernels, kernel calls alone from the same binned inputs, all variants alternating in
+each of 30 rounds (median ms); guitar 1280x720 and lego_sh3 800x800, H100.
+
+    XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/mosaic_profile.py [DATA]
+"""
+import functools
+import statistics
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+
+import lgs_jax
+from lgs_jax import binning
+from lgs_jax.backends import mosaic, pallas, tiles
+from lgs_jax.bench import parse_scene
+from lgs_jax.projection import project
+
+C = lgs_jax.RasterConfig
+data = sys.argv[1] if len(sys.argv) > 1 else "carry/data"
+specs = [f"guitar={data}/guitar/guitar.ply:{data}/guitar/orbit_cameras.json@1280x720",
+         f"lego={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@800x800"]
+print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}")
+for spec in specs:
+    case = parse_scene(spec)
+    g, cam = jax.device_put(case.scene), jax.device_put(case.camera)
+    w, h = cam.width, cam.height
+    cap = int(lgs_jax.render(g, cam).stats.capacity)
+    p = jax.jit(project)(g, cam)
+    b = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    tx, ty = binning.tile_grid(w, h)
+    order = jnp.argsort(b.tile_start - b.tile_end, stable=True).astype(jnp.int32)
+    masks = jax.jit(lambda p, b: tiles.pair_masks(p, b, tx, C()))(p, b)
+    rec = jax.jit(lambda p, b: pallas.pair_records(p, b, tx, C()))(p, b)
+    rows = jax.jit(pallas.gaussian_rows)(p)
+    ranges = jax.jit(mosaic.ranges)(b)
+    fns = {}
+    kw = dict(config=C(), tiles_x=tx, last_pair=cap - 1)
+    k = functools.partial(pallas._localgs_kernel, **kw)
+    fns["triton localgs"] = (jax.jit(lambda *a, k=k: pallas._call(
+        k, tx * ty * 8, 32, 1, jnp.float32, a)), (order, b.tile_start, b.tile_end, masks, rec))
+    k = functools.partial(pallas._vanilla_kernel, **kw)
+    fns["triton vanilla"] = (jax.jit(lambda *a, k=k: pallas._call(
+        k, tx * ty, 256, 8, jnp.float32, a)), (order, b.tile_start, b.tile_end, b.gauss, rows))
+    for unroll in (2, 4, 8):
+        for skip in (True, False):
+            mosaic.UNROLL, mosaic.GROUP_SKIP = {"localgs": unroll, "vanilla": unroll}, skip
+            k = functools.partial(mosaic.localgs_kernel, **kw)
+            f = jax.jit(lambda *a, k=k: mosaic.call(k, tx * ty, jnp.float32, a, False))
+            f = f.lower(order, ranges, masks, rec).compile()  # compiled with this variant
+            fns[f"mosaic localgs unroll={unroll} skip={skip}"] = (f, (order, ranges, masks, rec))
+        k = functools.partial(mosaic.vanilla_kernel, **kw)
+        f = jax.jit(lambda *a, k=k: mosaic.call(k, tx * ty, jnp.float32, a, False))
+        f = f.lower(order, ranges, b.gauss, rows).compile()
+        fns[f"mosaic vanilla unroll={unroll}"] = (f, (order, ranges, b.gauss, rows))
+    times = {name: [] for name in fns}
+    for name, (f, a) in fns.items():
+        jax.block_until_ready(f(*a))
+    for _ in range(30):
+        for name, (f, a) in fns.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(*a))
+            times[name].append(1e3 * (time.perf_counter() - t0))
+    for name, t in times.items():
+        print(f"{case.name:>7s} {name:<36s} {statistics.median(t):7.3f} ms", flush=True)
