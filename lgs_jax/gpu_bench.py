@@ -40,21 +40,25 @@ from .config import RasterConfig
 from .projection import project
 
 C = RasterConfig
-OURS = {  # row -> (backend, config, rasterize stage)
-    "pallas": ("pallas", C(), lambda p, b, w, h: pallas.rasterize(p, b, w, h, C())),
-    "pallas:fast": ("pallas", C(blend="fast"),
-                    lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(blend="fast"))),
-    "pallas:no_cull": ("pallas", C(warp_cull=False),
-                       lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(warp_cull=False))),
-    "pallas_vanilla": ("pallas_vanilla", C(),
-                       lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(), vanilla=True)),
-    "pallas:mosaic": ("pallas", C(kernel="mosaic"),
-                      lambda p, b, w, h: pallas.rasterize(p, b, w, h, C(kernel="mosaic"))),
-    "pallas:mosaic:fast": ("pallas", C(kernel="mosaic", blend="fast"), lambda p, b, w, h:
-                           pallas.rasterize(p, b, w, h, C(kernel="mosaic", blend="fast"))),
-    "pallas_vanilla:mosaic": ("pallas_vanilla", C(kernel="mosaic"), lambda p, b, w, h:
-                              pallas.rasterize(p, b, w, h, C(kernel="mosaic"), vanilla=True)),
-    "tiles": ("tiles", C(), lambda p, b, w, h: tiles.rasterize(p, b, w, h, C())),
+
+
+def _row(backend, config):
+    """(backend, config, rasterize stage from projected and binned inputs) of a forward row."""
+    vanilla = backend == "pallas_vanilla"
+    stage = ((lambda p, b, w, h: tiles.rasterize(p, b, w, h, config)) if backend == "tiles" else
+             (lambda p, b, w, h: pallas.rasterize(p, b, w, h, config, vanilla=vanilla)))
+    return backend, config, stage
+
+
+OURS = {  # row -> (backend, config, rasterize stage); kernel "auto" is Mosaic GPU (pallas.IMPL)
+    "pallas": _row("pallas", C()),
+    "pallas:fast": _row("pallas", C(blend="fast")),
+    "pallas:no_cull": _row("pallas", C(warp_cull=False)),
+    "pallas:triton": _row("pallas", C(kernel="triton")),
+    "pallas:triton:fast": _row("pallas", C(kernel="triton", blend="fast")),
+    "pallas_vanilla": _row("pallas_vanilla", C()),
+    "pallas_vanilla:triton": _row("pallas_vanilla", C(kernel="triton")),
+    "tiles": _row("tiles", C()),
 }
 
 

@@ -142,7 +142,7 @@ def per_gaussian_sum(rows, gauss, n: int):
                                                                      unique_indices=True)
 
 
-def differentiable(forward, gradients):
+def differentiable(forward, gradients, forward_for_gradients=None):
     """A rasterizer with a custom backward, from its two halves (both per tile, (n_tiles, 256)):
 
       forward(p, bins, width, height, config) -> (state, stop_at, extra, saved): the composited
@@ -150,6 +150,9 @@ def differentiable(forward, gradients):
         backward reuses (`saved`, O(pairs)).
       gradients(p, bins, width, height, config, trans, stop_at, saved, (ḡ_C, ḡ_T, ḡ_D)) -> (N, 10)
         per-Gaussian ∂L/∂(mean2d, conic, opacity, rgb, depth) (PAIR_COLUMNS order).
+
+    `forward_for_gradients` (same signature; default `forward`) is the forward run when the
+    backward will follow (under `jax.grad` / `jax.vjp`).
 
     Returns composite(p, bins, width, height, config) -> (color, trans, depth, extra), per tile.
     Reverse-mode cannot go through the forward's while loops; this is the only way in.
@@ -160,7 +163,8 @@ def differentiable(forward, gradients):
         return state.color, state.trans, state.depth, extra
 
     def composite_fwd(p, bins, width, height, config):
-        state, stop_at, extra, saved = forward(p, bins, width, height, config)
+        state, stop_at, extra, saved = (forward_for_gradients or forward)(p, bins, width, height,
+                                                                          config)
         return ((state.color, state.trans, state.depth, extra),
                 (p, bins, state.trans, stop_at, saved))
 

@@ -70,7 +70,7 @@ ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r,
 REC = 12  # packed pair record (Local-GS): see `pair_records`
 GRAD_COLUMNS = 16  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z, padding
 KERNELS = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
-IMPL = {"localgs": "triton", "vanilla": "triton"}  # config.kernel="auto" (BENCHMARKS.md §6)
+IMPL = {"localgs": "mosaic", "vanilla": "mosaic"}  # config.kernel="auto" (BENCHMARKS.md §6)
 
 
 def interpreted() -> bool:
@@ -439,9 +439,19 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
 
 
-_COMPOSITE = {vanilla: backward.differentiable(functools.partial(_forward, vanilla=vanilla),
-                                               functools.partial(_gradients, vanilla=vanilla))
-              for vanilla in (False, True)}
+def _forward_for_gradients(p, bins, width, height, config, vanilla: bool):
+    """The forward whose residuals the backward kernel (Triton) uses: with kernel="auto" the
+    Triton forward, so that forward and backward evaluate α with the same compiler's arithmetic
+    (the compilers' exp and multiply-add contraction can differ by an ulp, which could flip an
+    alpha test between them)."""
+    if config.kernel == "auto":
+        config = dataclasses.replace(config, kernel="triton")
+    return _forward(p, bins, width, height, config, vanilla)
+
+
+_COMPOSITE = {vanilla: backward.differentiable(
+    functools.partial(_forward, vanilla=vanilla), functools.partial(_gradients, vanilla=vanilla),
+    functools.partial(_forward_for_gradients, vanilla=vanilla)) for vanilla in (False, True)}
 
 
 def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
