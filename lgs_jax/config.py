@@ -33,9 +33,10 @@ class RasterConfig:
 
     Implementation (the `pallas` backends only; same image either way):
       kernel: "triton" or "mosaic" (Mosaic GPU) Pallas kernels for the forward; "auto" takes
-        the one measured faster on the H100 (lgs_jax.backends.pallas.IMPL: Mosaic GPU) when
-        rendering, and the Triton forward under differentiation, so that the forward and the
-        (Triton) backward kernel evaluate α with the same compiler's arithmetic.
+        the one measured faster per kernel on the H100 (lgs_jax.backends.pallas.IMPL: Local-GS
+        Triton, vanilla Mosaic GPU) when rendering, and the Triton forward under
+        differentiation, so that the forward and the (Triton) backward kernel evaluate α with
+        the same compiler's arithmetic.
     """
 
     convention: Literal["3dgs", "gsplat"] = "3dgs"

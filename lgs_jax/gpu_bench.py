@@ -50,14 +50,16 @@ def _row(backend, config):
     return backend, config, stage
 
 
-OURS = {  # row -> (backend, config, rasterize stage); kernel "auto" is Mosaic GPU (pallas.IMPL)
+OURS = {  # row -> (backend, config, rasterize stage); "auto" rows run pallas.IMPL's choice
     "pallas": _row("pallas", C()),
     "pallas:fast": _row("pallas", C(blend="fast")),
     "pallas:no_cull": _row("pallas", C(warp_cull=False)),
     "pallas:triton": _row("pallas", C(kernel="triton")),
-    "pallas:triton:fast": _row("pallas", C(kernel="triton", blend="fast")),
+    "pallas:mosaic": _row("pallas", C(kernel="mosaic")),
+    "pallas:mosaic:fast": _row("pallas", C(kernel="mosaic", blend="fast")),
     "pallas_vanilla": _row("pallas_vanilla", C()),
     "pallas_vanilla:triton": _row("pallas_vanilla", C(kernel="triton")),
+    "pallas_vanilla:mosaic": _row("pallas_vanilla", C(kernel="mosaic")),
     "tiles": _row("tiles", C()),
 }
 

@@ -16,6 +16,6 @@ d=carry/data
 g="guitar=$d/guitar/guitar.ply:$d/guitar/orbit_cameras.json"
 l="lego_sh3=$d/lego_sh3/lego_sh3.ply:$d/lego_sh3/lego_cameras.json"
 timeout "${BENCH_TIMEOUT:-330}" python3 -m lgs_jax.gpu_bench --repeat 20 --csv "$out/mosaic_bench.csv" \
-  --rows "${ROWS:-pallas,pallas:fast,pallas:triton,pallas:triton:fast,pallas_vanilla,pallas_vanilla:triton}" \
+  --rows "${ROWS:-pallas:triton,pallas:mosaic,pallas:mosaic:fast,pallas_vanilla:triton,pallas_vanilla:mosaic}" \
   --scene "$g@1280x720" --scene "$g@3840x2160" --scene "$l@800x800" --scene "$l@3200x3200" \
   --scene "synthetic:1000000@1280x720" 2>&1 | grep -v "Warning\|to_torch" | tee "$out/mosaic_bench.log"

@@ -38,8 +38,12 @@ to one tile, so every row has one writer (no atomics; rows of pairs never visite
 Rows are then chained to the Gaussian (Eq. 8 for the hoisted form, `tiles.chain_hoisted_rows`)
 and summed per Gaussian by `backward.per_gaussian_sum` (sort + segmented scan): deterministic.
 
-Without a GPU the kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel`
-names the kernel that ran, `stats.interpreted` says whether it was interpreted.
+Implementations. Each forward kernel also exists on Mosaic GPU (`lgs_jax.backends.mosaic`: a
+warpgroup per half tile, the same per-pair functions); `RasterConfig.kernel` picks one and
+"auto" takes `IMPL`, the faster per kernel on the H100 (BENCHMARKS.md §6). Without a GPU the
+kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel` names the forward
+kernel that ran ("localgs-triton", "vanilla-mosaic", ...), `stats.interpreted` says whether it
+was interpreted.
 """
 
 from __future__ import annotations
@@ -70,7 +74,7 @@ ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r,
 REC = 12  # packed pair record (Local-GS): see `pair_records`
 GRAD_COLUMNS = 16  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z, padding
 KERNELS = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
-IMPL = {"localgs": "mosaic", "vanilla": "mosaic"}  # config.kernel="auto" (BENCHMARKS.md §6)
+IMPL = {"localgs": "triton", "vanilla": "mosaic"}  # config.kernel="auto" (BENCHMARKS.md §6)
 
 
 def interpreted() -> bool:
