@@ -9,9 +9,11 @@ each owning 8 rows, i.e. four 16x2 strips, one per hardware warp (lane l of half
 (grid (tiles in longest-list-first order, 2)): it walks the tile's pairs and stops as soon as
 its 128 pixels are done. (Two warpgroups in one block with independent early exits crashed on
 the H100 with CUDA_ERROR_ILLEGAL_INSTRUCTION on real scenes: the loop's cross-warp reductions
-synchronise the block, so both warpgroups must run the same number of iterations.) The strip-mask bit of a
-pair is tested per lane (each lane's strip); as a lane predicate it is uniform within each
-warp, so the hardware never diverges inside a warp, but Pallas:MGPU has no way to *skip* work
+synchronise the block, so both warpgroups must run the same number of iterations.)
+
+Culling. The strip-mask bit of a pair is tested per lane (each lane's strip); as a lane
+predicate it is uniform within each warp, so the hardware never diverges inside a warp, but
+Pallas:MGPU has no way to *skip* work
 per warp inside a warpgroup (`plgpu.warp_map` runs scalar per-warp code, not array code), so
 the α of a pair whose bit is clear for some of the warpgroup's strips is still computed there.
 Branching around a staged group with no bit set in any of the warpgroup's strips (GROUP_SKIP)
@@ -19,8 +21,9 @@ measured slower than predicating (H100: 1.10 vs 0.83 ms on guitar 720p at UNROLL
 kernel stages 8 pairs per iteration and lets the lane predicates do the culling.
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
-images are the same to the bit wherever both compile the same operations; the per-pixel stop
-pairs feed the same backward kernel.
+images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
+multiply-add contraction differ by ulps); the per-pixel stop pairs feed the same backward
+kernel (`kernel="auto"` differentiates through the Triton forward, see `pallas`).
 """
 
 from __future__ import annotations
