@@ -175,10 +175,11 @@ def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
     np.testing.assert_allclose(bgt, bgr, rtol=0, atol=1e-9 * max(np.abs(bgr).max(), 1.0))
 
 
-def test_tiles_float32_gradients_are_close_to_float64():
+@pytest.mark.parametrize("backend", ["tiles", "pallas"])
+def test_fast_backends_float32_gradients_are_close_to_float64(backend):
     g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
     (a, _) = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())
-    (b, _) = _grads(scenes.cast(g64, np.float32), scenes.camera(), "tiles", C(), np.float32)
+    (b, _) = _grads(scenes.cast(g64, np.float32), scenes.camera(), backend, C(), np.float32)
     for name in FIELDS:
         x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
         assert np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30) < 1e-3, name
@@ -207,12 +208,3 @@ def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * max(np.abs(want).max(), 1.0),
                                    err_msg=field)
     np.testing.assert_allclose(bgp, bgr, rtol=0, atol=1e-9 * max(np.abs(bgr).max(), 1.0))
-
-
-def test_pallas_float32_gradients_are_close_to_float64():
-    g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
-    (a, _) = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())
-    (b, _) = _grads(scenes.cast(g64, np.float32), scenes.camera(), "pallas", C(), np.float32)
-    for name in FIELDS:
-        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
-        assert np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30) < 1e-3, name

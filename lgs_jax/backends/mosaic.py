@@ -122,23 +122,13 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *out_refs,
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
                    config: RasterConfig, tiles_x: int, last_pair: int):
     """The original 3DGS forward (lgs_jax.backends.pallas, module docstring), one warpgroup."""
-    from ..composite import gaussian_alpha, passes
-    from .pallas import ROW, _frame, _staged_loop
+    from .pallas import _frame, _staged_loop, vanilla_pairs
 
     dt = rows_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
     k, _ = lanes(wg)
-    _, (px, py) = _frame(tile, k, tiles_x, config, dt)
-    cap = jnp.asarray(config.alpha_cap, dt)
-
-    def fetch(j):
-        return gauss_ref[jnp.minimum(j, last_pair)]
-
-    def pair_alpha(gi):
-        row = [rows_ref[gi, c] for c in range(ROW - 1)]
-        power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], px, py, cap)
-        return alpha, passes(power, alpha), row[7:10], row[10]
-
+    _, pixel = _frame(tile, k, tiles_x, config, dt)
+    fetch, pair_alpha = vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
     store(out_refs, tile, wg, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt,
                                            fetch, pair_alpha, config, UNROLL["vanilla"]))

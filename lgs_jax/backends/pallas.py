@@ -250,21 +250,28 @@ def _localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
                         UNROLL["localgs"], take))
 
 
-def _vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
-                    config: RasterConfig, tiles_x: int, last_pair: int):
-    dt = rows_ref.dtype
-    tile = order_ref[pl.program_id(0)]
-    _, (px, py) = _frame(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt)
-    cap = jnp.asarray(config.alpha_cap, dt)
+def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: int):
+    """The vanilla kernels' (fetch, pair_alpha) for `_staged_loop` (Triton and Mosaic GPU): a
+    pair's Gaussian id, then that Gaussian's packed row, the difference form at `pixel`."""
+    cap = jnp.asarray(config.alpha_cap, rows_ref.dtype)
 
     def fetch(j):
         return gauss_ref[jnp.minimum(j, last_pair)]
 
     def pair_alpha(gi):
         row = [rows_ref[gi, c] for c in range(ROW - 1)]
-        power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], px, py, cap)
+        power, alpha = gaussian_alpha(row[0:2], row[2:5], row[6], *pixel, cap)
         return alpha, passes(power, alpha), row[7:10], row[10]
 
+    return fetch, pair_alpha
+
+
+def _vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
+                    config: RasterConfig, tiles_x: int, last_pair: int):
+    dt = rows_ref.dtype
+    tile = order_ref[pl.program_id(0)]
+    _, pixel = _frame(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt)
+    fetch, pair_alpha = vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
     _store(out_refs, tile, _staged_loop(start_ref[tile], end_ref[tile], TILE_PIXELS, dt, fetch,
                                         pair_alpha, config, UNROLL["vanilla"]))
 
