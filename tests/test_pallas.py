@@ -187,11 +187,12 @@ def test_backward_kernel_equals_the_tiles_walk(name, seed, dtype):
     p = project(g, cam)
     bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
     args = (p, bins, cam.width, cam.height, config)
-    state, stop_at, _, (masks, records) = pallas._forward(*args, vanilla=False)
+    state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
+    masks, records, _ = saved
     rng = np.random.default_rng(seed % 2**16)
     cot = tuple(rng.normal(size=x.shape).astype(dtype)
                 for x in (state.color, state.trans, state.depth))
-    got = pallas._gradients(*args, state.trans, stop_at, (masks, records), cot, vanilla=False)
+    got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
     want = tiles._gradients(*args, state.trans, stop_at,
                             (masks, records[:, :7] if config.hoist else None), cot)
     got, want = np.asarray(got), np.asarray(want)

@@ -300,7 +300,7 @@ def _longest_first(bins: TileBins):
 def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
              vanilla: bool):
     """Per tile (n_tiles, 256): the state, each pixel's stop pair, the strip–Gaussian pairs the
-    kernel had to visit, and (masks, records) for the backward."""
+    kernel had to visit, and (masks, records, tile order) for the backward."""
     dt = p.mean2d.dtype
     tiles_x, tiles_y = tile_grid(width, height)
     n_tiles = tiles_x * tiles_y
@@ -320,7 +320,7 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
             outs = _call(kernel, n_tiles, TILE_PIXELS, 8, dt,
                          (order, bins.tile_start, bins.tile_end) + data)
         strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
-        saved = (None, pair_records(p, bins, tiles_x, _vanilla_model(config)))
+        saved = (None, pair_records(p, bins, tiles_x, _vanilla_model(config)), order)
     else:
         if config.warp_cull:
             masks = pair_masks(p, bins, tiles_x, config)
@@ -339,7 +339,7 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
                                        last_pair=last_pair)
             outs = _call(kernel, n_tiles * STRIPS, STRIP_PIXELS, 1, dt,
                          (order, bins.tile_start, bins.tile_end, masks, records))
-        saved = (masks if config.warp_cull else None, records)
+        saved = (masks if config.warp_cull else None, records, order)
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
     r, g, b, t, d, stop_at = (x.reshape(n_tiles, TILE_PIXELS) for x in outs)
     state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
@@ -427,7 +427,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
                trans, stop_at, saved, cotangents, vanilla: bool):
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth) from the backward
     kernel's pair rows."""
-    masks, records = saved
+    masks, records, order = saved
     if vanilla:
         config = _vanilla_model(config)
     dt = p.mean2d.dtype
@@ -437,12 +437,11 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     zeros = jnp.zeros((bins.gauss.shape[0], GRAD_COLUMNS), dt)
     rows = pl.pallas_call(
         kernel, out_shape=jax.ShapeDtypeStruct(zeros.shape, dt), grid=(tiles_x * tiles_y,),
-        input_output_aliases={12: 0},  # pairs no pixel blended keep their zero row
+        input_output_aliases={12: 0},  # unvisited and padding pairs keep their zero row
         compiler_params=_compiler_params(8), interpret=interpreted(), name="localgs_backward",
-    )(_longest_first(bins), bins.tile_start, bins.tile_end,
+    )(order, bins.tile_start, bins.tile_end,
       jnp.zeros((1,), jnp.int32) if masks is None else masks, records, trans, stop_at,
       g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans, g_depth, zeros)
-    rows = jnp.where((bins.tile < tiles_x * tiles_y)[:, None], rows, 0)
     if config.hoist:
         rows = chain_hoisted_rows(p, bins, rows[:, :11], tiles_x, config)
     else:
