@@ -32,11 +32,11 @@ class RasterConfig:
       origin: tile-local origin, "corner" (the paper's Eq. 1) or "center" of the 16x16 tile.
 
     Implementation (the `pallas` backends only; same image either way):
-      kernel: "triton" or "mosaic" (Mosaic GPU) Pallas kernels for the forward; "auto" takes
-        the one measured faster per kernel on the H100 (lgs_jax.backends.pallas.IMPL: Local-GS
-        Triton, vanilla Mosaic GPU) when rendering, and the Triton forward under
-        differentiation, so that the forward and the (Triton) backward kernel evaluate α with
-        the same compiler's arithmetic.
+      kernel: "triton" or "mosaic" (Mosaic GPU) Pallas kernels, forward and backward; "auto"
+        takes the one measured faster per kernel on the H100 (lgs_jax.backends.pallas.IMPL:
+        Local-GS forward Triton, vanilla forward Mosaic GPU, backward Mosaic GPU) and, under
+        differentiation, the forward of the backward's implementation, so that forward and
+        backward evaluate α with the same compiler's arithmetic.
     """
 
     convention: Literal["3dgs", "gsplat"] = "3dgs"

@@ -244,8 +244,13 @@ def _gsplat(case, repeat):
 
 
 GRAD_ROWS = {"pallas": ("pallas", C()), "pallas:fast": ("pallas", C(blend="fast")),
-             "pallas_vanilla": ("pallas_vanilla", C()), "tiles": ("tiles", C()),
-             "reference": ("reference", C())}
+             "pallas:triton": ("pallas", C(kernel="triton")),
+             "pallas:mosaic": ("pallas", C(kernel="mosaic")),
+             "pallas:mosaic:fast": ("pallas", C(kernel="mosaic", blend="fast")),
+             "pallas_vanilla": ("pallas_vanilla", C()),
+             "pallas_vanilla:triton": ("pallas_vanilla", C(kernel="triton")),
+             "pallas_vanilla:mosaic": ("pallas_vanilla", C(kernel="mosaic")),
+             "tiles": ("tiles", C()), "reference": ("reference", C())}
 
 
 def _grad_rows(case, repeat, slow_repeat, names=tuple(GRAD_ROWS)):

@@ -10,7 +10,7 @@ python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upg
 export PYTHONPATH="/tmp/site:$PWD" LGS_JAX_DATA="$PWD/carry/data" PYTHONUNBUFFERED=1
 export XLA_PYTHON_CLIENT_PREALLOCATE=false HYPOTHESIS_PROFILE="${HYPOTHESIS_PROFILE:-dev}"
 timeout "${TEST_TIMEOUT:-240}" python3 -m pytest -q -p no:cacheprovider -n 4 \
-  tests/test_grad.py tests/test_pallas.py 2>&1 | tee "$out/grad_gpu_tests.log" | tail -4
+  tests/test_grad.py tests/test_pallas.py ${TEST_K:+-k "$TEST_K"} 2>&1 | tee "$out/grad_gpu_tests.log" | tail -4
 echo "tests exit: ${PIPESTATUS[0]}"
 d=carry/data
 timeout "${BENCH_TIMEOUT:-300}" python3 -m lgs_jax.gpu_bench --grad --repeat 20 \

@@ -187,7 +187,9 @@ def test_fast_backends_float32_gradients_are_close_to_float64(backend):
 
 PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
           "global": ("pallas", C(local_coords=False)), "gsplat": ("pallas", C("gsplat")),
-          "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat"))}
+          "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat")),
+          "triton": ("pallas", C(kernel="triton")),
+          "vanilla_triton": ("pallas_vanilla", C(kernel="triton"))}
 
 
 @pytest.mark.parametrize("name", PALLAS)

@@ -80,10 +80,11 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     out = scenes.render(g, cam, "pallas_vanilla", C(convention))
     assert out.stats.kernel == f"vanilla-{pallas.IMPL['vanilla']}"
     for field in ("image", "alpha", "depth"):
-        # float32: 1e-6 of the field's scale (depth is in scene units; on the GPU the Mosaic
-        # kernel's exp and multiply-adds round differently from XLA's: 5.8e-6 measured).
+        # float32: 1e-5 of the field's scale (depth is in scene units). On the GPU the Mosaic
+        # kernel's exp and multiply-adds round differently from XLA's (H100, measured: depth
+        # 5.8e-6 of scale, image 3.9e-6); interpret mode matches to 1e-6.
         scale = max(1.0, float(np.abs(np.asarray(getattr(ref, field))).max()))
-        atol = 1e-9 if dtype == np.float64 else 1e-6 * scale
+        atol = 1e-9 if dtype == np.float64 else 1e-5 * scale
         assert_render_close(getattr(out, field), getattr(ref, field), atol=atol,
                             max_flip_share=0.0 if dtype == np.float64 else 0.005,
                             flip_atol=2.0, what=field)
@@ -114,7 +115,10 @@ def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
             np.testing.assert_allclose(got, want, rtol=0, atol=0 if pallas.interpreted() else 1e-9,
                                        err_msg=field)
         else:  # the GPU's float32 exp and multiply-add contraction differ between the compilers
-            assert_render_close(got, want, atol=F32_ATOL, max_flip_share=0.01, flip_atol=2.0,
+            # Global coordinates: the hoisted sum's cancellation (numerics/) amplifies those ulps
+            # into flipped alpha tests (H100: 2.6% of depth pixels, by up to 4.6e-4).
+            share = 0.05 if name == "global" else 0.01
+            assert_render_close(got, want, atol=F32_ATOL, max_flip_share=share, flip_atol=2.0,
                                 what=field)
 
 
@@ -170,18 +174,20 @@ BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "loc
             "fast": C(blend="fast"), "fast_gsplat": C("gsplat", blend="fast")}
 
 
-@pytest.mark.parametrize("name", BACKWARD)
+@pytest.mark.parametrize("name,kernel", [(n, "triton") for n in BACKWARD]
+                         + [(n, "mosaic") for n in ("local_gs", "difference", "fast", "gsplat")])
 @settings(max_examples=4)  # interpret mode: the kernels run serially, one program at a time
 @given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float64, np.float32]))
-def test_backward_kernel_equals_the_tiles_walk(name, seed, dtype):
-    """The backward kernel against its plain-jnp counterpart (`tiles._gradients`: the same walk
-    in XLA) on the same residuals (this kernel's forward: final T, stop pairs, masks, records)
-    and random cotangents, both blending modes (`fast` has no reference image to compare with:
-    this is where its backward is checked)."""
+def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype):
+    """The backward kernel (Triton: a program per tile; Mosaic GPU: a warpgroup per half tile)
+    against its plain-jnp counterpart (`tiles._gradients`: the same walk in XLA) on the same
+    residuals (this kernel's forward: final T, stop pairs, masks, records) and random
+    cotangents, both blending modes (`fast` has no reference image to compare with: this is
+    where its backward is checked)."""
     from lgs_jax import binning
     from lgs_jax.backends import pallas, tiles
 
-    config = BACKWARD[name]
+    config = dataclasses.replace(BACKWARD[name], kernel=kernel)
     g = scenes.cast(scenes.scene(seed), dtype)
     cam = scenes.camera(dtype=dtype)
     p = project(g, cam)
@@ -231,7 +237,9 @@ def test_kernels_lower_for_the_gpu(backend, config, monkeypatch):
         forward, both = lower(image), lower(grad)
     finally:
         jax.clear_caches()  # and drop those traces before other tests run kernels
-    impl = pallas.implementation(backend, config)
-    assert ("mosaic_gpu" if impl == "mosaic" else "__gpu$xla.gpu.triton") in forward
-    # Under grad: the backward kernel (Triton) and the forward (Triton for kernel="auto").
-    assert both.count("__gpu$xla.gpu.triton") >= (1 if config.kernel == "mosaic" else 2)
+    marker = {"mosaic": "mosaic_gpu", "triton": "__gpu$xla.gpu.triton"}
+    assert marker[pallas.implementation(backend, config)] in forward
+    # Under grad: the backward kernel and a forward of the same implementation.
+    impl = pallas.backward_implementation(config)
+    assert both.count(marker[impl]) >= 2
+    assert marker["triton" if impl == "mosaic" else "mosaic"] not in both

@@ -1,7 +1,8 @@
-"""The Local-GS and vanilla forward kernels on Mosaic GPU (`jax.experimental.pallas.mosaic_gpu`),
-the Pallas GPU backend JAX supports going forward; `lgs_jax.backends.pallas` holds the Triton
-versions, the shared per-pair arithmetic (`_record_alpha`, `_blend`, `_staged_loop`) and the
-backward kernel, and picks between the two implementations (`pallas.IMPL`).
+"""The Local-GS and vanilla forward kernels and the backward kernel on Mosaic GPU
+(`jax.experimental.pallas.mosaic_gpu`), the Pallas GPU backend JAX supports going forward;
+`lgs_jax.backends.pallas` holds the Triton versions and the shared per-pair arithmetic
+(`_record_alpha`, `_blend`, `_staged_loop`, `_backward_step`), and picks between the two
+implementations (`pallas.IMPL`).
 
 Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup; a 16x16 tile is two of them,
 each owning 8 rows, i.e. four 16x2 strips, one per hardware warp (lane l of half w is tile pixel
@@ -22,8 +23,17 @@ kernel stages 8 pairs per iteration and lets the lane predicates do the culling.
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
-multiply-add contraction differ by ulps); the per-pixel stop pairs feed the same backward
-kernel (`kernel="auto"` differentiates through the Triton forward, see `pallas`).
+multiply-add contraction differ by ulps); both record per-pixel stop pairs for the backward.
+
+Backward. The same half-tile blocks walk the tile's pairs back to front from the last pair any
+of their 128 pixels blended (`pallas._backward_step`), and reduce each pair's 11 gradient terms
+over their 128 pixels (11 warpgroup reductions: Mosaic GPU reduces a warpgroup array to a
+scalar, but has no multi-column cross-warp reduction like the Triton kernel's (256, 16) one).
+A pair none of the half tile's four strips takes (mask bits clear) is skipped by one uniform
+branch: unlike the forward's staged groups, a backward step is long enough for the branch to
+pay (H100, BENCHMARKS.md §6: 3.84 vs 5.01 ms rasterization fwd+bwd on guitar 720p). Each half
+writes its own row per pair (`backward_rows` masks the pairs it did not visit and adds the two
+halves): one writer per row, no atomics, deterministic.
 """
 
 from __future__ import annotations
@@ -132,3 +142,71 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
     fetch, pair_alpha = vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
     store(out_refs, tile, wg, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt,
                                            fetch, pair_alpha, config, UNROLL["vanilla"]))
+
+
+def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
+                    g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *, config: RasterConfig,
+                    tiles_x: int):
+    """The backward walk (`pallas._backward_step`) for one warpgroup: rows_ref[wg, j] = pair
+    j's gradient summed over this half tile's pixels, for the pairs before this half's last
+    stop pair (the others are left unwritten; `backward_rows` masks them)."""
+    from jax.experimental import pallas as pl
+
+    from .pallas import GRAD_VALUES, REC, _backward_step, backward_lanes
+
+    dt = rec_ref.dtype
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    k, _ = lanes(wg)
+    half = pl.ds(wg * WG_LANES, WG_LANES)
+    trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
+    lane = backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
+                          [ref[tile, half] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
+                                                       g_d_ref)])
+    start = ranges_ref[tile, 0]
+    last = jnp.minimum(ranges_ref[tile, 1], jnp.max(stop_at))
+    mine = strip_bits(wg)
+
+    zero_row = [jnp.zeros((), dt)] * GRAD_VALUES
+
+    def step(j, carry):
+        rec = [rec_ref[j, c] for c in range(REC - 1)]
+        values, carry = _backward_step(j, rec, mask_ref[j] if config.warp_cull else None, lane,
+                                       carry, config)
+        return [zero_row[0] if v is None else jnp.sum(v) for v in values], carry
+
+    def body(i, carry):
+        j = last - 1 - i
+        if config.warp_cull:  # a pair none of this half's strips takes: zero row, same carry
+            sums, carry = lax.cond((mask_ref[j] & mine) != 0, step,
+                                   lambda j, carry: (zero_row, carry), j, carry)
+        else:
+            sums, carry = step(j, carry)
+        for c, s in enumerate(sums):
+            rows_ref[wg, j, c] = s
+        return carry
+
+    zero = jnp.zeros((WG_LANES,), dt)
+    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
+
+
+def backward_rows(kernel, bins, stop_at, dt, args, interpret: bool):
+    """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, WARPGROUPS)
+    grid: each half tile's rows, zero where that half did not visit the pair (pairs at or after
+    its last stop pair, padding pairs), summed over the two halves in a fixed order."""
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+
+    from .pallas import GRAD_VALUES
+
+    capacity, n_tiles = bins.gauss.shape[0], stop_at.shape[0]
+    out = jax.ShapeDtypeStruct((WARPGROUPS, capacity, GRAD_VALUES), dt)
+    rows = plgpu.kernel(kernel, out_type=out, grid=(n_tiles, WARPGROUPS),
+                        grid_names=("tile", "wg"),
+                        interpret=_interpret_params() if interpret else None,
+                        kernel_name="localgs_backward_mosaic")(*args)
+    last = jnp.minimum(bins.tile_end[:, None],
+                       jnp.max(stop_at.reshape(n_tiles, WARPGROUPS, WG_LANES), -1))
+    tile = jnp.minimum(bins.tile, n_tiles - 1)
+    j = jnp.arange(capacity)
+    visited = (bins.tile[None] < n_tiles) & (j[None] < last[tile].T)  # (WARPGROUPS, capacity)
+    return jnp.sum(jnp.where(visited[..., None], rows, 0), axis=0)

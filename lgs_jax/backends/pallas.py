@@ -32,18 +32,20 @@ never processed), which is all the backward needs besides the final T.
 Backward kernel (both backends): one program per tile, 256 lanes (8 warps), walking the tile's
 pairs back to front from the last pair any pixel blended, with the forward's own α arithmetic
 (hoisted V·B clamped at ln o, or the difference form) and strip masks: the walk of
-lgs_jax.backends.backward (equations there). Per pair, the per-pixel gradient terms are reduced
-over the tile in one (256, 16) column reduction and stored as that pair's row: each pair belongs
-to one tile, so every row has one writer (no atomics; rows of pairs never visited stay zero).
-Rows are then chained to the Gaussian (Eq. 8 for the hoisted form, `tiles.chain_hoisted_rows`)
-and summed per Gaussian by `backward.per_gaussian_sum` (sort + segmented scan): deterministic.
+lgs_jax.backends.backward (equations there), one pair per step (`_backward_step`). Per pair, the
+per-pixel gradient terms are reduced over the tile in one (256, 16) column reduction and stored
+as that pair's row: each pair belongs to one tile, so every row has one writer (no atomics; rows
+of pairs never visited stay zero). Rows are then chained to the Gaussian (Eq. 8 for the hoisted
+form, `tiles.chain_hoisted_rows`) and summed per Gaussian by `backward.per_gaussian_sum` (sort +
+segmented scan): deterministic.
 
-Implementations. Each forward kernel also exists on Mosaic GPU (`lgs_jax.backends.mosaic`: a
-warpgroup per half tile, the same per-pair functions); `RasterConfig.kernel` picks one and
-"auto" takes `IMPL`, the faster per kernel on the H100 (BENCHMARKS.md §6). Without a GPU the
-kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel` names the forward
-kernel that ran ("localgs-triton", "vanilla-mosaic", ...), `stats.interpreted` says whether it
-was interpreted.
+Implementations. Each kernel, forward and backward, also exists on Mosaic GPU
+(`lgs_jax.backends.mosaic`: a warpgroup per half tile, the same per-pair functions);
+`RasterConfig.kernel` picks one and "auto" takes `IMPL`, the faster per kernel on the H100
+(BENCHMARKS.md §6); under differentiation "auto" runs the forward of the backward's
+implementation (`_forward_for_gradients`). Without a GPU the kernels run in Pallas interpret
+mode (slow, meant for tests); `stats.kernel` names the forward kernel that ran
+("localgs-triton", "vanilla-mosaic", ...), `stats.interpreted` says whether it was interpreted.
 """
 
 from __future__ import annotations
@@ -72,9 +74,11 @@ STRIP_PIXELS = 2 * TILE
 TILE_PIXELS = TILE * TILE
 ROW = 12  # packed Gaussian row (vanilla): mean x, y; conic a, b, c; ln o; o; r, g, b; z; unused
 REC = 12  # packed pair record (Local-GS): see `pair_records`
-GRAD_COLUMNS = 16  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z, padding
+GRAD_VALUES = 11  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z
+GRAD_COLUMNS = 16  # the Triton kernel's row: GRAD_VALUES padded to a power of two
 KERNELS = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
-IMPL = {"localgs": "triton", "vanilla": "mosaic"}  # config.kernel="auto" (BENCHMARKS.md §6)
+# config.kernel="auto": the faster implementation per kernel on the H100 (BENCHMARKS.md §6)
+IMPL = {"localgs": "triton", "vanilla": "mosaic", "backward": "mosaic"}
 
 
 def interpreted() -> bool:
@@ -86,6 +90,12 @@ def interpreted() -> bool:
 def implementation(backend: str, config: RasterConfig) -> str:
     """"triton" or "mosaic": the forward kernel implementation `backend` runs with `config`."""
     return IMPL[KERNELS[backend]] if config.kernel == "auto" else config.kernel
+
+
+def backward_implementation(config: RasterConfig) -> str:
+    """The backward kernel implementation; under differentiation the forward runs the same one
+    (`_forward_for_gradients`)."""
+    return IMPL["backward"] if config.kernel == "auto" else config.kernel
 
 
 def kernel_name(backend: str, config: RasterConfig) -> str:
@@ -364,63 +374,80 @@ def _columns(values, lanes: int, dt):
     return jnp.sum(m, axis=0)
 
 
+def _backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
+    """Pair j's step of the backward walk (lgs_jax.backends.backward.walk, equations there) at
+    a lane vector of pixels: its per-lane gradient terms (7 α-model columns, ∂L/∂rgb, ∂L/∂z;
+    the Triton and Mosaic GPU kernels reduce them over the tile) and the new carry (T_{k+1},
+    S_C, S_Z). `lane` = (frame, pixel, strip bit, stop pair, ḡ_r, ḡ_g, ḡ_b, ḡ_D, ḡ_T·T_N)."""
+    frame, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
+    t_next, s_r, s_g, s_b, s_z = carry
+    cap = jnp.asarray(config.alpha_cap, rec[0].dtype)
+    alpha, hit, aux = _record_alpha(rec, frame, pixel, config)
+    hit = hit & (j < stop_at)
+    if config.warp_cull:
+        hit = hit & ((mask_word & bit) != 0)
+    one_minus = jnp.where(hit, 1 - alpha, 1)
+    t_k = t_next / one_minus
+    w = jnp.where(hit, alpha * t_k, 0)
+    rgb, z = rec[7:10], rec[10]
+    dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
+    dot_s = g_r * s_r + g_g * s_g + g_b * s_b
+    d_alpha = jnp.where(hit, t_k * (dot_c + g_d * z) - (dot_s + g_d * s_z + g_bg) / one_minus, 0)
+    if config.hoist:  # ∂(V·B)/∂V = B; the clamp at ln o passes ∂ to ln o instead
+        ln_a, raw = aux
+        d_ln = jnp.where(jnp.exp(ln_a) < cap, d_alpha * alpha, 0)
+        on_v = raw <= rec[6]
+        d_raw = jnp.where(on_v, d_ln, 0)
+        x, y = frame
+        model = [d_raw * (x * x), d_raw * (x * y), d_raw * (y * y), d_raw * x, d_raw * y, d_raw,
+                 jnp.where(on_v, 0, d_ln)]
+    else:  # the difference form: backward.difference_alpha
+        power = aux
+        unclamped = rec[5] * jnp.exp(power) < cap
+        d_power = jnp.where(unclamped, d_alpha * alpha, 0)
+        dx, dy = rec[0] - pixel[0], rec[1] - pixel[1]
+        a, b, c = rec[2:5]
+        model = [-d_power * (a * dx + b * dy), -d_power * (c * dy + b * dx),
+                 -0.5 * d_power * dx * dx, -d_power * dx * dy, -0.5 * d_power * dy * dy,
+                 jnp.where(unclamped, d_alpha * jnp.exp(power), 0), None]
+    carry = (jnp.where(hit, t_k, t_next), s_r + w * rgb[0], s_g + w * rgb[1], s_b + w * rgb[2],
+             s_z + w * z)
+    return model + [w * g_r, w * g_g, w * g_b, w * g_d], carry
+
+
+def backward_lanes(tile, k, tiles_x: int, config: RasterConfig, dt, trans, stop_at, cotangents):
+    """The per-lane data of `_backward_step` for lanes k of `tile`, from the rows of the final
+    T, stop pairs and cotangents (r, g, b, T, D) the kernel loaded."""
+    frame, pixel = _frame(tile, k, tiles_x, config, dt)
+    bit = jnp.left_shift(jnp.int32(1), k // STRIP_PIXELS)  # each lane's strip
+    g_r, g_g, g_b, g_t, g_d = cotangents
+    return frame, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_t * trans
+
+
 def _backward_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, trans_ref, stop_ref,
                      g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, _zeros_ref, rows_ref, *,
                      config: RasterConfig, tiles_x: int):
-    """One tile's backward walk (lgs_jax.backends.backward.walk, equations there): rows_ref[k]
-    = the pair's gradient summed over the tile's pixels, for every pair some pixel blended."""
+    """One tile's backward walk (`_backward_step`): rows_ref[k] = the pair's gradient summed
+    over the tile's pixels, for every pair some pixel blended."""
     dt = rec_ref.dtype
     tile = order_ref[pl.program_id(0)]
-    k = lax.iota(jnp.int32, TILE_PIXELS)
-    frame, pixel = _frame(tile, k, tiles_x, config, dt)
-    bit = jnp.left_shift(jnp.int32(1), k // STRIP_PIXELS)  # each lane's strip
-    cap = jnp.asarray(config.alpha_cap, dt)
-    t_final, stop_at = trans_ref[tile, :], stop_ref[tile, :]
-    g_r, g_g, g_b, g_t, g_d = (ref[tile, :] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
-                                                          g_d_ref))
-    g_bg = g_t * t_final
+    trans, stop_at = trans_ref[tile, :], stop_ref[tile, :]
+    lane = backward_lanes(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt, trans,
+                          stop_at, [ref[tile, :] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
+                                                             g_d_ref)])
     start = start_ref[tile]
     last = jnp.minimum(end_ref[tile], jnp.max(stop_at))  # pairs at or after it: no pixel blended
 
     def body(i, carry):
-        t_next, s_r, s_g, s_b, s_z = carry
         j = last - 1 - i
         rec = [rec_ref[j, c] for c in range(REC - 1)]
-        alpha, hit, aux = _record_alpha(rec, frame, pixel, config)
-        hit = hit & (j < stop_at)
-        if config.warp_cull:
-            hit = hit & ((mask_ref[j] & bit) != 0)
-        one_minus = jnp.where(hit, 1 - alpha, 1)
-        t_k = t_next / one_minus
-        w = jnp.where(hit, alpha * t_k, 0)
-        rgb, z = rec[7:10], rec[10]
-        dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
-        dot_s = g_r * s_r + g_g * s_g + g_b * s_b
-        d_alpha = jnp.where(hit, t_k * (dot_c + g_d * z)
-                            - (dot_s + g_d * s_z + g_bg) / one_minus, 0)
-        if config.hoist:  # ∂(V·B)/∂V = B; the clamp at ln o passes ∂ to ln o instead
-            ln_a, raw = aux
-            d_ln = jnp.where(jnp.exp(ln_a) < cap, d_alpha * alpha, 0)
-            on_v = raw <= rec[6]
-            d_raw = jnp.where(on_v, d_ln, 0)
-            x, y = frame
-            model = [d_raw * (x * x), d_raw * (x * y), d_raw * (y * y), d_raw * x, d_raw * y,
-                     d_raw, jnp.where(on_v, 0, d_ln)]
-        else:  # the difference form: backward.difference_alpha
-            power = aux
-            unclamped = rec[5] * jnp.exp(power) < cap
-            d_power = jnp.where(unclamped, d_alpha * alpha, 0)
-            dx, dy = rec[0] - pixel[0], rec[1] - pixel[1]
-            a, b, c = rec[2:5]
-            model = [-d_power * (a * dx + b * dy), -d_power * (c * dy + b * dx),
-                     -0.5 * d_power * dx * dx, -d_power * dx * dy, -0.5 * d_power * dy * dy,
-                     jnp.where(unclamped, d_alpha * jnp.exp(power), 0), None]
-        rows_ref[j, :] = _columns(model + [w * g_r, w * g_g, w * g_b, w * g_d], TILE_PIXELS, dt)
-        return (jnp.where(hit, t_k, t_next), s_r + w * rgb[0], s_g + w * rgb[1],
-                s_b + w * rgb[2], s_z + w * z)
+        values, carry = _backward_step(j, rec, mask_ref[j] if config.warp_cull else None, lane,
+                                       carry, config)
+        rows_ref[j, :] = _columns(values, TILE_PIXELS, dt)
+        return carry
 
     zero = jnp.zeros((TILE_PIXELS,), dt)
-    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (t_final, zero, zero, zero, zero))
+    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
@@ -433,29 +460,37 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     dt = p.mean2d.dtype
     tiles_x, tiles_y = tile_grid(width, height)
     g_color, g_trans, g_depth = cotangents
-    kernel = functools.partial(_backward_kernel, config=config, tiles_x=tiles_x)
-    zeros = jnp.zeros((bins.gauss.shape[0], GRAD_COLUMNS), dt)
-    rows = pl.pallas_call(
-        kernel, out_shape=jax.ShapeDtypeStruct(zeros.shape, dt), grid=(tiles_x * tiles_y,),
-        input_output_aliases={12: 0},  # unvisited and padding pairs keep their zero row
-        compiler_params=_compiler_params(8), interpret=interpreted(), name="localgs_backward",
-    )(order, bins.tile_start, bins.tile_end,
-      jnp.zeros((1,), jnp.int32) if masks is None else masks, records, trans, stop_at,
-      g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans, g_depth, zeros)
-    if config.hoist:
-        rows = chain_hoisted_rows(p, bins, rows[:, :11], tiles_x, config)
+    masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
+    lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans,
+                 g_depth)
+    if backward_implementation(config) == "mosaic":
+        kernel = functools.partial(mosaic.backward_kernel, config=config, tiles_x=tiles_x)
+        rows = mosaic.backward_rows(kernel, bins, stop_at, dt,
+                                    (order, mosaic.ranges(bins), masks, records) + lane_rows,
+                                    interpreted())
     else:
-        rows = jnp.concatenate([rows[:, :6], rows[:, 7:11]], -1)
+        kernel = functools.partial(_backward_kernel, config=config, tiles_x=tiles_x)
+        zeros = jnp.zeros((bins.gauss.shape[0], GRAD_COLUMNS), dt)
+        rows = pl.pallas_call(
+            kernel, out_shape=jax.ShapeDtypeStruct(zeros.shape, dt), grid=(tiles_x * tiles_y,),
+            input_output_aliases={12: 0},  # unvisited and padding pairs keep their zero row
+            compiler_params=_compiler_params(8), interpret=interpreted(),
+            name="localgs_backward",
+        )(order, bins.tile_start, bins.tile_end, masks, records, *lane_rows, zeros)
+    if config.hoist:
+        rows = chain_hoisted_rows(p, bins, rows[:, :GRAD_VALUES], tiles_x, config)
+    else:
+        rows = jnp.concatenate([rows[:, :6], rows[:, 7:GRAD_VALUES]], -1)
     return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
 
 
 def _forward_for_gradients(p, bins, width, height, config, vanilla: bool):
-    """The forward whose residuals the backward kernel (Triton) uses: with kernel="auto" the
-    Triton forward, so that forward and backward evaluate α with the same compiler's arithmetic
-    (the compilers' exp and multiply-add contraction can differ by an ulp, which could flip an
-    alpha test between them)."""
+    """The forward whose residuals the backward kernel uses: with kernel="auto" the forward of
+    the backward's implementation, so that forward and backward evaluate α with the same
+    compiler's arithmetic (the compilers' exp and multiply-add contraction can differ by an
+    ulp, which could flip an alpha test between them)."""
     if config.kernel == "auto":
-        config = dataclasses.replace(config, kernel="triton")
+        config = dataclasses.replace(config, kernel=backward_implementation(config))
     return _forward(p, bins, width, height, config, vanilla)
 
 
