@@ -2,8 +2,9 @@
 
 Without a GPU the kernels run in Pallas interpret mode (what CI exercises); on a GPU the same
 tests run the compiled kernels (scripts/pallas_gpu_check.sh). `test_kernels_lower_for_the_gpu`
-lowers every kernel variant to Triton IR on any machine (the GPU description is faked), so a
-primitive the Triton lowering lacks fails here, not first on the GPU.
+lowers every kernel variant, forward and backward, through the Triton or Mosaic GPU lowering on
+any machine (the GPU description is faked), so a primitive a lowering lacks fails here, not first
+on the GPU.
 """
 
 import dataclasses
