@@ -1,6 +1,7 @@
-"""Mosaic GPU forward kernels (lgs_jax.backends.mosaic) per UNROLL and GROUP_SKIP against the
-Triton kernels, kernel calls alone from the same binned inputs, all variants alternating in
-each of 30 rounds (median ms); guitar 1280x720 and lego_sh3 800x800, H100.
+"""Mosaic GPU Local-GS forward kernel (lgs_jax.backends.mosaic) per CHUNK (records staged in
+shared memory by TMA, 0: read from global memory) against the Triton kernel, kernel calls alone
+from the same binned inputs, all variants alternating in each of 30 rounds (median ms), H100.
+(Earlier runs of this script swept UNROLL and GROUP_SKIP: bench_results/mosaic_profile_h100.log.)
 
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/mosaic_profile.py [DATA]
 """
@@ -21,7 +22,9 @@ from lgs_jax.projection import project
 C = lgs_jax.RasterConfig
 data = sys.argv[1] if len(sys.argv) > 1 else "carry/data"
 specs = [f"guitar={data}/guitar/guitar.ply:{data}/guitar/orbit_cameras.json@1280x720",
-         f"lego={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@800x800"]
+         f"guitar4k={data}/guitar/guitar.ply:{data}/guitar/orbit_cameras.json@3840x2160",
+         f"lego={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@800x800",
+         "synthetic:1000000@1280x720"]
 print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}")
 for spec in specs:
     case = parse_scene(spec)
@@ -33,28 +36,26 @@ for spec in specs:
     tx, ty = binning.tile_grid(w, h)
     order = jnp.argsort(b.tile_start - b.tile_end, stable=True).astype(jnp.int32)
     masks = jax.jit(lambda p, b: tiles.pair_masks(p, b, tx, C()))(p, b)
-    rec = jax.jit(lambda p, b: pallas.pair_records(p, b, tx, C()))(p, b)
-    rows = jax.jit(pallas.gaussian_rows)(p)
+    rec = jax.jit(lambda p, b, m: pallas.pair_records(p, b, tx, C(), m))(p, b, masks)
     ranges = jax.jit(mosaic.ranges)(b)
     fns = {}
     kw = dict(config=C(), tiles_x=tx, last_pair=cap - 1)
     k = functools.partial(pallas._localgs_kernel, **kw)
     fns["triton localgs"] = (jax.jit(lambda *a, k=k: pallas._call(
         k, tx * ty * 8, 32, 1, jnp.float32, a)), (order, b.tile_start, b.tile_end, masks, rec))
-    k = functools.partial(pallas._vanilla_kernel, **kw)
-    fns["triton vanilla"] = (jax.jit(lambda *a, k=k: pallas._call(
-        k, tx * ty, 256, 8, jnp.float32, a)), (order, b.tile_start, b.tile_end, b.gauss, rows))
-    for unroll in (2, 4, 8):
-        for skip in (True, False):
-            mosaic.UNROLL, mosaic.GROUP_SKIP = {"localgs": unroll, "vanilla": unroll}, skip
-            k = functools.partial(mosaic.localgs_kernel, **kw)
-            f = jax.jit(lambda *a, k=k: mosaic.call(k, tx * ty, jnp.float32, a, False))
-            f = f.lower(order, ranges, masks, rec).compile()  # compiled with this variant
-            fns[f"mosaic localgs unroll={unroll} skip={skip}"] = (f, (order, ranges, masks, rec))
-        k = functools.partial(mosaic.vanilla_kernel, **kw)
-        f = jax.jit(lambda *a, k=k: mosaic.call(k, tx * ty, jnp.float32, a, False))
-        f = f.lower(order, ranges, b.gauss, rows).compile()
-        fns[f"mosaic vanilla unroll={unroll}"] = (f, (order, ranges, b.gauss, rows))
+    for chunk in (0, 64):
+        mosaic.CHUNK = chunk
+        k = functools.partial(mosaic.localgs_kernel, **kw)
+        scratch = mosaic.staged_scratch(jnp.float32) if chunk else ()
+        f = jax.jit(lambda *a, k=k, s=scratch: mosaic.call(k, tx * ty, jnp.float32, a, False, s))
+        f = f.lower(order, ranges, masks, rec).compile()  # compiled with this variant
+        fns[f"mosaic localgs chunk={chunk}"] = (f, (order, ranges, masks, rec))
+    ref = jax.block_until_ready(fns["mosaic localgs chunk=0"][0](*fns["mosaic localgs chunk=0"][1]))
+    for name, (f, a) in fns.items():
+        if name.startswith("mosaic"):
+            out = f(*a)
+            diff = max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(out[:5], ref[:5]))
+            print(f"{case.name:>9s} {name:<28s} max |diff| vs chunk=0: {diff:.1e}", flush=True)
     times = {name: [] for name in fns}
     for name, (f, a) in fns.items():
         jax.block_until_ready(f(*a))
@@ -64,4 +65,4 @@ for spec in specs:
             jax.block_until_ready(f(*a))
             times[name].append(1e3 * (time.perf_counter() - t0))
     for name, t in times.items():
-        print(f"{case.name:>7s} {name:<36s} {statistics.median(t):7.3f} ms", flush=True)
+        print(f"{case.name:>9s} {name:<28s} {statistics.median(t):7.3f} ms", flush=True)

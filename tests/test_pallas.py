@@ -123,6 +123,36 @@ def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
                                 what=field)
 
 
+@pytest.mark.parametrize("chunk", [8, 16])
+@settings(max_examples=3)
+@given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
+def test_mosaic_staged_records_equal_unstaged(chunk, seed, dtype):
+    """The Mosaic GPU Local-GS kernel with records staged through shared memory, with chunks
+    small enough that every tile list of the test scenes spans several (chunk boundaries,
+    partial last chunks, the copy still in flight at an early exit), equals the unstaged kernel
+    bit for bit; an empty scene (no pair anywhere) renders the background."""
+    from lgs_jax.backends import mosaic
+
+    g = scenes.cast(scenes.scene(seed), dtype)
+    empty = scenes.cast(scenes.scene(seed, kinds=("behind", "invalid")), dtype)
+    cam = scenes.camera(dtype=dtype)
+    config = C(kernel="mosaic")
+    outs, default = {}, mosaic.CHUNK
+    try:
+        for c in (0, chunk):
+            jax.clear_caches()  # `render`'s traces are cached per config: retrace with CHUNK c
+            mosaic.CHUNK = c
+            outs[c] = scenes.render(g, cam, "pallas", config)
+            background = scenes.render(empty, cam, "pallas", config).image
+            np.testing.assert_array_equal(background, np.broadcast_to(
+                np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
+    finally:
+        mosaic.CHUNK = default
+        jax.clear_caches()
+    for field in ("image", "alpha", "depth"):
+        np.testing.assert_array_equal(getattr(outs[chunk], field), getattr(outs[0], field))
+
+
 @pytest.mark.parametrize("convention,kernel", list(itertools.product(["3dgs", "gsplat"],
                                                                      ["triton", "mosaic"])))
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
@@ -211,19 +241,25 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype):
         np.testing.assert_array_equal(np.any(got != 0, 1), np.any(want != 0, 1))
 
 
-@pytest.mark.parametrize("backend,config", [("pallas", c) for c in LOCALGS.values()]
-                         + [("pallas", C(blend="fast")), ("pallas_vanilla", C())]
-                         + [("pallas", C(kernel="mosaic")),
-                            ("pallas", C(kernel="mosaic", blend="fast")),
-                            ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False)),
-                            ("pallas_vanilla", C(kernel="mosaic"))], ids=str)
-def test_kernels_lower_for_the_gpu(backend, config, monkeypatch):
+@pytest.mark.parametrize("backend,config,chunk", [("pallas", c, 0) for c in LOCALGS.values()]
+                         + [("pallas", C(blend="fast"), 0), ("pallas_vanilla", C(), 0)]
+                         + [("pallas", C(kernel="mosaic"), 0),
+                            ("pallas", C(kernel="mosaic", blend="fast"), 0),
+                            ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0),
+                            ("pallas_vanilla", C(kernel="mosaic"), 0),
+                            ("pallas", C(kernel="mosaic"), 64),
+                            ("pallas", C(kernel="mosaic", blend="fast"), 64)], ids=str)
+def test_kernels_lower_for_the_gpu(backend, config, chunk, monkeypatch):
     """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering
-    (to Triton IR, for an H100) or the Mosaic GPU lowering, so CI catches what the GPU would
-    reject at lowering time (e.g. Mosaic GPU's missing bool-vector negation)."""
+    (to Triton IR, for an H100) or the Mosaic GPU lowering (records read from global memory,
+    or staged in shared memory by TMA: `chunk`), so CI catches what the GPU would reject at
+    lowering time (e.g. Mosaic GPU's missing bool-vector negation)."""
     from jax._src.pallas.triton import gpu_info
 
+    from lgs_jax.backends import mosaic
+
     jax.clear_caches()  # `render`'s traces are cached per config: retrace with GPU lowering
+    monkeypatch.setattr(mosaic, "CHUNK", chunk)
     monkeypatch.setenv("LGS_JAX_PALLAS_LOWER", "gpu")
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))

@@ -21,6 +21,14 @@ Branching around a staged group with no bit set in any of the warpgroup's strips
 measured slower than predicating (H100: 1.10 vs 0.83 ms on guitar 720p at UNROLL 8), so the
 kernel stages 8 pairs per iteration and lets the lane predicates do the culling.
 
+Staging (CHUNK > 0, off by default). The Local-GS kernel can stage the tile's pair records in
+shared memory: CHUNK records per TMA copy, double-buffered (chunk c + 1 in flight while chunk c
+is blended; a copy is issued only where the list reaches it, and the block waits for the one in
+flight before it exits), the strip mask read from the record's last column. H100, kernel only:
+1.24–1.80x faster than the Triton kernel at 720p/800, even at 4K and on 1M Gaussians, and bit
+for bit the unstaged kernel's output on four real scenes (BENCHMARKS.md §6). It stays off until
+the GPU test suite has run with it: one run showed failures it timed out before naming.
+
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
 multiply-add contraction differ by ulps); both record per-pixel stop pairs for the backward.
@@ -49,6 +57,7 @@ from ..warp_masks import STRIPS
 WG_LANES = 128  # a Mosaic GPU (Pallas) thread: one warpgroup
 WARPGROUPS = TILE * TILE // WG_LANES
 UNROLL = {"localgs": 8, "vanilla": 8}  # pairs staged per iteration (scripts/mosaic_profile.py)
+CHUNK = 0  # Local-GS: records per TMA copy into shared memory (0: none; module docstring)
 GROUP_SKIP = False  # Local-GS: branch around a staged group none of the warpgroup's strips takes
 
 
@@ -64,18 +73,27 @@ def ranges(bins):
     return jnp.stack([bins.tile_start, bins.tile_end], -1)
 
 
-def call(kernel, n_tiles: int, dt, args, interpret: bool):
+def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
     """Run `kernel(*refs)` on a (n_tiles, WARPGROUPS) grid of one-warpgroup blocks (axes "tile"
-    and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair."""
+    and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair; then `scratch` refs."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
     out = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), dt)
     stop = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), jnp.int32)
 
-    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], grid=(n_tiles, WARPGROUPS),
-                        grid_names=("tile", "wg"),
+    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
+                        grid=(n_tiles, WARPGROUPS), grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name=kernel.func.__name__)(*args)
+
+
+def staged_scratch(dt):
+    """The SMEM scratch of the staged Local-GS kernel: two CHUNK-record buffers, a barrier each."""
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+
+    from .pallas import REC
+
+    return [plgpu.SMEM((2, CHUNK, REC), dt), plgpu.Barrier(num_barriers=2)]
 
 
 def lanes(wg):
@@ -98,10 +116,15 @@ def strip_bits(wg):
     return jnp.left_shift(jnp.int32((1 << per_wg) - 1), wg * per_wg)
 
 
-def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *out_refs,
+def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int):
     """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup."""
     from .pallas import REC, _frame, _record_alpha, _staged_loop
+
+    if CHUNK:
+        return _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config=config,
+                               tiles_x=tiles_x)
+    out_refs = refs
 
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
@@ -127,6 +150,60 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *out_refs,
     store(out_refs, tile, wg,
           _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt, fetch, pair_alpha,
                        config, UNROLL["localgs"], take))
+
+
+def _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config: RasterConfig, tiles_x: int):
+    """`localgs_kernel` with the tile's records staged in shared memory: CHUNK records at a
+    time by TMA, double-buffered (chunk c + 1 is in flight while chunk c is blended), the strip
+    mask read from the record's last column."""
+    from jax.experimental import pallas as pl
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+
+    from .pallas import REC, _frame, _record_alpha, _staged_loop
+
+    out_refs, (smem, barriers) = refs[:6], refs[6:]
+    dt = rec_ref.dtype
+    unroll = UNROLL["localgs"]
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
+    k, strip = lanes(wg)
+    frame, pixel = _frame(tile, k, tiles_x, config, dt)
+    bit = jnp.left_shift(jnp.int32(1), strip)
+
+    def copy(c):  # chunk c of the tile's records into slot c % 2, if the list reaches it
+        @pl.when(start + c * CHUNK < end)
+        def _():
+            plgpu.copy_gmem_to_smem(rec_ref.at[pl.ds(start + c * CHUNK, CHUNK)], smem.at[c % 2],
+                                    barriers.at[c % 2])
+
+    def begin(j):  # at a chunk's first group: wait for it, start the next one's copy
+        c = (j - start) // CHUNK
+
+        @pl.when((j - start) % CHUNK == 0)
+        def _():
+            plgpu.barrier_wait(barriers.at[c % 2])
+            copy(c + 1)
+
+    def finish(j):  # wait for the copy still in flight (if any) before the block exits
+        c = (j - start - unroll) // CHUNK + 1  # the last chunk copy() was called for
+
+        @pl.when(start + c * CHUNK < end)
+        def _():
+            plgpu.barrier_wait(barriers.at[c % 2])
+
+    def pair_alpha(j):
+        i = j - start
+        rec = [smem[(i // CHUNK) % 2, i % CHUNK, c] for c in range(REC)]
+        alpha, hit, _ = _record_alpha(rec, frame, pixel, config)
+        if config.warp_cull:
+            hit = hit & ((rec[REC - 1].astype(jnp.int32) & bit) != 0)
+        return alpha, hit, rec[7:10], rec[10]
+
+    copy(0)
+    store(out_refs, tile, wg,
+          _staged_loop(start, end, WG_LANES, dt, lambda j: j, pair_alpha, config, unroll,
+                       stage=(begin, finish)))
 
 
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,

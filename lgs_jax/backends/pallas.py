@@ -112,12 +112,13 @@ def gaussian_rows(p: Projected):
     return jnp.stack(cols, -1)
 
 
-def pair_records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+def pair_records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig, masks=None):
     """(capacity, REC) per-pair rows the Local-GS kernel loads, in pair order (no indirection).
 
     hoist: V (Eq. 8) relative to the pair's tile origin, ln o, rgb, z: the hoisted vector is
     built once per (tile, Gaussian) pair, as the paper stages it per tile, not once per strip.
-    Otherwise the Gaussian's mean, conic and opacity, then rgb, z (the difference form).
+    Otherwise the Gaussian's mean, conic and opacity, then rgb, z (the difference form). The
+    last column holds the pair's strip-mask bits (`masks`, exact as a float: < 2^8) or 0.
     """
     g = bins.gauss
     if config.hoist:
@@ -125,7 +126,8 @@ def pair_records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfi
     else:
         head = jnp.concatenate([p.mean2d[g], p.conic[g], p.opacity[g, None],
                                 jnp.zeros_like(p.opacity[g, None])], -1)
-    tail = jnp.concatenate([p.rgb[g], p.depth[g, None], jnp.zeros_like(p.depth[g, None])], -1)
+    bits = jnp.zeros_like(p.depth[g]) if masks is None else masks.astype(p.depth.dtype)
+    tail = jnp.concatenate([p.rgb[g], p.depth[g, None], bits[:, None]], -1)
     return jnp.concatenate([head, tail], -1)
 
 
@@ -188,7 +190,7 @@ def _running(state, config: RasterConfig):
 
 
 def _staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterConfig, unroll: int,
-                 take=None):
+                 take=None, stage=None):
     """Walk pairs [start, end) `unroll` at a time while some lane still blends; returns
     (r, g, b, T, D, stop pair) per lane.
 
@@ -197,8 +199,10 @@ def _staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCo
     independent of the pixel state, so their loads and arithmetic overlap) and then blends them
     in order. `take(fetched)` (optional) says whether a pair concerns this program at all (its
     mask bit): pairs without it do not blend, and a group with none is skipped by one
-    program-uniform branch. A lane's stop pair is where its stop test fired (exact), else the
-    first pair the loop did not process (`end` or beyond when it ran to the end).
+    program-uniform branch. `stage = (begin, finish)` (optional): `begin(j)` runs at the start of
+    each iteration (before its pairs are evaluated) and `finish(j)` after the loop, with the first
+    pair not processed. A lane's stop pair is where its stop test fired (exact), else the first
+    pair the loop did not process (`end` or beyond when it ran to the end).
     """
     def cond(carry):
         j, _, st = carry
@@ -206,6 +210,8 @@ def _staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCo
 
     def body(carry):
         j, cur, st = carry
+        if stage is not None:
+            stage[0](j)
         nxt = [fetch(j + unroll + u) for u in range(unroll)]
         takes = [(j + u < end) & (True if take is None else take(cur[u])) for u in range(unroll)]
 
@@ -225,6 +231,8 @@ def _staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCo
              jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
     first = [fetch(start + u) for u in range(unroll)]
     j, _, st = lax.while_loop(cond, body, (start, first, empty))
+    if stage is not None:
+        stage[1](j)
     stop_at = jnp.minimum(st[6], j) if config.blend == "exact" else jnp.full((lanes,), j)
     return st[:5] + (stop_at,)
 
@@ -338,12 +346,12 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
         else:
             masks = jnp.zeros((1,), jnp.int32)
             strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
-        records = pair_records(p, bins, tiles_x, config)
+        records = pair_records(p, bins, tiles_x, config, masks if config.warp_cull else None)
         if implementation("pallas", config) == "mosaic":
             kernel = functools.partial(mosaic.localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
             outs = mosaic.call(kernel, n_tiles, dt, (order, mosaic.ranges(bins), masks, records),
-                               interpreted())
+                               interpreted(), mosaic.staged_scratch(dt) if mosaic.CHUNK else ())
         else:
             kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
