@@ -21,13 +21,13 @@ Branching around a staged group with no bit set in any of the warpgroup's strips
 measured slower than predicating (H100: 1.10 vs 0.83 ms on guitar 720p at UNROLL 8), so the
 kernel stages 8 pairs per iteration and lets the lane predicates do the culling.
 
-Staging (CHUNK > 0, off by default). The Local-GS kernel can stage the tile's pair records in
-shared memory: CHUNK records per TMA copy, double-buffered (chunk c + 1 in flight while chunk c
+Staging (CHUNK > 0, off by default; float32 only: TMA has no 64-bit float type). The Local-GS
+kernel can stage the tile's pair records in shared memory: CHUNK records per TMA copy, double-buffered (chunk c + 1 in flight while chunk c
 is blended; a copy is issued only where the list reaches it, and the block waits for the one in
 flight before it exits), the strip mask read from the record's last column. H100, kernel only:
 1.24–1.80x faster than the Triton kernel at 720p/800, even at 4K and on 1M Gaussians, and bit
 for bit the unstaged kernel's output on four real scenes (BENCHMARKS.md §6). It stays off until
-the GPU test suite has run with it: one run showed failures it timed out before naming.
+the GPU test suite has run with it (the one run, before the float32 guard, failed on float64).
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
@@ -87,6 +87,13 @@ def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
                         kernel_name=kernel.func.__name__)(*args)
 
 
+def staged(dt) -> bool:
+    """Whether the Local-GS kernel stages records in shared memory for records of dtype `dt`:
+    CHUNK > 0 and float32 (TMA has no 64-bit float type: Mosaic GPU raises "unsupported TMA
+    dtype f64" when compiling for the GPU; interpret mode has no TMA and would not notice)."""
+    return CHUNK > 0 and jnp.dtype(dt) == jnp.float32
+
+
 def staged_scratch(dt):
     """The SMEM scratch of the staged Local-GS kernel: two CHUNK-record buffers, a barrier each."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
@@ -121,7 +128,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup."""
     from .pallas import REC, _frame, _record_alpha, _staged_loop
 
-    if CHUNK:
+    if staged(rec_ref.dtype):
         return _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config=config,
                                tiles_x=tiles_x)
     out_refs = refs
