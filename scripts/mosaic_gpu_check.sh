@@ -4,11 +4,7 @@
 # Run from the repository root on the device machine (scenes in carry/data, the gsplat wheel in
 # carry/wheels); logs and CSV to $OUT.
 set -uo pipefail
-out="${OUT:-out}"; mkdir -p "$out"
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-  --target /tmp/site carry/wheels/*.whl
-export PYTHONPATH="/tmp/site:$PWD" LGS_JAX_DATA="$PWD/carry/data" PYTHONUNBUFFERED=1
-export XLA_PYTHON_CLIENT_PREALLOCATE=false HYPOTHESIS_PROFILE="${HYPOTHESIS_PROFILE:-dev}"
+. "$(dirname "$0")/gpu_env.sh"
 timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 tests/test_pallas.py \
   -k "mosaic or fast or kernel_equals" 2>&1 | tee "$out/mosaic_gpu_tests.log" | tail -4
 echo "tests exit: ${PIPESTATUS[0]}"

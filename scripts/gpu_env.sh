@@ -1,0 +1,8 @@
+# Sourced by the GPU session scripts (grad_gpu_check.sh, mosaic_gpu_check.sh): $out for logs,
+# the carried wheels (gsplat 1.5.3) installed to /tmp/site, and the environment the tests and
+# benchmarks expect (scenes in carry/data, no JAX preallocation so gsplat gets GPU memory).
+out="${OUT:-out}"; mkdir -p "$out"
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+  --target /tmp/site carry/wheels/*.whl
+export PYTHONPATH="/tmp/site:$PWD" LGS_JAX_DATA="$PWD/carry/data" PYTHONUNBUFFERED=1
+export XLA_PYTHON_CLIENT_PREALLOCATE=false HYPOTHESIS_PROFILE="${HYPOTHESIS_PROFILE:-dev}"
