@@ -132,7 +132,6 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
         return _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config=config,
                                tiles_x=tiles_x)
     out_refs = refs
-
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -171,6 +170,7 @@ def _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config: RasterConfig,
     out_refs, (smem, barriers) = refs[:6], refs[6:]
     dt = rec_ref.dtype
     unroll = UNROLL["localgs"]
+    assert CHUNK % unroll == 0, "a staged group of pairs must lie within one chunk"
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
