@@ -21,13 +21,14 @@ Branching around a staged group with no bit set in any of the warpgroup's strips
 measured slower than predicating (H100: 1.10 vs 0.83 ms on guitar 720p at UNROLL 8), so the
 kernel stages 8 pairs per iteration and lets the lane predicates do the culling.
 
-Staging (CHUNK > 0, off by default; float32 only: TMA has no 64-bit float type). The Local-GS
-kernel can stage the tile's pair records in shared memory: CHUNK records per TMA copy, double-buffered (chunk c + 1 in flight while chunk c
-is blended; a copy is issued only where the list reaches it, and the block waits for the one in
-flight before it exits), the strip mask read from the record's last column. H100, kernel only:
-1.24–1.80x faster than the Triton kernel at 720p/800, even at 4K and on 1M Gaussians, and bit
-for bit the unstaged kernel's output on four real scenes (BENCHMARKS.md §6). It stays off until
-the GPU test suite has run with it (the one run, before the float32 guard, failed on float64).
+Staging (CHUNK > 0, off by default; float32 only: TMA has no 64-bit float type). The
+Local-GS kernel can stage the tile's pair records in shared memory: CHUNK records per TMA copy,
+double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only where the
+list reaches it, and the block waits for the one in flight before it exits), the strip mask
+read from the record's last column. H100, kernel only: 1.24–1.80x faster than the Triton kernel
+at 720p/800, about even at 4K and on 1M Gaussians (1.04x, 0.98x), and bit for bit the unstaged
+kernel's output on four real scenes (BENCHMARKS.md §6). It stays off until the GPU test suite
+has run with it (the one run, before the float32 guard, failed on float64).
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
