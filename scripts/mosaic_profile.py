@@ -46,7 +46,7 @@ for spec in specs:
     for chunk in (0, 64):
         mosaic.CHUNK = chunk
         k = functools.partial(mosaic.localgs_kernel, **kw)
-        scratch = mosaic.staged_scratch(jnp.float32) if chunk else ()
+        scratch = mosaic.localgs_scratch(jnp.float32)
         f = jax.jit(lambda *a, k=k, s=scratch: mosaic.call(k, tx * ty, jnp.float32, a, False, s))
         f = f.lower(order, ranges, masks, rec).compile()  # compiled with this variant
         fns[f"mosaic localgs chunk={chunk}"] = (f, (order, ranges, masks, rec))

@@ -95,13 +95,16 @@ def staged(dt) -> bool:
     return CHUNK > 0 and jnp.dtype(dt) == jnp.float32
 
 
-def staged_scratch(dt):
-    """The SMEM scratch of the staged Local-GS kernel: two CHUNK-record buffers, a barrier each."""
+def localgs_scratch(dt):
+    """The Local-GS kernel's SMEM scratch: with staging two CHUNK-record buffers and a barrier
+    each, otherwise none (the kernel stages exactly when it is given this scratch)."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
     from .pallas import REC
 
-    return [plgpu.SMEM((2, CHUNK, REC), dt), plgpu.Barrier(num_barriers=2)]
+    if not staged(dt):
+        return ()
+    return (plgpu.SMEM((2, CHUNK, REC), dt), plgpu.Barrier(num_barriers=2))
 
 
 def lanes(wg):
@@ -126,58 +129,55 @@ def strip_bits(wg):
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int):
-    """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup."""
+    """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup;
+    `refs` = the six outputs, then `localgs_scratch` (records staged in shared memory) if any."""
     from .pallas import REC, _frame, _record_alpha, _staged_loop
 
-    if staged(rec_ref.dtype):
-        return _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config=config,
-                               tiles_x=tiles_x)
-    out_refs = refs
+    out_refs, scratch = refs[:6], refs[6:]
     dt = rec_ref.dtype
-    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
-    tile = order_ref[tid]
-    k, strip = lanes(wg)
-    frame, pixel = _frame(tile, k, tiles_x, config, dt)
-    bit = jnp.left_shift(jnp.int32(1), strip)
-    mine = strip_bits(wg)
-
-    def fetch(j):
-        jj = jnp.minimum(j, last_pair)
-        return jj, mask_ref[jj] if config.warp_cull else None
-
-    def pair_alpha(fetched):
-        rec = [rec_ref[fetched[0], c] for c in range(REC - 1)]
-        alpha, hit, _ = _record_alpha(rec, frame, pixel, config)
-        if config.warp_cull:
-            hit = hit & ((fetched[1] & bit) != 0)
-        return alpha, hit, rec[7:10], rec[10]
-
-    take = ((lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull and GROUP_SKIP
-            else None)
-    store(out_refs, tile, wg,
-          _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt, fetch, pair_alpha,
-                       config, UNROLL["localgs"], take))
-
-
-def _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config: RasterConfig, tiles_x: int):
-    """`localgs_kernel` with the tile's records staged in shared memory: CHUNK records at a
-    time by TMA, double-buffered (chunk c + 1 is in flight while chunk c is blended), the strip
-    mask read from the record's last column."""
-    from jax.experimental import pallas as pl
-    from jax.experimental.pallas import mosaic_gpu as plgpu
-
-    from .pallas import REC, _frame, _record_alpha, _staged_loop
-
-    out_refs, (smem, barriers) = refs[:6], refs[6:]
-    dt = rec_ref.dtype
-    unroll = UNROLL["localgs"]
-    assert CHUNK % unroll == 0, "a staged group of pairs must lie within one chunk"
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
     k, strip = lanes(wg)
     frame, pixel = _frame(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
+
+    def evaluate(rec, mask_word):
+        alpha, hit, _ = _record_alpha(rec, frame, pixel, config)
+        if config.warp_cull:
+            hit = hit & ((mask_word & bit) != 0)
+        return alpha, hit, rec[7:10], rec[10]
+
+    if scratch:
+        fetch, pair_alpha, stage = _smem_records(rec_ref, *scratch, start, end, evaluate)
+        take = None
+    else:
+        def fetch(j):
+            jj = jnp.minimum(j, last_pair)
+            return jj, mask_ref[jj] if config.warp_cull else None
+
+        def pair_alpha(fetched):
+            return evaluate([rec_ref[fetched[0], c] for c in range(REC - 1)], fetched[1])
+
+        mine = strip_bits(wg)
+        take = ((lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull and GROUP_SKIP
+                else None)
+        stage = None
+    store(out_refs, tile, wg, _staged_loop(start, end, WG_LANES, dt, fetch, pair_alpha, config,
+                                           UNROLL["localgs"], take, stage))
+
+
+def _smem_records(rec_ref, smem, barriers, start, end, evaluate):
+    """`_staged_loop`'s (fetch, pair_alpha, stage) for records [start, end) staged in shared
+    memory: CHUNK records at a time by TMA, double-buffered (chunk c + 1 is in flight while
+    chunk c is blended), the strip mask read from the record's last column."""
+    from jax.experimental import pallas as pl
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+
+    from .pallas import REC
+
+    unroll = UNROLL["localgs"]
+    assert CHUNK % unroll == 0, "a staged group of pairs must lie within one chunk"
 
     def copy(c):  # chunk c of the tile's records into slot c % 2, if the list reaches it
         @pl.when(start + c * CHUNK < end)
@@ -203,15 +203,10 @@ def _staged_localgs(order_ref, ranges_ref, rec_ref, *refs, config: RasterConfig,
     def pair_alpha(j):
         i = j - start
         rec = [smem[(i // CHUNK) % 2, i % CHUNK, c] for c in range(REC)]
-        alpha, hit, _ = _record_alpha(rec, frame, pixel, config)
-        if config.warp_cull:
-            hit = hit & ((rec[REC - 1].astype(jnp.int32) & bit) != 0)
-        return alpha, hit, rec[7:10], rec[10]
+        return evaluate(rec, rec[REC - 1].astype(jnp.int32))
 
     copy(0)
-    store(out_refs, tile, wg,
-          _staged_loop(start, end, WG_LANES, dt, lambda j: j, pair_alpha, config, unroll,
-                       stage=(begin, finish)))
+    return (lambda j: j), pair_alpha, (begin, finish)
 
 
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,

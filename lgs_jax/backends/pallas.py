@@ -351,7 +351,7 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
             kernel = functools.partial(mosaic.localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
             outs = mosaic.call(kernel, n_tiles, dt, (order, mosaic.ranges(bins), masks, records),
-                               interpreted(), mosaic.staged_scratch(dt) if mosaic.staged(dt) else ())
+                               interpreted(), mosaic.localgs_scratch(dt))
         else:
             kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
