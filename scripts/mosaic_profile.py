@@ -1,7 +1,9 @@
-"""Mosaic GPU Local-GS forward kernel (lgs_jax.backends.mosaic) per CHUNK (records staged in
-shared memory by TMA, 0: read from global memory) against the Triton kernel, kernel calls alone
-from the same binned inputs, all variants alternating in each of 30 rounds (median ms), H100.
-(Earlier runs of this script swept UNROLL and GROUP_SKIP: bench_results/mosaic_profile_h100.log.)
+"""Mosaic GPU forward kernels (lgs_jax.backends.mosaic) per block size (FORWARD_PIXELS: 128 = half
+a tile per warpgroup, 256 = the whole tile, two pixels per lane), CHUNK (Local-GS records staged
+in shared memory by TMA; 0: read from global memory) and UNROLL, against the Triton Local-GS
+kernel: kernel calls alone from the same binned inputs, all variants alternating in each of 30
+rounds (median ms), H100. Each variant's outputs are compared with the default layout's.
+(Earlier runs swept UNROLL and GROUP_SKIP alone: bench_results/mosaic_profile_h100.log.)
 
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/mosaic_profile.py [DATA]
 """
@@ -24,7 +26,12 @@ data = sys.argv[1] if len(sys.argv) > 1 else "carry/data"
 specs = [f"guitar={data}/guitar/guitar.ply:{data}/guitar/orbit_cameras.json@1280x720",
          f"guitar4k={data}/guitar/guitar.ply:{data}/guitar/orbit_cameras.json@3840x2160",
          f"lego={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@800x800",
+         f"lego3200={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@3200x3200",
          "synthetic:1000000@1280x720"]
+# (kernel, FORWARD_PIXELS, CHUNK, UNROLL)
+VARIANTS = [("localgs", 128, 0, 8), ("localgs", 128, 64, 8), ("localgs", 256, 0, 8),
+            ("localgs", 256, 64, 8), ("localgs", 256, 64, 4), ("vanilla", 128, 0, 8),
+            ("vanilla", 256, 0, 8)]
 print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}")
 for spec in specs:
     case = parse_scene(spec)
@@ -43,19 +50,26 @@ for spec in specs:
     k = functools.partial(pallas._localgs_kernel, **kw)
     fns["triton localgs"] = (jax.jit(lambda *a, k=k: pallas._call(
         k, tx * ty * 8, 32, 1, jnp.float32, a)), (order, b.tile_start, b.tile_end, masks, rec))
-    for chunk in (0, 64):
-        mosaic.CHUNK = chunk
-        k = functools.partial(mosaic.localgs_kernel, **kw)
-        scratch = mosaic.localgs_scratch(jnp.float32)
+    gauss_rows = jax.jit(pallas.gaussian_rows)(p)
+    for kind, px, chunk, unroll in VARIANTS:
+        mosaic.FORWARD_PIXELS, mosaic.CHUNK, mosaic.UNROLL[kind] = px, chunk, unroll
+        if kind == "localgs":
+            k = functools.partial(mosaic.localgs_kernel, **kw)
+            a, scratch = (order, ranges, masks, rec), mosaic.localgs_scratch(jnp.float32)
+        else:
+            k = functools.partial(mosaic.vanilla_kernel, **kw)
+            a, scratch = (order, ranges, b.gauss, gauss_rows), ()
         f = jax.jit(lambda *a, k=k, s=scratch: mosaic.call(k, tx * ty, jnp.float32, a, False, s))
-        f = f.lower(order, ranges, masks, rec).compile()  # compiled with this variant
-        fns[f"mosaic localgs chunk={chunk}"] = (f, (order, ranges, masks, rec))
-    ref = jax.block_until_ready(fns["mosaic localgs chunk=0"][0](*fns["mosaic localgs chunk=0"][1]))
+        fns[f"{kind} px={px} chunk={chunk} unroll={unroll}"] = (f.lower(*a).compile(), a)
+    mosaic.FORWARD_PIXELS, mosaic.CHUNK, mosaic.UNROLL = 128, 64, {"localgs": 8, "vanilla": 8}
+    refs = {}
     for name, (f, a) in fns.items():
-        if name.startswith("mosaic"):
-            out = f(*a)
-            diff = max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(out[:5], ref[:5]))
-            print(f"{case.name:>9s} {name:<28s} max |diff| vs chunk=0: {diff:.1e}", flush=True)
+        if name.startswith("triton"):
+            continue
+        out = jax.block_until_ready(f(*a))
+        ref = refs.setdefault(name.split()[0], out)
+        diff = max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(out[:5], ref[:5]))
+        print(f"{case.name:>9s} {name:<36s} max |diff| vs first: {diff:.1e}", flush=True)
     times = {name: [] for name in fns}
     for name, (f, a) in fns.items():
         jax.block_until_ready(f(*a))
@@ -65,4 +79,4 @@ for spec in specs:
             jax.block_until_ready(f(*a))
             times[name].append(1e3 * (time.perf_counter() - t0))
     for name, t in times.items():
-        print(f"{case.name:>9s} {name:<28s} {statistics.median(t):7.3f} ms", flush=True)
+        print(f"{case.name:>9s} {name:<36s} {statistics.median(t):7.3f} ms", flush=True)

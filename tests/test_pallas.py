@@ -237,7 +237,10 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype):
                             (masks, records[:, :7] if config.hoist else None), cot)
     got, want = np.asarray(got), np.asarray(want)
     assert np.all(np.isfinite(got))
-    tol = 1e-9 if dtype == np.float64 else 1e-4
+    # float32 on the GPU: the two compilers' rounding (FMA contraction, exp) meets the walk's
+    # division by 1 − α (α up to 0.99): seed 5038 ("fast", Mosaic) differs by 1.9e-4 of max |∂|,
+    # where the float32 walk itself is 1.5e-4 off the float64 walk (scripts/backward_error.py).
+    tol = 1e-9 if dtype == np.float64 else 1e-4 if jax.default_backend() == "cpu" else 1e-3
     np.testing.assert_allclose(got, want, rtol=0, atol=tol * max(np.abs(want).max(), 1.0))
     # Same Gaussians get gradient (float64: no rounding to zero by chance).
     if dtype == np.float64:

@@ -57,8 +57,11 @@ from ..warp_masks import STRIPS
 
 WG_LANES = 128  # a Mosaic GPU (Pallas) thread: one warpgroup
 WARPGROUPS = TILE * TILE // WG_LANES
+# forward: pixels per one-warpgroup block (128: a half tile, one pixel per lane, two blocks per
+# tile; 256: the whole tile, two pixels per lane, one block; module docstring)
+FORWARD_PIXELS = 128
 UNROLL = {"localgs": 8, "vanilla": 8}  # pairs staged per iteration (scripts/mosaic_profile.py)
-CHUNK = 0  # Local-GS: records per TMA copy into shared memory (0: none; module docstring)
+CHUNK = 64  # Local-GS: records per TMA copy into shared memory (0: none; module docstring)
 GROUP_SKIP = False  # Local-GS: branch around a staged group none of the warpgroup's strips takes
 
 
@@ -75,15 +78,16 @@ def ranges(bins):
 
 
 def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
-    """Run `kernel(*refs)` on a (n_tiles, WARPGROUPS) grid of one-warpgroup blocks (axes "tile"
-    and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair; then `scratch` refs."""
+    """Run `kernel(*refs)` on a (n_tiles, 256 / FORWARD_PIXELS) grid of one-warpgroup blocks
+    (axes "tile" and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair; then
+    `scratch` refs."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
     out = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), dt)
     stop = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), jnp.int32)
 
     return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
-                        grid=(n_tiles, WARPGROUPS), grid_names=("tile", "wg"),
+                        grid=(n_tiles, TILE * TILE // FORWARD_PIXELS), grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name=kernel.func.__name__)(*args)
 
@@ -107,24 +111,25 @@ def localgs_scratch(dt):
     return (plgpu.SMEM((2, CHUNK, REC), dt), plgpu.Barrier(num_barriers=2))
 
 
-def lanes(wg):
-    """Tile pixel index of each lane of warpgroup `wg` and its strip (0..7)."""
-    k = lax.broadcasted_iota(jnp.int32, (WG_LANES,), 0) + wg * WG_LANES
+def lanes(wg, pixels: int = WG_LANES):
+    """Tile pixel indices of block `wg` of `pixels` pixels (a warpgroup array: one or two per
+    lane) and their strips (0..7)."""
+    k = lax.broadcasted_iota(jnp.int32, (pixels,), 0) + wg * pixels
     return k, k // (2 * TILE)
 
 
 def store(refs, tile, wg, outputs):
-    """Write this warpgroup's half of row `tile` of the (n_tiles, 256) outputs."""
+    """Write block `wg`'s FORWARD_PIXELS pixels of row `tile` of the (n_tiles, 256) outputs."""
     from jax.experimental import pallas as pl
 
     for ref, x in zip(refs, outputs):
-        ref[tile, pl.ds(wg * WG_LANES, WG_LANES)] = x.astype(ref.dtype)
+        ref[tile, pl.ds(wg * FORWARD_PIXELS, FORWARD_PIXELS)] = x.astype(ref.dtype)
 
 
-def strip_bits(wg):
-    """The mask bits of warpgroup `wg`'s four strips (for the group-skip branch)."""
-    per_wg = STRIPS // WARPGROUPS
-    return jnp.left_shift(jnp.int32((1 << per_wg) - 1), wg * per_wg)
+def strip_bits(wg, pixels: int = WG_LANES):
+    """The mask bits of the strips of block `wg` of `pixels` pixels (a uniform branch's test)."""
+    per_block = pixels // (2 * TILE)
+    return jnp.left_shift(jnp.int32((1 << per_block) - 1), wg * per_block)
 
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
@@ -138,7 +143,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
-    k, strip = lanes(wg)
+    k, strip = lanes(wg, FORWARD_PIXELS)
     frame, pixel = _frame(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
 
@@ -159,12 +164,12 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
         def pair_alpha(fetched):
             return evaluate([rec_ref[fetched[0], c] for c in range(REC - 1)], fetched[1])
 
-        mine = strip_bits(wg)
+        mine = strip_bits(wg, FORWARD_PIXELS)
         take = ((lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull and GROUP_SKIP
                 else None)
         stage = None
-    store(out_refs, tile, wg, _staged_loop(start, end, WG_LANES, dt, fetch, pair_alpha, config,
-                                           UNROLL["localgs"], take, stage))
+    store(out_refs, tile, wg, _staged_loop(start, end, FORWARD_PIXELS, dt, fetch, pair_alpha,
+                                           config, UNROLL["localgs"], take, stage))
 
 
 def _smem_records(rec_ref, smem, barriers, start, end, evaluate):
@@ -217,11 +222,12 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
     dt = rows_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
-    k, _ = lanes(wg)
+    k, _ = lanes(wg, FORWARD_PIXELS)
     _, pixel = _frame(tile, k, tiles_x, config, dt)
     fetch, pair_alpha = vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
-    store(out_refs, tile, wg, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], WG_LANES, dt,
-                                           fetch, pair_alpha, config, UNROLL["vanilla"]))
+    store(out_refs, tile, wg, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1],
+                                           FORWARD_PIXELS, dt, fetch, pair_alpha, config,
+                                           UNROLL["vanilla"]))
 
 
 def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,

@@ -78,7 +78,7 @@ GRAD_VALUES = 11  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂
 GRAD_COLUMNS = 16  # the Triton kernel's row: GRAD_VALUES padded to a power of two
 KERNELS = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
 # config.kernel="auto": the faster implementation per kernel on the H100 (BENCHMARKS.md §6)
-IMPL = {"localgs": "triton", "vanilla": "mosaic", "backward": "mosaic"}
+IMPL = {"localgs": "mosaic", "vanilla": "mosaic", "backward": "mosaic"}
 
 
 def interpreted() -> bool:
