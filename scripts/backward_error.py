@@ -32,11 +32,12 @@ def grads(seed, config, dtype, kernel=None):
     rng = np.random.default_rng(seed % 2**16)
     cot = tuple(rng.normal(size=x.shape).astype(np.float64).astype(dtype)
                 for x in (state.color, state.trans, state.depth))
-    walk = np.asarray(tiles._gradients(*args, state.trans, stop_at,
-                                       (masks, records[:, :7] if config.hoist else None), cot))
+    hoisted = records[:, :7] if config.hoist else None
+    walk = np.asarray(tiles._gradients(*args, state.trans, stop_at, (masks, hoisted), cot))
     if kernel is None:
         return walk
-    return np.asarray(pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)), walk
+    got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
+    return np.asarray(got), walk
 
 
 seeds = [int(s) for s in sys.argv[1:]] or [5038]

@@ -99,7 +99,7 @@ MOSAIC = {**{n: ("pallas", c) for n, c in LOCALGS.items()},
 @settings(max_examples=3)  # interpret mode: one program at a time
 @given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
 def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
-    """The Mosaic GPU forward kernels (a warpgroup per half tile) run the Triton kernels'
+    """The Mosaic GPU forward kernels (a warpgroup per tile or half tile) run the Triton kernels'
     arithmetic in the same order with exact blending: the same image, alpha, depth and stop
     pairs, bit for bit in interpret mode; on the GPU, float64 to 1e-9 and float32 within the
     float32 tolerance of the other kernels (the compilers' exp and multiply-add contraction
@@ -123,15 +123,17 @@ def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
                                 what=field)
 
 
-@pytest.mark.parametrize("chunk", [8, 16])
+@pytest.mark.parametrize("chunk,pixels", [(8, 256), (16, 128)])
 @settings(max_examples=3)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_mosaic_staged_records_equal_unstaged(chunk, seed):
-    """The Mosaic GPU Local-GS kernel with float32 records staged through shared memory, with
-    chunks small enough that every tile list of the test scenes spans several (chunk
-    boundaries, partial last chunks, the copy still in flight at an early exit), equals the
-    unstaged kernel bit for bit; an empty scene (no pair anywhere) renders the background.
-    float64 records are never staged (no 64-bit float TMA)."""
+def test_mosaic_layouts_equal(chunk, pixels, seed):
+    """The Mosaic GPU forward kernels in each layout (`mosaic.BLOCK_PIXELS`: half-tile or
+    whole-tile warpgroup blocks; Local-GS float32 records staged through shared memory, with
+    chunks small enough that every tile list of the test scenes spans several: chunk
+    boundaries, partial last chunks, the copy still in flight at an early exit) equal the
+    simplest layout (half tiles, records read from global memory) bit for bit; an empty scene
+    (no pair anywhere) renders the background. float64 records are never staged (no 64-bit
+    float TMA)."""
     from lgs_jax.backends import mosaic
 
     dtype = np.float32
@@ -140,20 +142,23 @@ def test_mosaic_staged_records_equal_unstaged(chunk, seed):
     empty = scenes.cast(scenes.scene(seed, kinds=("behind", "invalid")), dtype)
     cam = scenes.camera(dtype=dtype)
     config = C(kernel="mosaic")
-    outs, default = {}, mosaic.CHUNK
+    outs, default = {}, (mosaic.CHUNK, mosaic.BLOCK_PIXELS["forward"])
     try:
-        for c in (0, chunk):
-            jax.clear_caches()  # `render`'s traces are cached per config: retrace with CHUNK c
-            mosaic.CHUNK = c
-            outs[c] = scenes.render(g, cam, "pallas", config)
-            background = scenes.render(empty, cam, "pallas", config).image
-            np.testing.assert_array_equal(background, np.broadcast_to(
-                np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
+        for layout in ((0, 128), (chunk, pixels)):
+            jax.clear_caches()  # `render`'s traces are cached per config: retrace with `layout`
+            mosaic.CHUNK, mosaic.BLOCK_PIXELS["forward"] = layout
+            for backend in ("pallas", "pallas_vanilla"):
+                outs[layout, backend] = scenes.render(g, cam, backend, config)
+                background = scenes.render(empty, cam, backend, config).image
+                np.testing.assert_array_equal(background, np.broadcast_to(
+                    np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
     finally:
-        mosaic.CHUNK = default
+        mosaic.CHUNK, mosaic.BLOCK_PIXELS["forward"] = default
         jax.clear_caches()
-    for field in ("image", "alpha", "depth"):
-        np.testing.assert_array_equal(getattr(outs[chunk], field), getattr(outs[0], field))
+    for backend, field in itertools.product(("pallas", "pallas_vanilla"),
+                                            ("image", "alpha", "depth")):
+        np.testing.assert_array_equal(getattr(outs[(chunk, pixels), backend], field),
+                                      getattr(outs[(0, 128), backend], field))
 
 
 @pytest.mark.parametrize("convention,kernel", list(itertools.product(["3dgs", "gsplat"],
@@ -162,8 +167,8 @@ def test_mosaic_staged_records_equal_unstaged(chunk, seed):
 @given(seed=st.integers(0, 2**32 - 1))
 def test_fast_blending_kernel_stays_within_its_bound(convention, kernel, seed):
     """|fast − exact| <= 1e-4/(1 − cap)·max|rgb − background| (lgs_jax.backends.tiles); the
-    Mosaic kernel stops per half tile instead of per strip, which blends only more of the
-    remaining T < 1e-4 and stays within the same bound."""
+    Mosaic kernel stops per block (a tile or half tile) instead of per strip, which blends only
+    more of the remaining T < 1e-4 and stays within the same bound."""
     g = scenes.scene(seed, kinds=("normal", "opaque", "layers", "tiny"))
     cam = scenes.camera(dtype=np.float64)
     bg = np.array(scenes.BACKGROUND)
@@ -208,18 +213,20 @@ BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "loc
             "fast": C(blend="fast"), "fast_gsplat": C("gsplat", blend="fast")}
 
 
-@pytest.mark.parametrize("name,kernel", [(n, "triton") for n in BACKWARD]
-                         + [(n, "mosaic") for n in ("local_gs", "difference", "fast", "gsplat")])
+@pytest.mark.parametrize("name,kernel,pixels", [(n, "triton", None) for n in BACKWARD]
+                         + [(n, "mosaic", 256) for n in ("local_gs", "difference", "fast",
+                                                         "gsplat")]
+                         + [("local_gs", "mosaic", 128)])
 @settings(max_examples=4)  # interpret mode: the kernels run serially, one program at a time
 @given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float64, np.float32]))
-def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype):
-    """The backward kernel (Triton: a program per tile; Mosaic GPU: a warpgroup per half tile)
-    against its plain-jnp counterpart (`tiles._gradients`: the same walk in XLA) on the same
+def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels):
+    """The backward kernel (Triton: a program per tile; Mosaic GPU: a warpgroup per tile or
+    half tile, `mosaic.BLOCK_PIXELS`) against its plain-jnp counterpart (`tiles._gradients`: the same walk in XLA) on the same
     residuals (this kernel's forward: final T, stop pairs, masks, records) and random
     cotangents, both blending modes (`fast` has no reference image to compare with: this is
     where its backward is checked)."""
     from lgs_jax import binning
-    from lgs_jax.backends import pallas, tiles
+    from lgs_jax.backends import mosaic, pallas, tiles
 
     config = dataclasses.replace(BACKWARD[name], kernel=kernel)
     g = scenes.cast(scenes.scene(seed), dtype)
@@ -227,12 +234,21 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype):
     p = project(g, cam)
     bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
     args = (p, bins, cam.width, cam.height, config)
-    state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
+    default = dict(mosaic.BLOCK_PIXELS)
+    try:
+        if pixels:
+            jax.clear_caches()  # traces are cached: retrace with these block sizes
+            mosaic.BLOCK_PIXELS.update(forward=pixels, backward=pixels)
+        state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
+        rng = np.random.default_rng(seed % 2**16)
+        cot = tuple(rng.normal(size=x.shape).astype(dtype)
+                    for x in (state.color, state.trans, state.depth))
+        got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
+    finally:
+        mosaic.BLOCK_PIXELS.update(default)
+        if pixels:
+            jax.clear_caches()
     masks, records, _ = saved
-    rng = np.random.default_rng(seed % 2**16)
-    cot = tuple(rng.normal(size=x.shape).astype(dtype)
-                for x in (state.color, state.trans, state.depth))
-    got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
     want = tiles._gradients(*args, state.trans, stop_at,
                             (masks, records[:, :7] if config.hoist else None), cot)
     got, want = np.asarray(got), np.asarray(want)
@@ -250,27 +266,36 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype):
 F32, F64 = np.float32, np.float64
 
 
-@pytest.mark.parametrize("backend,config,chunk,dtype",
-                         [("pallas", c, 0, F32) for c in LOCALGS.values()]
-                         + [("pallas", C(blend="fast"), 0, F32), ("pallas_vanilla", C(), 0, F32)]
-                         + [("pallas", C(kernel="mosaic"), 0, F32),
-                            ("pallas", C(kernel="mosaic", blend="fast"), 0, F32),
-                            ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0, F32),
-                            ("pallas_vanilla", C(kernel="mosaic"), 0, F32),
-                            ("pallas", C(kernel="mosaic"), 64, F32),
-                            ("pallas", C(kernel="mosaic", blend="fast"), 64, F32),
-                            ("pallas", C(kernel="mosaic"), 64, F64)], ids=str)
-def test_kernels_lower_for_the_gpu(backend, config, chunk, dtype, monkeypatch):
+M = C(kernel="mosaic")
+
+
+@pytest.mark.parametrize("backend,config,chunk,pixels,dtype",
+                         [("pallas", c, 0, 256, F32) for c in LOCALGS.values()]
+                         + [("pallas", C(blend="fast"), 0, 256, F32),
+                            ("pallas_vanilla", C(), 0, 256, F32)]
+                         + [("pallas", M, 0, 256, F32),
+                            ("pallas", C(kernel="mosaic", blend="fast"), 0, 256, F32),
+                            ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0, 256,
+                             F32),
+                            ("pallas_vanilla", M, 0, 256, F32),
+                            ("pallas", M, 64, 256, F32),
+                            ("pallas", C(kernel="mosaic", blend="fast"), 64, 256, F32),
+                            ("pallas", M, 64, 256, F64),
+                            ("pallas", M, 0, 128, F32), ("pallas", M, 64, 128, F32),
+                            ("pallas_vanilla", M, 0, 128, F32)], ids=str)
+def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkeypatch):
     """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering
     (to Triton IR, for an H100) or the Mosaic GPU lowering (records read from global memory,
-    or staged in shared memory by TMA: `chunk`), so CI catches what the GPU would reject at
-    lowering time (e.g. Mosaic GPU's missing bool-vector negation, or a float64 TMA copy)."""
+    or staged in shared memory by TMA: `chunk`; blocks of `pixels`), so CI catches what the GPU
+    would reject at lowering time (e.g. Mosaic GPU's missing bool-vector negation, or a float64
+    TMA copy)."""
     from jax._src.pallas.triton import gpu_info
 
     from lgs_jax.backends import mosaic
 
     jax.clear_caches()  # `render`'s traces are cached per config: retrace with GPU lowering
     monkeypatch.setattr(mosaic, "CHUNK", chunk)
+    monkeypatch.setattr(mosaic, "BLOCK_PIXELS", {"forward": pixels, "backward": pixels})
     monkeypatch.setenv("LGS_JAX_PALLAS_LOWER", "gpu")
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))

@@ -4,45 +4,51 @@
 (`_record_alpha`, `_blend`, `_staged_loop`, `_backward_step`), and picks between the two
 implementations (`pallas.IMPL`).
 
-Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup; a 16x16 tile is two of them,
-each owning 8 rows, i.e. four 16x2 strips, one per hardware warp (lane l of half w is tile pixel
-128·w + l; a warp's 32 lanes are one strip). Each half tile is its own one-warpgroup block
-(grid (tiles in longest-list-first order, 2)): it walks the tile's pairs and stops as soon as
-its 128 pixels are done. (Two warpgroups in one block with independent early exits crashed on
-the H100 with CUDA_ERROR_ILLEGAL_INSTRUCTION on real scenes: the loop's cross-warp reductions
-synchronise the block, so both warpgroups must run the same number of iterations.)
+Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup, and each block is one
+warpgroup on a grid (tiles in longest-list-first order, blocks per tile): `BLOCK_PIXELS` picks,
+per kernel, 128 pixels per block (a half tile of four 16x2 strips, one per hardware warp: lane l
+of block w is tile pixel 128·w + l) or 256 (the whole tile in one block, each lane holding two
+adjacent pixels of one row: Mosaic GPU's strided layout of a (256,) array, so a hardware warp
+holds two strips). A block walks its tile's pairs and stops as soon as its pixels are done.
+(Two warpgroups in one block with independent early exits crashed on the H100 with
+CUDA_ERROR_ILLEGAL_INSTRUCTION on real scenes: the loop's cross-warp reductions synchronise the
+block; two pixels per lane avoid that and share every record load and loop step between them.)
+H100 (BENCHMARKS.md §6): 256 for both kernels — the forward kernel alone 0.68 vs 0.82 ms at
+guitar 4K, 1.12 vs 1.36 at lego 3200x3200, 0.79 vs 0.94 on 1M Gaussians, but 0.61 vs 0.55 at
+guitar 720p; rasterization forward+backward 3.62 vs 4.43 ms (guitar 4K), 7.25 vs 9.41 (1M),
+2.13 vs 2.07 (lego 800), 4.67 vs 3.68 (guitar 720p, where the backward's per-block skip of
+culled pairs covers four strips instead of eight).
 
 Culling. The strip-mask bit of a pair is tested per lane (each lane's strip); as a lane
-predicate it is uniform within each warp, so the hardware never diverges inside a warp, but
-Pallas:MGPU has no way to *skip* work
-per warp inside a warpgroup (`plgpu.warp_map` runs scalar per-warp code, not array code), so
-the α of a pair whose bit is clear for some of the warpgroup's strips is still computed there.
-Branching around a staged group with no bit set in any of the warpgroup's strips (GROUP_SKIP)
-measured slower than predicating (H100: 1.10 vs 0.83 ms on guitar 720p at UNROLL 8), so the
-kernel stages 8 pairs per iteration and lets the lane predicates do the culling.
+predicate it is uniform within each strip's lanes, so the hardware never diverges inside one,
+but Pallas:MGPU has no way to *skip* work per warp inside a warpgroup (`plgpu.warp_map` runs
+scalar per-warp code, not array code), so the α of a pair whose bit is clear for some of the
+block's strips is still computed there. Branching around a staged group with no bit set in any
+of the block's strips (GROUP_SKIP) measured slower than predicating (H100: 1.10 vs 0.83 ms on
+guitar 720p at UNROLL 8, 128-pixel blocks), so the kernel stages 8 pairs per iteration and lets
+the lane predicates do the culling.
 
-Staging (CHUNK > 0, off by default; float32 only: TMA has no 64-bit float type). The
-Local-GS kernel can stage the tile's pair records in shared memory: CHUNK records per TMA copy,
-double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only where the
-list reaches it, and the block waits for the one in flight before it exits), the strip mask
-read from the record's last column. H100, kernel only: 1.24–1.80x faster than the Triton kernel
-at 720p/800, about even at 4K and on 1M Gaussians (1.04x, 0.98x), and bit for bit the unstaged
-kernel's output on four real scenes (BENCHMARKS.md §6). It stays off until the GPU test suite
-has run with it (the one run, before the float32 guard, failed on float64).
+Staging (CHUNK > 0; float32 only: TMA has no 64-bit float type). The Local-GS kernel stages the
+tile's pair records in shared memory: CHUNK records per TMA copy, double-buffered (chunk c + 1
+in flight while chunk c is blended; a copy is issued only where the list reaches it, and the
+block waits for the one in flight before it exits), the strip mask read from the record's last
+column. H100, kernel only: 1.2–1.8x faster than the Triton kernel at 720p/800 with 128-pixel
+blocks, and bit for bit the unstaged kernel's output on five real and synthetic scenes
+(BENCHMARKS.md §6).
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
 multiply-add contraction differ by ulps); both record per-pixel stop pairs for the backward.
 
-Backward. The same half-tile blocks walk the tile's pairs back to front from the last pair any
-of their 128 pixels blended (`pallas._backward_step`), and reduce each pair's 11 gradient terms
-over their 128 pixels (11 warpgroup reductions: Mosaic GPU reduces a warpgroup array to a
-scalar, but has no multi-column cross-warp reduction like the Triton kernel's (256, 16) one).
-A pair none of the half tile's four strips takes (mask bits clear) is skipped by one uniform
-branch: unlike the forward's staged groups, a backward step is long enough for the branch to
-pay (H100, BENCHMARKS.md §6: 3.84 vs 5.01 ms rasterization fwd+bwd on guitar 720p). Each half
-writes its own row per pair (`backward_rows` masks the pairs it did not visit and adds the two
-halves): one writer per row, no atomics, deterministic.
+Backward. The same blocks walk the tile's pairs back to front from the last pair any of their
+pixels blended (`pallas._backward_step`), and reduce each pair's 11 gradient terms over their
+pixels (11 warpgroup reductions: Mosaic GPU reduces a warpgroup array to a scalar, but has no
+multi-column cross-warp reduction like the Triton kernel's (256, 16) one). A pair none of the
+block's strips takes (mask bits clear) is skipped by one uniform branch: unlike the forward's
+staged groups, a backward step is long enough for the branch to pay (H100, BENCHMARKS.md §6:
+3.84 vs 5.01 ms rasterization fwd+bwd on guitar 720p). Each block writes its own row per pair
+(`backward_rows` masks the pairs it did not visit and adds a tile's blocks): one writer per
+row, no atomics, deterministic.
 """
 
 from __future__ import annotations
@@ -55,11 +61,10 @@ from ..binning import TILE
 from ..config import RasterConfig
 from ..warp_masks import STRIPS
 
-WG_LANES = 128  # a Mosaic GPU (Pallas) thread: one warpgroup
-WARPGROUPS = TILE * TILE // WG_LANES
-# forward: pixels per one-warpgroup block (128: a half tile, one pixel per lane, two blocks per
-# tile; 256: the whole tile, two pixels per lane, one block; module docstring)
-FORWARD_PIXELS = 128
+# Pixels per one-warpgroup block (a Mosaic GPU thread is a 128-lane warpgroup): 128 = a half
+# tile, one pixel per lane, two blocks per tile; 256 = the whole tile, two pixels per lane
+# (module docstring: measured on the H100 with scripts/mosaic_profile.py, scripts/backward_ab.py).
+BLOCK_PIXELS = {"forward": 256, "backward": 256}
 UNROLL = {"localgs": 8, "vanilla": 8}  # pairs staged per iteration (scripts/mosaic_profile.py)
 CHUNK = 64  # Local-GS: records per TMA copy into shared memory (0: none; module docstring)
 GROUP_SKIP = False  # Local-GS: branch around a staged group none of the warpgroup's strips takes
@@ -78,8 +83,8 @@ def ranges(bins):
 
 
 def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
-    """Run `kernel(*refs)` on a (n_tiles, 256 / FORWARD_PIXELS) grid of one-warpgroup blocks
-    (axes "tile" and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair; then
+    """Run the forward `kernel(*refs)` on a (n_tiles, blocks per tile) grid of one-warpgroup
+    blocks (axes "tile" and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair; then
     `scratch` refs."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
@@ -87,7 +92,7 @@ def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
     stop = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), jnp.int32)
 
     return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
-                        grid=(n_tiles, TILE * TILE // FORWARD_PIXELS), grid_names=("tile", "wg"),
+                        grid=(n_tiles, blocks("forward")), grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name=kernel.func.__name__)(*args)
 
@@ -111,24 +116,31 @@ def localgs_scratch(dt):
     return (plgpu.SMEM((2, CHUNK, REC), dt), plgpu.Barrier(num_barriers=2))
 
 
-def lanes(wg, pixels: int = WG_LANES):
-    """Tile pixel indices of block `wg` of `pixels` pixels (a warpgroup array: one or two per
-    lane) and their strips (0..7)."""
-    k = lax.broadcasted_iota(jnp.int32, (pixels,), 0) + wg * pixels
-    return k, k // (2 * TILE)
+def blocks(kernel: str) -> int:
+    """One-warpgroup blocks per tile of the "forward" or "backward" kernels."""
+    return TILE * TILE // BLOCK_PIXELS[kernel]
 
 
-def store(refs, tile, wg, outputs):
-    """Write block `wg`'s FORWARD_PIXELS pixels of row `tile` of the (n_tiles, 256) outputs."""
+def lanes(wg, kernel: str):
+    """Tile pixel indices of block `wg` of `kernel` (a warpgroup array of BLOCK_PIXELS[kernel]
+    pixels: one or two per lane) and their strips (0..7), and the block's slice of a tile row."""
     from jax.experimental import pallas as pl
 
+    n = BLOCK_PIXELS[kernel]
+    k = lax.broadcasted_iota(jnp.int32, (n,), 0) + wg * n
+    return k, k // (2 * TILE), pl.ds(wg * n, n)
+
+
+def store(refs, tile, cols, outputs):
+    """Write a block's pixels (`cols`, from `lanes`) of row `tile` of the (n_tiles, 256)
+    outputs."""
     for ref, x in zip(refs, outputs):
-        ref[tile, pl.ds(wg * FORWARD_PIXELS, FORWARD_PIXELS)] = x.astype(ref.dtype)
+        ref[tile, cols] = x.astype(ref.dtype)
 
 
-def strip_bits(wg, pixels: int = WG_LANES):
-    """The mask bits of the strips of block `wg` of `pixels` pixels (a uniform branch's test)."""
-    per_block = pixels // (2 * TILE)
+def strip_bits(wg, kernel: str):
+    """The mask bits of the strips of block `wg` of `kernel` (a uniform branch's test)."""
+    per_block = STRIPS // blocks(kernel)
     return jnp.left_shift(jnp.int32((1 << per_block) - 1), wg * per_block)
 
 
@@ -143,7 +155,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
-    k, strip = lanes(wg, FORWARD_PIXELS)
+    k, strip, cols = lanes(wg, "forward")
     frame, pixel = _frame(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
 
@@ -164,12 +176,12 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
         def pair_alpha(fetched):
             return evaluate([rec_ref[fetched[0], c] for c in range(REC - 1)], fetched[1])
 
-        mine = strip_bits(wg, FORWARD_PIXELS)
+        mine = strip_bits(wg, "forward")
         take = ((lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull and GROUP_SKIP
                 else None)
         stage = None
-    store(out_refs, tile, wg, _staged_loop(start, end, FORWARD_PIXELS, dt, fetch, pair_alpha,
-                                           config, UNROLL["localgs"], take, stage))
+    store(out_refs, tile, cols, _staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha,
+                                             config, UNROLL["localgs"], take, stage))
 
 
 def _smem_records(rec_ref, smem, barriers, start, end, evaluate):
@@ -222,36 +234,33 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
     dt = rows_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
-    k, _ = lanes(wg, FORWARD_PIXELS)
+    k, _, cols = lanes(wg, "forward")
     _, pixel = _frame(tile, k, tiles_x, config, dt)
     fetch, pair_alpha = vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
-    store(out_refs, tile, wg, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1],
-                                           FORWARD_PIXELS, dt, fetch, pair_alpha, config,
-                                           UNROLL["vanilla"]))
+    store(out_refs, tile, cols, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1],
+                                             k.shape[0], dt, fetch, pair_alpha, config,
+                                             UNROLL["vanilla"]))
 
 
 def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
                     g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *, config: RasterConfig,
                     tiles_x: int):
     """The backward walk (`pallas._backward_step`) for one warpgroup: rows_ref[wg, j] = pair
-    j's gradient summed over this half tile's pixels, for the pairs before this half's last
-    stop pair (the others are left unwritten; `backward_rows` masks them)."""
-    from jax.experimental import pallas as pl
-
+    j's gradient summed over this block's pixels, for the pairs before the block's last stop
+    pair (the others are left unwritten; `backward_rows` masks them)."""
     from .pallas import GRAD_VALUES, REC, _backward_step, backward_lanes
 
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
-    k, _ = lanes(wg)
-    half = pl.ds(wg * WG_LANES, WG_LANES)
+    k, _, half = lanes(wg, "backward")
     trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
     lane = backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
                           [ref[tile, half] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
                                                        g_d_ref)])
     start = ranges_ref[tile, 0]
     last = jnp.minimum(ranges_ref[tile, 1], jnp.max(stop_at))
-    mine = strip_bits(wg)
+    mine = strip_bits(wg, "backward")
 
     zero_row = [jnp.zeros((), dt)] * GRAD_VALUES
 
@@ -263,7 +272,7 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
 
     def body(i, carry):
         j = last - 1 - i
-        if config.warp_cull:  # a pair none of this half's strips takes: zero row, same carry
+        if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
             sums, carry = lax.cond((mask_ref[j] & mine) != 0, step,
                                    lambda j, carry: (zero_row, carry), j, carry)
         else:
@@ -272,27 +281,28 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
             rows_ref[wg, j, c] = s
         return carry
 
-    zero = jnp.zeros((WG_LANES,), dt)
+    zero = jnp.zeros(k.shape, dt)
     lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
 
 
 def backward_rows(kernel, bins, stop_at, dt, args, interpret: bool):
-    """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, WARPGROUPS)
-    grid: each half tile's rows, zero where that half did not visit the pair (pairs at or after
-    its last stop pair, padding pairs), summed over the two halves in a fixed order."""
+    """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, blocks per
+    tile) grid: each block's rows, zero where that block did not visit the pair (pairs at or
+    after its last stop pair, padding pairs), summed over a tile's blocks in a fixed order."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
 
     from .pallas import GRAD_VALUES
 
     capacity, n_tiles = bins.gauss.shape[0], stop_at.shape[0]
-    out = jax.ShapeDtypeStruct((WARPGROUPS, capacity, GRAD_VALUES), dt)
-    rows = plgpu.kernel(kernel, out_type=out, grid=(n_tiles, WARPGROUPS),
+    n = blocks("backward")
+    out = jax.ShapeDtypeStruct((n, capacity, GRAD_VALUES), dt)
+    rows = plgpu.kernel(kernel, out_type=out, grid=(n_tiles, n),
                         grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name="localgs_backward_mosaic")(*args)
     last = jnp.minimum(bins.tile_end[:, None],
-                       jnp.max(stop_at.reshape(n_tiles, WARPGROUPS, WG_LANES), -1))
+                       jnp.max(stop_at.reshape(n_tiles, n, BLOCK_PIXELS["backward"]), -1))
     tile = jnp.minimum(bins.tile, n_tiles - 1)
     j = jnp.arange(capacity)
-    visited = (bins.tile[None] < n_tiles) & (j[None] < last[tile].T)  # (WARPGROUPS, capacity)
+    visited = (bins.tile[None] < n_tiles) & (j[None] < last[tile].T)  # (blocks, capacity)
     return jnp.sum(jnp.where(visited[..., None], rows, 0), axis=0)
