@@ -1,9 +1,9 @@
-"""Mosaic GPU forward kernels (lgs_jax.backends.mosaic) per block size (BLOCK_PIXELS["forward"]:
-128 = half a tile per warpgroup, 256 = the whole tile, two pixels per lane), CHUNK (Local-GS
-records staged in shared memory by TMA; 0: read from global memory) and UNROLL, against the
-Triton Local-GS kernel: kernel calls alone from the same binned inputs, all variants
-alternating in each of 30 rounds (median ms), H100. Each variant's outputs are compared with
-the first variant's of its kernel. (Earlier runs swept UNROLL and GROUP_SKIP alone:
+"""Mosaic GPU forward kernels (lgs_jax.backends.mosaic) per block size (pixels per warpgroup
+block: 128 = half a tile, 256 = the whole tile, two pixels per lane), CHUNK (Local-GS records
+staged in shared memory by TMA; 0: read from global memory) and UNROLL, against the Triton
+Local-GS kernel: kernel calls alone from the same binned inputs, all variants alternating in
+each of 30 rounds (median ms), H100. Each variant's outputs are compared with the first
+variant's of its kernel. (Earlier runs swept UNROLL and GROUP_SKIP alone:
 bench_results/mosaic_profile_h100.log.)
 
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/mosaic_profile.py [DATA]
@@ -29,11 +29,11 @@ specs = [f"guitar={data}/guitar/guitar.ply:{data}/guitar/orbit_cameras.json@1280
          f"lego={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@800x800",
          f"lego3200={data}/lego_sh3/lego_sh3.ply:{data}/lego_sh3/lego_cameras.json@3200x3200",
          "synthetic:1000000@1280x720"]
-# (kernel, BLOCK_PIXELS["forward"], CHUNK, UNROLL)
+# (kernel, pixels per block, CHUNK, UNROLL)
 VARIANTS = [("localgs", 128, 0, 8), ("localgs", 128, 64, 8), ("localgs", 256, 0, 8),
             ("localgs", 256, 64, 8), ("localgs", 256, 64, 4), ("vanilla", 128, 0, 8),
             ("vanilla", 256, 0, 8)]
-defaults = mosaic.BLOCK_PIXELS["forward"], mosaic.CHUNK, dict(mosaic.UNROLL)
+defaults = mosaic.CHUNK, dict(mosaic.UNROLL)
 print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}")
 for spec in specs:
     case = parse_scene(spec)
@@ -54,16 +54,17 @@ for spec in specs:
         k, tx * ty * 8, 32, 1, jnp.float32, a)), (order, b.tile_start, b.tile_end, masks, rec))
     gauss_rows = jax.jit(pallas.gaussian_rows)(p)
     for kind, px, chunk, unroll in VARIANTS:
-        mosaic.BLOCK_PIXELS["forward"], mosaic.CHUNK, mosaic.UNROLL[kind] = px, chunk, unroll
+        mosaic.CHUNK, mosaic.UNROLL[kind] = chunk, unroll
         if kind == "localgs":
-            k = functools.partial(mosaic.localgs_kernel, **kw)
+            k = functools.partial(mosaic.localgs_kernel, **kw, pixels=px)
             a, scratch = (order, ranges, masks, rec), mosaic.localgs_scratch(jnp.float32)
         else:
-            k = functools.partial(mosaic.vanilla_kernel, **kw)
+            k = functools.partial(mosaic.vanilla_kernel, **kw, pixels=px)
             a, scratch = (order, ranges, b.gauss, gauss_rows), ()
-        f = jax.jit(lambda *a, k=k, s=scratch: mosaic.call(k, tx * ty, jnp.float32, a, False, s))
+        f = jax.jit(lambda *a, k=k, px=px, s=scratch: mosaic.call(k, tx * ty, px, jnp.float32, a,
+                                                                  False, s))
         fns[f"{kind} px={px} chunk={chunk} unroll={unroll}"] = (f.lower(*a).compile(), a)
-    mosaic.BLOCK_PIXELS["forward"], mosaic.CHUNK, mosaic.UNROLL = defaults
+    mosaic.CHUNK, mosaic.UNROLL = defaults
     refs = {}
     for name, (f, a) in fns.items():
         if name.startswith("triton"):

@@ -161,6 +161,17 @@ def test_mosaic_layouts_equal(chunk, pixels, seed):
                                       getattr(outs[(0, 128), backend], field))
 
 
+def test_mosaic_block_pixels_rule(monkeypatch):
+    """Whole-tile blocks from WHOLE_TILE_BLOCKS_FROM tiles on, half tiles below, unless
+    BLOCK_PIXELS fixes a kernel's size."""
+    from lgs_jax.backends import mosaic
+
+    monkeypatch.setattr(mosaic, "BLOCK_PIXELS", {"forward": None, "backward": 256})
+    n = mosaic.WHOLE_TILE_BLOCKS_FROM
+    assert [mosaic.block_pixels("forward", t) for t in (1, n - 1, n)] == [128, 128, 256]
+    assert mosaic.block_pixels("backward", 1) == 256
+
+
 @pytest.mark.parametrize("convention,kernel", list(itertools.product(["3dgs", "gsplat"],
                                                                      ["triton", "mosaic"])))
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
@@ -221,10 +232,10 @@ BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "loc
 @given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float64, np.float32]))
 def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels):
     """The backward kernel (Triton: a program per tile; Mosaic GPU: a warpgroup per tile or
-    half tile, `mosaic.BLOCK_PIXELS`) against its plain-jnp counterpart (`tiles._gradients`: the same walk in XLA) on the same
-    residuals (this kernel's forward: final T, stop pairs, masks, records) and random
-    cotangents, both blending modes (`fast` has no reference image to compare with: this is
-    where its backward is checked)."""
+    half tile, `pixels` per block, forward and backward) against its plain-jnp counterpart
+    (`tiles._gradients`: the same walk in XLA) on the same residuals (this kernel's forward:
+    final T, stop pairs, masks, records) and random cotangents, both blending modes (`fast` has
+    no reference image to compare with: this is where its backward is checked)."""
     from lgs_jax import binning
     from lgs_jax.backends import mosaic, pallas, tiles
 

@@ -5,19 +5,23 @@
 implementations (`pallas.IMPL`).
 
 Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup, and each block is one
-warpgroup on a grid (tiles in longest-list-first order, blocks per tile): `BLOCK_PIXELS` picks,
-per kernel, 128 pixels per block (a half tile of four 16x2 strips, one per hardware warp: lane l
-of block w is tile pixel 128·w + l) or 256 (the whole tile in one block, each lane holding two
+warpgroup on a grid (tiles in longest-list-first order, blocks per tile) of one of two sizes
+(`block_pixels`): 128 pixels (a half tile of four 16x2 strips, one per hardware warp: lane l of
+block w is tile pixel 128·w + l) or 256 (the whole tile in one block, each lane holding two
 adjacent pixels of one row: Mosaic GPU's strided layout of a (256,) array, so a hardware warp
 holds two strips). A block walks its tile's pairs and stops as soon as its pixels are done.
 (Two warpgroups in one block with independent early exits crashed on the H100 with
 CUDA_ERROR_ILLEGAL_INSTRUCTION on real scenes: the loop's cross-warp reductions synchronise the
 block; two pixels per lane avoid that and share every record load and loop step between them.)
-H100 (BENCHMARKS.md §6): 256 for both kernels — the forward kernel alone 0.68 vs 0.82 ms at
-guitar 4K, 1.12 vs 1.36 at lego 3200x3200, 0.79 vs 0.94 on 1M Gaussians, but 0.61 vs 0.55 at
-guitar 720p; rasterization forward+backward 3.62 vs 4.43 ms (guitar 4K), 7.25 vs 9.41 (1M),
-2.13 vs 2.07 (lego 800), 4.67 vs 3.68 (guitar 720p, where the backward's per-block skip of
-culled pairs covers four strips instead of eight).
+Whole tiles win where tiles are many and their lists short, half tiles where lists are long
+(two blocks stop independently; the backward skips the pairs none of a block's four strips
+takes). H100, 256 vs 128 (BENCHMARKS.md §6): the forward kernel alone 0.68 vs 0.82 ms at guitar
+3840x2160 (32,400 tiles), 1.12 vs 1.36 at lego 3200x3200 (40,000), but 0.61 vs 0.55 at guitar
+1280x720 (3,600) and 0.41 vs 0.39 at lego 800x800 (2,500); rasterization forward+backward
+3.62 vs 4.28 ms at guitar 4K but 4.67 vs 3.70 at guitar 720p. Hence the default: whole tiles
+from WHOLE_TILE_BLOCKS_FROM = 8192 tiles on (between the measured sizes; 1920x1080 has 8,160).
+The rule misses one measured case: 1M small synthetic Gaussians at 1280x720, where 256 is
+faster though tiles are few (0.79 vs 0.94 ms forward, 7.25 vs 9.27 ms forward+backward).
 
 Culling. The strip-mask bit of a pair is tested per lane (each lane's strip); as a lane
 predicate it is uniform within each strip's lanes, so the hardware never diverges inside one,
@@ -59,12 +63,12 @@ from jax import lax
 
 from ..binning import TILE
 from ..config import RasterConfig
-from ..warp_masks import STRIPS
 
-# Pixels per one-warpgroup block (a Mosaic GPU thread is a 128-lane warpgroup): 128 = a half
-# tile, one pixel per lane, two blocks per tile; 256 = the whole tile, two pixels per lane
-# (module docstring: measured on the H100 with scripts/mosaic_profile.py, scripts/backward_ab.py).
-BLOCK_PIXELS = {"forward": 256, "backward": 256}
+# Pixels per one-warpgroup block (a Mosaic GPU thread is a 128-lane warpgroup) of the forward
+# and backward kernels: 128 = a half tile, one pixel per lane, two blocks per tile; 256 = the
+# whole tile, two pixels per lane; None = by the image's tile count (`block_pixels`).
+BLOCK_PIXELS = {"forward": None, "backward": None}
+WHOLE_TILE_BLOCKS_FROM = 8192  # tiles (module docstring)
 UNROLL = {"localgs": 8, "vanilla": 8}  # pairs staged per iteration (scripts/mosaic_profile.py)
 CHUNK = 64  # Local-GS: records per TMA copy into shared memory (0: none; module docstring)
 GROUP_SKIP = False  # Local-GS: branch around a staged group none of the warpgroup's strips takes
@@ -82,8 +86,8 @@ def ranges(bins):
     return jnp.stack([bins.tile_start, bins.tile_end], -1)
 
 
-def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
-    """Run the forward `kernel(*refs)` on a (n_tiles, blocks per tile) grid of one-warpgroup
+def call(kernel, n_tiles: int, pixels: int, dt, args, interpret: bool, scratch=()):
+    """Run the forward `kernel(*refs)` on a (n_tiles, 256 / pixels) grid of one-warpgroup
     blocks (axes "tile" and "wg"); outputs (n_tiles, 256): r, g, b, T, D and the stop pair; then
     `scratch` refs."""
     from jax.experimental.pallas import mosaic_gpu as plgpu
@@ -92,7 +96,7 @@ def call(kernel, n_tiles: int, dt, args, interpret: bool, scratch=()):
     stop = jax.ShapeDtypeStruct((n_tiles, TILE * TILE), jnp.int32)
 
     return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
-                        grid=(n_tiles, blocks("forward")), grid_names=("tile", "wg"),
+                        grid=(n_tiles, TILE * TILE // pixels), grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name=kernel.func.__name__)(*args)
 
@@ -116,19 +120,25 @@ def localgs_scratch(dt):
     return (plgpu.SMEM((2, CHUNK, REC), dt), plgpu.Barrier(num_barriers=2))
 
 
-def blocks(kernel: str) -> int:
-    """One-warpgroup blocks per tile of the "forward" or "backward" kernels."""
-    return TILE * TILE // BLOCK_PIXELS[kernel]
+def block_pixels(kernel: str, n_tiles: int) -> int:
+    """Pixels per block of the "forward" or "backward" kernels for an image of `n_tiles` tiles:
+    BLOCK_PIXELS[kernel] if set, else whole tiles (256) from WHOLE_TILE_BLOCKS_FROM tiles on
+    (short lists: one block's per-tile work and record loads serve twice the pixels) and half
+    tiles (128) below (long lists: two blocks stop independently and, in the backward, skip the
+    pairs none of their four strips takes)."""
+    fixed = BLOCK_PIXELS[kernel]
+    if fixed is not None:
+        return fixed
+    return 256 if n_tiles >= WHOLE_TILE_BLOCKS_FROM else 128
 
 
-def lanes(wg, kernel: str):
-    """Tile pixel indices of block `wg` of `kernel` (a warpgroup array of BLOCK_PIXELS[kernel]
-    pixels: one or two per lane) and their strips (0..7), and the block's slice of a tile row."""
+def lanes(wg, pixels: int):
+    """Tile pixel indices of block `wg` of `pixels` pixels (a warpgroup array: one or two per
+    lane) and their strips (0..7), and the block's slice of a tile row."""
     from jax.experimental import pallas as pl
 
-    n = BLOCK_PIXELS[kernel]
-    k = lax.broadcasted_iota(jnp.int32, (n,), 0) + wg * n
-    return k, k // (2 * TILE), pl.ds(wg * n, n)
+    k = lax.broadcasted_iota(jnp.int32, (pixels,), 0) + wg * pixels
+    return k, k // (2 * TILE), pl.ds(wg * pixels, pixels)
 
 
 def store(refs, tile, cols, outputs):
@@ -138,14 +148,14 @@ def store(refs, tile, cols, outputs):
         ref[tile, cols] = x.astype(ref.dtype)
 
 
-def strip_bits(wg, kernel: str):
-    """The mask bits of the strips of block `wg` of `kernel` (a uniform branch's test)."""
-    per_block = STRIPS // blocks(kernel)
+def strip_bits(wg, pixels: int):
+    """The mask bits of the strips of block `wg` of `pixels` pixels (a uniform branch's test)."""
+    per_block = pixels // (2 * TILE)
     return jnp.left_shift(jnp.int32((1 << per_block) - 1), wg * per_block)
 
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
-                   config: RasterConfig, tiles_x: int, last_pair: int):
+                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int):
     """The Local-GS forward (lgs_jax.backends.pallas, module docstring) for one warpgroup;
     `refs` = the six outputs, then `localgs_scratch` (records staged in shared memory) if any."""
     from .pallas import REC, _frame, _record_alpha, _staged_loop
@@ -155,7 +165,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
-    k, strip, cols = lanes(wg, "forward")
+    k, strip, cols = lanes(wg, pixels)
     frame, pixel = _frame(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
 
@@ -176,7 +186,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
         def pair_alpha(fetched):
             return evaluate([rec_ref[fetched[0], c] for c in range(REC - 1)], fetched[1])
 
-        mine = strip_bits(wg, "forward")
+        mine = strip_bits(wg, pixels)
         take = ((lambda fetched: (fetched[1] & mine) != 0) if config.warp_cull and GROUP_SKIP
                 else None)
         stage = None
@@ -227,14 +237,14 @@ def _smem_records(rec_ref, smem, barriers, start, end, evaluate):
 
 
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
-                   config: RasterConfig, tiles_x: int, last_pair: int):
+                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int):
     """The original 3DGS forward (lgs_jax.backends.pallas, module docstring), one warpgroup."""
     from .pallas import _frame, _staged_loop, vanilla_pairs
 
     dt = rows_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
-    k, _, cols = lanes(wg, "forward")
+    k, _, cols = lanes(wg, pixels)
     _, pixel = _frame(tile, k, tiles_x, config, dt)
     fetch, pair_alpha = vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
     store(out_refs, tile, cols, _staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1],
@@ -244,7 +254,7 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
 
 def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
                     g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *, config: RasterConfig,
-                    tiles_x: int):
+                    tiles_x: int, pixels: int):
     """The backward walk (`pallas._backward_step`) for one warpgroup: rows_ref[wg, j] = pair
     j's gradient summed over this block's pixels, for the pairs before the block's last stop
     pair (the others are left unwritten; `backward_rows` masks them)."""
@@ -253,14 +263,14 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
-    k, _, half = lanes(wg, "backward")
+    k, _, half = lanes(wg, pixels)
     trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
     lane = backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
                           [ref[tile, half] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
                                                        g_d_ref)])
     start = ranges_ref[tile, 0]
     last = jnp.minimum(ranges_ref[tile, 1], jnp.max(stop_at))
-    mine = strip_bits(wg, "backward")
+    mine = strip_bits(wg, pixels)
 
     zero_row = [jnp.zeros((), dt)] * GRAD_VALUES
 
@@ -285,7 +295,7 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
 
 
-def backward_rows(kernel, bins, stop_at, dt, args, interpret: bool):
+def backward_rows(kernel, bins, stop_at, pixels: int, dt, args, interpret: bool):
     """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, blocks per
     tile) grid: each block's rows, zero where that block did not visit the pair (pairs at or
     after its last stop pair, padding pairs), summed over a tile's blocks in a fixed order."""
@@ -294,14 +304,14 @@ def backward_rows(kernel, bins, stop_at, dt, args, interpret: bool):
     from .pallas import GRAD_VALUES
 
     capacity, n_tiles = bins.gauss.shape[0], stop_at.shape[0]
-    n = blocks("backward")
+    n = TILE * TILE // pixels
     out = jax.ShapeDtypeStruct((n, capacity, GRAD_VALUES), dt)
     rows = plgpu.kernel(kernel, out_type=out, grid=(n_tiles, n),
                         grid_names=("tile", "wg"),
                         interpret=_interpret_params() if interpret else None,
                         kernel_name="localgs_backward_mosaic")(*args)
     last = jnp.minimum(bins.tile_end[:, None],
-                       jnp.max(stop_at.reshape(n_tiles, n, BLOCK_PIXELS["backward"]), -1))
+                       jnp.max(stop_at.reshape(n_tiles, n, pixels), -1))
     tile = jnp.minimum(bins.tile, n_tiles - 1)
     j = jnp.arange(capacity)
     visited = (bins.tile[None] < n_tiles) & (j[None] < last[tile].T)  # (blocks, capacity)

@@ -328,9 +328,10 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
     if vanilla:
         data = (bins.gauss, gaussian_rows(p))
         if implementation("pallas_vanilla", config) == "mosaic":
+            pixels = mosaic.block_pixels("forward", n_tiles)
             kernel = functools.partial(mosaic.vanilla_kernel, config=config, tiles_x=tiles_x,
-                                       last_pair=last_pair)
-            outs = mosaic.call(kernel, n_tiles, dt, (order, mosaic.ranges(bins)) + data,
+                                       last_pair=last_pair, pixels=pixels)
+            outs = mosaic.call(kernel, n_tiles, pixels, dt, (order, mosaic.ranges(bins)) + data,
                                interpreted())
         else:
             kernel = functools.partial(_vanilla_kernel, config=config, tiles_x=tiles_x,
@@ -348,10 +349,12 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
             strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
         records = pair_records(p, bins, tiles_x, config, masks if config.warp_cull else None)
         if implementation("pallas", config) == "mosaic":
+            pixels = mosaic.block_pixels("forward", n_tiles)
             kernel = functools.partial(mosaic.localgs_kernel, config=config, tiles_x=tiles_x,
-                                       last_pair=last_pair)
-            outs = mosaic.call(kernel, n_tiles, dt, (order, mosaic.ranges(bins), masks, records),
-                               interpreted(), mosaic.localgs_scratch(dt))
+                                       last_pair=last_pair, pixels=pixels)
+            outs = mosaic.call(kernel, n_tiles, pixels, dt,
+                               (order, mosaic.ranges(bins), masks, records), interpreted(),
+                               mosaic.localgs_scratch(dt))
         else:
             kernel = functools.partial(_localgs_kernel, config=config, tiles_x=tiles_x,
                                        last_pair=last_pair)
@@ -472,8 +475,10 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans,
                  g_depth)
     if backward_implementation(config) == "mosaic":
-        kernel = functools.partial(mosaic.backward_kernel, config=config, tiles_x=tiles_x)
-        rows = mosaic.backward_rows(kernel, bins, stop_at, dt,
+        pixels = mosaic.block_pixels("backward", tiles_x * tiles_y)
+        kernel = functools.partial(mosaic.backward_kernel, config=config, tiles_x=tiles_x,
+                                   pixels=pixels)
+        rows = mosaic.backward_rows(kernel, bins, stop_at, pixels, dt,
                                     (order, mosaic.ranges(bins), masks, records) + lane_rows,
                                     interpreted())
     else:
