@@ -58,19 +58,36 @@ def passes(power, alpha):
     return (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, alpha.dtype))
 
 
+def blend_weights(trans, alpha, hit, config: RasterConfig):
+    """The blending rule of one Gaussian at pixels with transmittance T: (w, new T, stopped),
+    with C += rgb·w, D += z·w by the caller. `hit`: the Gaussian passes the alpha test there
+    (and, in exact blending, the pixel is not done). Every backend blends through this.
+
+    exact (the contract): test_T = T·(1 − α); a hit whose test_T passes the stop test ends the
+           pixel unblended (stopped); any other hit blends, w = α·T, T = test_T.
+    fast (Sec. III-D, warp-coherent blending): w = α·T, T −= w for every hit; no per-pixel
+           stop (stopped is None): the caller ends a strip when all its pixels have T < 1e-4.
+    Written with `hit ^ (hit & stop)` for hit & ~stop: Mosaic GPU cannot negate a bool vector.
+    """
+    if config.blend == "fast":
+        w = jnp.where(hit, alpha * trans, 0)
+        return w, trans - w, None
+    test_t = trans * (1 - alpha)
+    stopped = hit & stops(test_t, config)
+    take = hit ^ stopped
+    return jnp.where(take, alpha * trans, 0), jnp.where(take, test_t, trans), stopped
+
+
 def blend(state: PixelState, mean2d, conic, opacity, rgb, depth, active, px, py,
           config: RasterConfig) -> PixelState:
-    """Composite one Gaussian over pixels (px, py); `active` (scalar bool) gates it entirely."""
+    """Composite one Gaussian over pixels (px, py) with exact blending (`blend_weights`);
+    `active` (scalar bool) gates it entirely."""
     dt = state.trans.dtype
     power, alpha = gaussian_alpha(mean2d, conic, opacity, px, py, jnp.asarray(config.alpha_cap, dt))
     hit = active & ~state.done & passes(power, alpha)
-    test_t = state.trans * (1 - alpha)
-    stop = stops(test_t, config)
-    take = hit & ~stop
-    w = jnp.where(take, alpha * state.trans, 0)
-    return PixelState(color=state.color + w[:, None] * rgb,
-                      trans=jnp.where(take, test_t, state.trans),
-                      depth=state.depth + w * depth, done=state.done | (hit & stop))
+    w, trans, stopped = blend_weights(state.trans, alpha, hit, config)
+    return PixelState(color=state.color + w[:, None] * rgb, trans=trans,
+                      depth=state.depth + w * depth, done=state.done | stopped)
 
 
 def finish(state: PixelState, background):

@@ -61,7 +61,7 @@ from jax.experimental import pallas as pl
 
 from .. import hoist
 from ..binning import TILE, TileBins, tile_grid
-from ..composite import PixelState, gaussian_alpha, passes, stops
+from ..composite import PixelState, blend_weights, gaussian_alpha, passes, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import STRIPS
@@ -160,25 +160,15 @@ def _record_alpha(rec, frame, pixel, config: RasterConfig):
 
 
 def _blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
-    """One Gaussian (pair index `pair`) over a lane vector of pixels; state = (r, g, b, T, D,
-    done, stop pair), `done` as int32 0/1 (Mosaic GPU holds no 1-bit registers).
-
-    exact: the contract (lgs_jax.composite.blend): a hit whose T·(1 − α) passes the stop test
-    ends the pixel unblended (and records `pair`); otherwise C += rgb·α·T, T = T·(1 − α).
-    fast: w = α·T; C += rgb·w; T −= w for every hit (Sec. III-D).
-    """
+    """One Gaussian (pair index `pair`) over a lane vector of pixels by the blending rule
+    (`lgs_jax.composite.blend_weights`); state = (r, g, b, T, D, done, stop pair), `done` as
+    int32 0/1 (Mosaic GPU holds no 1-bit registers); exact blending records the pair at which
+    a pixel's stop test fired."""
     r, g, b, t, d, done, stop_at = state
-    if config.blend == "exact":
-        hit = hit & (done == 0)
-        test_t = t * (1 - alpha)
-        stop = stops(test_t, config)
-        take = hit ^ (hit & stop)  # = hit & ~stop (Mosaic GPU cannot negate a bool vector)
-        w = jnp.where(take, alpha * t, 0)
-        t, done = jnp.where(take, test_t, t), jnp.where(hit & stop, 1, done)
-        stop_at = jnp.where(hit & stop, pair, stop_at)
-    else:
-        w = jnp.where(hit, alpha * t, 0)
-        t = t - w
+    exact = config.blend == "exact"
+    w, t, stopped = blend_weights(t, alpha, hit & (done == 0) if exact else hit, config)
+    if exact:
+        done, stop_at = jnp.where(stopped, 1, done), jnp.where(stopped, pair, stop_at)
     return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, done, stop_at
 
 

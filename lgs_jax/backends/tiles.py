@@ -48,7 +48,7 @@ from jax import lax
 
 from .. import hoist
 from ..binning import TILE, TileBins, padded_ellipse, tile_grid
-from ..composite import PixelState, gaussian_alpha, passes, stops
+from ..composite import PixelState, blend_weights, gaussian_alpha, passes, stops
 from ..config import ALPHA_MIN, RasterConfig
 from ..projection import Projected
 from ..warp_masks import FULL_MASK, STRIPS, strip_mask
@@ -143,27 +143,18 @@ def blend_chunk(state: PixelState, stop_at, alpha, hit, feats, pair, config: Ras
     step is one fused elementwise pass over the n·P pixels. Returns the state and `stop_at`
     (n, P), updated with the pair index at which a pixel's stop test fired (for the backward).
 
-    exact: test_T = T·(1 − α); stop (not blended) if test_T < 1e-4 (<= for gsplat), else
-           C += f·α·T, T = test_T: the contract's per-pixel semantics, the reference arithmetic.
-    fast:  w = α·T; C += f·w; T −= w for every hit (the paper's branch-free loop); no per-pixel
-           stop: the caller ends a strip when all its pixels have T < 1e-4.
+    Exact or fast blending by `composite.blend_weights`; fast has no per-pixel stop: the caller
+    ends a strip when all its pixels have T < 1e-4.
     """
     def step(carry, x):
         st, stop_at = carry
         a, h, f, k = x
         f = f[:, None, :]  # (n, 1, 4)
-        if config.blend == "exact":
-            h = h & ~st.done
-            test_t = st.trans * (1 - a)
-            stop = stops(test_t, config)
-            take = h & ~stop
-            w = jnp.where(take, a * st.trans, 0)
-            trans = jnp.where(take, test_t, st.trans)
-            done = st.done | (h & stop)
-            stop_at = jnp.where(h & stop, k[:, None], stop_at)
-        else:
-            w = jnp.where(h, a * st.trans, 0)
-            trans, done = st.trans - w, st.done
+        exact = config.blend == "exact"
+        w, trans, stopped = blend_weights(st.trans, a, h & ~st.done if exact else h, config)
+        done = st.done
+        if exact:
+            done, stop_at = done | stopped, jnp.where(stopped, k[:, None], stop_at)
         return (PixelState(color=st.color + w[..., None] * f[..., :3], trans=trans,
                            depth=st.depth + w * f[..., 3], done=done), stop_at), None
 
