@@ -33,10 +33,11 @@ class RasterConfig:
 
     Implementation (the `pallas` backends only; same image either way):
       kernel: "triton" or "mosaic" (Mosaic GPU) Pallas kernels, forward and backward; "auto"
-        takes the one measured faster per kernel on the H100 (lgs_jax.backends.pallas.IMPL:
-        Mosaic GPU for all three, the Local-GS and vanilla forwards and the backward) and,
-        under differentiation, the forward of the backward's implementation, so that forward
-        and backward evaluate α with the same compiler's arithmetic.
+        takes the one measured faster per kernel (lgs_jax.backends.pallas.auto: on the GPU,
+        Mosaic GPU for all three, the Local-GS and vanilla forwards and the backward; in
+        interpret mode, without a GPU, Triton) and, under differentiation, the forward of the
+        backward's implementation, so that forward and backward evaluate α with the same
+        compiler's arithmetic.
     """
 
     convention: Literal["3dgs", "gsplat"] = "3dgs"

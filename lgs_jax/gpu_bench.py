@@ -50,7 +50,7 @@ def _row(backend, config):
     return backend, config, stage
 
 
-OURS = {  # row -> (backend, config, rasterize stage); "auto" rows run pallas.IMPL's choice
+OURS = {  # row -> (backend, config, rasterize stage); "auto" rows run pallas.auto's choice
     "pallas": _row("pallas", C()),
     "pallas:fast": _row("pallas", C(blend="fast")),
     "pallas:no_cull": _row("pallas", C(warp_cull=False)),

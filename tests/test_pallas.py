@@ -43,7 +43,7 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
     config = LOCALGS[name]
     ref = scenes.render(g, cam, "reference", C(config.convention))
     out = scenes.render(g, cam, "pallas", config)
-    assert out.stats.kernel == f"localgs-{pallas.IMPL['localgs']}"
+    assert out.stats.kernel == f"localgs-{pallas.auto('localgs')}"
     assert out.stats.interpreted == (jax.default_backend() != "gpu")
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=1e-9, what=field)
@@ -79,7 +79,7 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     cam = scenes.camera(dtype=dtype)
     ref = scenes.render(g, cam, "reference", C(convention))
     out = scenes.render(g, cam, "pallas_vanilla", C(convention))
-    assert out.stats.kernel == f"vanilla-{pallas.IMPL['vanilla']}"
+    assert out.stats.kernel == f"vanilla-{pallas.auto('vanilla')}"
     for field in ("image", "alpha", "depth"):
         # float32: 1e-5 of the field's scale (depth is in scene units). On the GPU the Mosaic
         # kernel's exp and multiply-adds round differently from XLA's (H100, measured: depth
@@ -246,9 +246,8 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels
     bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
     args = (p, bins, cam.width, cam.height, config)
     default = dict(mosaic.BLOCK_PIXELS)
-    try:
+    try:  # called outside jit: `block_pixels` is read on every call, no trace to clear
         if pixels:
-            jax.clear_caches()  # traces are cached: retrace with these block sizes
             mosaic.BLOCK_PIXELS.update(forward=pixels, backward=pixels)
         state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
         rng = np.random.default_rng(seed % 2**16)
@@ -257,8 +256,6 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels
         got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
     finally:
         mosaic.BLOCK_PIXELS.update(default)
-        if pixels:
-            jax.clear_caches()
     masks, records, _ = saved
     want = tiles._gradients(*args, state.trans, stop_at,
                             (masks, records[:, :7] if config.hoist else None), cot)

@@ -40,11 +40,11 @@ form, `tiles.chain_hoisted_rows`) and summed per Gaussian by `backward.per_gauss
 segmented scan): deterministic.
 
 Implementations. Each kernel, forward and backward, also exists on Mosaic GPU
-(`lgs_jax.backends.mosaic`: a warpgroup per half tile, the same per-pair functions);
-`RasterConfig.kernel` picks one and "auto" takes `IMPL`, the faster per kernel on the H100
-(BENCHMARKS.md §6); under differentiation "auto" runs the forward of the backward's
-implementation (`_forward_for_gradients`). Without a GPU the kernels run in Pallas interpret
-mode (slow, meant for tests); `stats.kernel` names the forward kernel that ran
+(`lgs_jax.backends.mosaic`: a warpgroup per tile or half tile, the same per-pair functions);
+`RasterConfig.kernel` picks one and "auto" takes `auto`: on the GPU `IMPL`, the faster per
+kernel on the H100 (BENCHMARKS.md §6), in interpret mode Triton; under differentiation "auto"
+runs the forward of the backward's implementation (`_forward_for_gradients`). Without a GPU
+the kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel` names the forward kernel that ran
 ("localgs-triton", "vanilla-mosaic", ...), `stats.interpreted` says whether it was interpreted.
 """
 
@@ -77,7 +77,8 @@ REC = 12  # packed pair record (Local-GS): see `pair_records`
 GRAD_VALUES = 11  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z
 GRAD_COLUMNS = 16  # the Triton kernel's row: GRAD_VALUES padded to a power of two
 KERNELS = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
-# config.kernel="auto": the faster implementation per kernel on the H100 (BENCHMARKS.md §6)
+# config.kernel="auto": the faster implementation per kernel on the H100 (BENCHMARKS.md §6);
+# in interpret mode Triton for every kernel (`auto`)
 IMPL = {"localgs": "mosaic", "vanilla": "mosaic", "backward": "mosaic"}
 
 
@@ -87,15 +88,24 @@ def interpreted() -> bool:
     return jax.default_backend() != "gpu" and os.environ.get("LGS_JAX_PALLAS_LOWER") != "gpu"
 
 
+def auto(kernel: str) -> str:
+    """The implementation `kernel="auto"` runs for "localgs", "vanilla" or "backward": on the
+    GPU the one measured faster on the H100 (IMPL); in interpret mode Triton, whose interpreter
+    (jitted XLA loops) runs the same kernels orders of magnitude faster than Mosaic GPU's
+    simulation of a GPU (a 500-Gaussian 64x48 frame on 2 CPU cores: 4 ms vs 11 s). Both are
+    bit for bit the same in interpret mode (tests/test_pallas.py)."""
+    return "triton" if interpreted() else IMPL[kernel]
+
+
 def implementation(backend: str, config: RasterConfig) -> str:
     """"triton" or "mosaic": the forward kernel implementation `backend` runs with `config`."""
-    return IMPL[KERNELS[backend]] if config.kernel == "auto" else config.kernel
+    return auto(KERNELS[backend]) if config.kernel == "auto" else config.kernel
 
 
 def backward_implementation(config: RasterConfig) -> str:
     """The backward kernel implementation; under differentiation the forward runs the same one
     (`_forward_for_gradients`)."""
-    return IMPL["backward"] if config.kernel == "auto" else config.kernel
+    return auto("backward") if config.kernel == "auto" else config.kernel
 
 
 def kernel_name(backend: str, config: RasterConfig) -> str:
