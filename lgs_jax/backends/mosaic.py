@@ -2,7 +2,7 @@
 (`jax.experimental.pallas.mosaic_gpu`), the Pallas GPU backend JAX supports going forward;
 `lgs_jax.backends.pallas` holds the Triton versions and the shared per-pair arithmetic
 (`_record_alpha`, `_blend`, `_staged_loop`, `_backward_step`), and picks between the two
-implementations (`pallas.IMPL`).
+implementations (`pallas.auto`).
 
 Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup, and each block is one
 warpgroup on a grid (tiles in longest-list-first order, blocks per tile) of one of two sizes

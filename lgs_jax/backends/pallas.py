@@ -44,8 +44,9 @@ Implementations. Each kernel, forward and backward, also exists on Mosaic GPU
 `RasterConfig.kernel` picks one and "auto" takes `auto`: on the GPU `IMPL`, the faster per
 kernel on the H100 (BENCHMARKS.md §6), in interpret mode Triton; under differentiation "auto"
 runs the forward of the backward's implementation (`_forward_for_gradients`). Without a GPU
-the kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel` names the forward kernel that ran
-("localgs-triton", "vanilla-mosaic", ...), `stats.interpreted` says whether it was interpreted.
+the kernels run in Pallas interpret mode (slow, meant for tests); `stats.kernel` names the
+forward kernel that ran ("localgs-triton", "vanilla-mosaic", ...), `stats.interpreted` says
+whether it was interpreted.
 """
 
 from __future__ import annotations
