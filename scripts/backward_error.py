@@ -15,30 +15,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, "tests")
 import scenes  # noqa: E402
-from lgs_jax import binning  # noqa: E402
-from lgs_jax.backends import pallas, tiles  # noqa: E402
 from lgs_jax.config import RasterConfig  # noqa: E402
-from lgs_jax.projection import project  # noqa: E402
-
-
-def grads(seed, config, dtype, kernel=None):
-    g = scenes.cast(scenes.scene(seed), dtype)
-    cam = scenes.camera(dtype=dtype)
-    p = project(g, cam)
-    bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
-    args = (p, bins, cam.width, cam.height, config)
-    state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
-    masks, records, _ = saved
-    rng = np.random.default_rng(seed % 2**16)
-    cot = tuple(rng.normal(size=x.shape).astype(np.float64).astype(dtype)
-                for x in (state.color, state.trans, state.depth))
-    hoisted = records[:, :7] if config.hoist else None
-    walk = np.asarray(tiles._gradients(*args, state.trans, stop_at, (masks, hoisted), cot))
-    if kernel is None:
-        return walk
-    got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
-    return np.asarray(got), walk
-
 
 seeds = [int(s) for s in sys.argv[1:]] or [5038]
 print(f"{'seed':>6} {'config':>12} {'kernel':>7} {'kernel-walk':>12} {'kernel-f64':>11} {'walk-f64':>9}")
@@ -46,8 +23,8 @@ for seed in seeds:
     for name, cfg in (("fast", RasterConfig(blend="fast")), ("local_gs", RasterConfig())):
         for kernel in ("mosaic", "triton"):
             c = dataclasses.replace(cfg, kernel=kernel)
-            got, walk = grads(seed, c, np.float32, kernel)
-            ref = grads(seed, c, np.float64)
+            got, walk = scenes.backward_kernel_and_walk(seed, c, np.float32)
+            _, ref = scenes.backward_kernel_and_walk(seed, c, np.float64)
             scale = max(np.abs(ref).max(), 1.0)
             e = lambda a, b: np.abs(a.astype(np.float64) - b).max() / scale  # noqa: E731
             print(f"{seed:>6} {name:>12} {kernel:>7} {e(got, walk):12.2e} {e(got, ref):11.2e} "

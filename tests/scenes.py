@@ -139,3 +139,27 @@ def projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, ed
                      depth=jnp.ones(n, dtype), opacity=jnp.asarray(np.where(valid, opacity, 0)),
                      rgb=jnp.zeros((n, 3), dtype), valid=jnp.asarray(valid),
                      invalid=jnp.asarray(~valid))
+
+
+def backward_kernel_and_walk(seed: int, config, dtype):
+    """The Local-GS backward kernel's pair rows (`pallas._gradients`) and those of its plain-jnp
+    counterpart (`tiles._gradients`) on one test scene, from the same residuals (the kernel's
+    forward: final T, stop pairs, masks, records) and random cotangents; numpy arrays."""
+    from lgs_jax import binning
+    from lgs_jax.backends import pallas, tiles
+    from lgs_jax.projection import project
+
+    g = cast(scene(seed), dtype)
+    cam = camera(dtype=dtype)
+    p = project(g, cam)
+    bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
+    args = (p, bins, cam.width, cam.height, config)
+    state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
+    rng = np.random.default_rng(seed % 2**16)
+    cot = tuple(rng.normal(size=x.shape).astype(dtype)
+                for x in (state.color, state.trans, state.depth))
+    got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
+    masks, records, _ = saved
+    want = tiles._gradients(*args, state.trans, stop_at,
+                            (masks, records[:, :7] if config.hoist else None), cot)
+    return np.asarray(got), np.asarray(want)

@@ -236,30 +236,16 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels
     (`tiles._gradients`: the same walk in XLA) on the same residuals (this kernel's forward:
     final T, stop pairs, masks, records) and random cotangents, both blending modes (`fast` has
     no reference image to compare with: this is where its backward is checked)."""
-    from lgs_jax import binning
-    from lgs_jax.backends import mosaic, pallas, tiles
+    from lgs_jax.backends import mosaic
 
     config = dataclasses.replace(BACKWARD[name], kernel=kernel)
-    g = scenes.cast(scenes.scene(seed), dtype)
-    cam = scenes.camera(dtype=dtype)
-    p = project(g, cam)
-    bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
-    args = (p, bins, cam.width, cam.height, config)
     default = dict(mosaic.BLOCK_PIXELS)
     try:  # called outside jit: `block_pixels` is read on every call, no trace to clear
         if pixels:
             mosaic.BLOCK_PIXELS.update(forward=pixels, backward=pixels)
-        state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
-        rng = np.random.default_rng(seed % 2**16)
-        cot = tuple(rng.normal(size=x.shape).astype(dtype)
-                    for x in (state.color, state.trans, state.depth))
-        got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
+        got, want = scenes.backward_kernel_and_walk(seed, config, dtype)
     finally:
         mosaic.BLOCK_PIXELS.update(default)
-    masks, records, _ = saved
-    want = tiles._gradients(*args, state.trans, stop_at,
-                            (masks, records[:, :7] if config.hoist else None), cot)
-    got, want = np.asarray(got), np.asarray(want)
     assert np.all(np.isfinite(got))
     # float32 on the GPU: the two compilers' rounding (FMA contraction, exp) meets the walk's
     # division by 1 − α (α up to 0.99): seed 5038 ("fast", Mosaic) differs by 1.9e-4 of max |∂|,
