@@ -1,10 +1,11 @@
 """lgs_jax: differentiable 3D Gaussian Splatting in JAX, built around Local-GS.
 
-Public API: `Gaussians`, `Camera`, `RasterConfig`, `render` (-> `RenderOutput`), `render_growing`,
-`load_ply`, `save_ply`, `load_cameras`, `stack_cameras`, `default_scene`.
+Public API: `Gaussians`, `Camera`, `RasterConfig` (with its `KernelConfig`), `render`
+(-> `RenderOutput`), `render_growing`, `load_ply`, `save_ply`, `load_cameras`, `stack_cameras`,
+`default_scene`.
 """
 
-from .config import RasterConfig
+from .config import KernelConfig, RasterConfig
 from .data import default_camera, default_scene
 from .io.cameras import load_cameras
 from .io.ply import PlyError, load_ply, save_ply
@@ -12,8 +13,8 @@ from .render import BACKENDS, CapacityError, RenderOutput, RenderStats, render, 
 from .scene import Camera, Gaussians, stack_cameras
 
 __all__ = [
-    "BACKENDS", "Camera", "CapacityError", "Gaussians", "PlyError", "RasterConfig", "RenderOutput",
-    "RenderStats", "default_camera", "default_scene", "load_cameras", "load_ply", "render",
-    "render_growing", "save_ply", "stack_cameras",
+    "BACKENDS", "Camera", "CapacityError", "Gaussians", "KernelConfig", "PlyError",
+    "RasterConfig", "RenderOutput", "RenderStats", "default_camera", "default_scene",
+    "load_cameras", "load_ply", "render", "render_growing", "save_ply", "stack_cameras",
 ]
 __version__ = "0.1.0"

@@ -31,15 +31,10 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .layout import TILE, tile_grid
 from .projection import Projected, depth_order
 
-TILE = 16
 MAX_PAIRS = 2**31 - 1  # pair indices are int32
-
-
-def tile_grid(width: int, height: int) -> tuple[int, int]:
-    """Number of 16x16 tiles (tiles_x, tiles_y) covering a width x height image."""
-    return -(-width // TILE), -(-height // TILE)
 
 
 @jax.tree_util.register_dataclass
@@ -156,16 +151,6 @@ def count_pairs(p: Projected, width: int, height: int):
     return total_pairs(nx * ny)
 
 
-def _searchsorted_right(sorted_values, queries):
-    """jnp.searchsorted(side="right"), lowered per platform: on GPUs the unrolled bisection (one
-    fused kernel; the default while-loop form launches a kernel per step: 0.56 vs 0.12 ms for
-    2^19 queries on an H100), elsewhere the default (XLA:CPU compiles the unrolled form slowly).
-    Both give the same integers."""
-    search = lambda method: (lambda: jnp.searchsorted(sorted_values, queries, side="right",
-                                                      method=method).astype(jnp.int32))
-    return lax.platform_dependent(default=search("scan"), cuda=search("scan_unrolled"))
-
-
 def tile_ranges(tile, n_tiles: int):
     """Half-open ranges [start, end) of each tile's pairs in `tile`, sorted ascending with padding
     pairs (tile == n_tiles) last.
@@ -183,12 +168,30 @@ def tile_ranges(tile, n_tiles: int):
     return firsts[:n_tiles], firsts[1:]
 
 
+def segment_of_slot(starts, counts, capacity: int):
+    """For every slot s < capacity, the segment k whose range [starts[k], starts[k] + counts[k])
+    holds it, where the ranges tile [0, Σ counts) in order of k (an exclusive prefix sum);
+    slots past the total get the last segment, n − 1.
+
+    Each non-empty segment stores its index at its first slot (distinct slots: a plain,
+    deterministic store) and a running maximum fills the slots between: O(slots), where
+    `searchsorted(ends, slots)` reads log2(n) scattered ends per slot."""
+    n = counts.shape[0]
+    first = jnp.where((counts > 0) & (starts >= 0) & (starts < capacity), starts, capacity)
+    marks = jnp.zeros((capacity + 1,), jnp.int32).at[first].set(
+        jnp.arange(n, dtype=jnp.int32), mode="drop", unique_indices=True)
+    k = lax.cummax(marks[:capacity], axis=0)
+    total = starts[-1] + counts[-1]
+    return jnp.where(jnp.arange(capacity, dtype=jnp.int32) < total, k, n - 1)
+
+
 def emit_pairs(p: Projected, width: int, height: int, capacity: int):
     """Tile–Gaussian pairs in (depth, index) order: (tile, gauss, total, n_unbounded).
 
-    A prefix sum over the depth-ordered tile counts and `searchsorted(cumsum, arange(capacity))`
-    give each slot its Gaussian (no scatter, so deterministic on GPUs); slots past the total
-    get tile = n_tiles (padding, sorts last).
+    Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
+    prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
+    row. `segment_of_slot` finds each slot's k (no scatter-add, so deterministic on GPUs); slots
+    past the total get tile = n_tiles (padding, sorts last).
     """
     if not 0 < capacity <= MAX_PAIRS:
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
@@ -196,16 +199,16 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int):
     tx0, ty0, nx, ny, unbounded = tile_rects(p, width, height)
     counts = nx * ny
     total = total_pairs(counts)
-    n = counts.shape[0]
     order = depth_order(p)
     counts_sorted = counts[order]
-    ends = jnp.cumsum(counts_sorted)  # exact when total fits (otherwise overflow is reported)
+    starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact when total fits (else overflow)
+    k = segment_of_slot(starts, counts_sorted, capacity)
+    per_k = jnp.stack([starts, order], -1)[k]  # one row gather per slot: (start, Gaussian)
+    g = per_k[:, 1]
+    rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)[g]  # (tx0, ty0, nx) of the Gaussian
     slot = jnp.arange(capacity, dtype=jnp.int32)
-    k = jnp.clip(_searchsorted_right(ends, slot), 0, max(n - 1, 0)).astype(jnp.int32)
-    g = order[k]
-    local = slot - (ends[k] - counts_sorted[k])
-    nxg = jnp.maximum(nx[g], 1)
-    tile = (ty0[g] + local // nxg) * tiles_x + tx0[g] + local % nxg
+    local = slot - per_k[:, 0]
+    tile = (rect[:, 1] + local // rect[:, 2]) * tiles_x + rect[:, 0] + local % rect[:, 2]
     tile = jnp.where(slot < total, tile, tiles_x * tiles_y)
     return tile, g, total, jnp.sum(unbounded, dtype=jnp.int32)
 

@@ -1,4 +1,10 @@
-"""Static rendering options (hashable, so they can be `jit` static arguments)."""
+"""Static rendering options (frozen, hashable: `jit` static arguments and part of its cache key).
+
+`RasterConfig` says what to render (convention, the Local-GS switches, which Pallas
+implementation); its `tuning` field, a `KernelConfig`, holds the kernels' performance settings,
+which never change the image beyond the stated float32 tolerances. Both are values: a new
+setting is a new config and a new compile, never a module global changed behind a cached trace.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +15,80 @@ from typing import Literal
 ALPHA_MIN = 1.0 / 255.0
 T_STOP = 1e-4
 _ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}
+IMPLEMENTATIONS = ("triton", "mosaic")
+
+
+def _check(name: str, value, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name}: expected one of {tuple(allowed)}, got {value!r}")
+
+
+def _check_int(name: str, value, low: int):
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise ValueError(f"{name}: expected an int >= {low}, got {value!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class KernelConfig:
+    """Performance settings of the `pallas`, `pallas_vanilla` and `tiles` kernels.
+
+    Implementation (RasterConfig.kernel="auto"):
+      auto_localgs, auto_vanilla, auto_backward: the implementation "auto" runs on a GPU for the
+        Local-GS forward, the vanilla forward and the backward ("triton" or "mosaic": the faster
+        per kernel as measured, BENCHMARKS.md). In interpret mode "auto" runs Triton, whose
+        interpreter (jitted XLA loops) is orders of magnitude faster than Mosaic GPU's
+        simulation of a GPU; the two are bit for bit the same there.
+      interpret: run the Pallas kernels in interpret mode (True), lower them for the GPU (False:
+        on a machine without one only tracing and lowering work, which tests use to check that
+        every kernel lowers), or decide by the platform (None: interpret unless JAX's default
+        backend is a GPU).
+
+    Triton kernels:
+      triton_unroll_localgs, triton_unroll_vanilla: pairs staged per loop iteration.
+
+    Mosaic GPU kernels (a block is one 128-lane warpgroup):
+      mosaic_unroll_localgs, mosaic_unroll_vanilla: pairs staged per loop iteration.
+      mosaic_forward_pixels, mosaic_backward_pixels: pixels per block, 128 (half a tile, one per
+        lane) or 256 (the whole tile, two per lane); None: by the image's tile count, whole
+        tiles from `mosaic_whole_tile_from` tiles on.
+      mosaic_chunk: Local-GS pair records per TMA copy into shared memory (double-buffered;
+        float32 only, TMA has no 64-bit float type); 0 reads records from global memory. A
+        multiple of mosaic_unroll_localgs (a staged group never straddles two chunks).
+
+    `tiles` backend (XLA):
+      tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
+        blending mode tests its strip-wide stop once per batch).
+    """
+
+    auto_localgs: Literal["triton", "mosaic"] = "mosaic"
+    auto_vanilla: Literal["triton", "mosaic"] = "mosaic"
+    auto_backward: Literal["triton", "mosaic"] = "mosaic"
+    interpret: bool | None = None
+    triton_unroll_localgs: int = 2
+    triton_unroll_vanilla: int = 8
+    mosaic_unroll_localgs: int = 8
+    mosaic_unroll_vanilla: int = 8
+    mosaic_forward_pixels: int | None = None
+    mosaic_backward_pixels: int | None = None
+    mosaic_whole_tile_from: int = 8192
+    mosaic_chunk: int = 64
+    tiles_group: int = 256
+    tiles_chunk: int = 16
+
+    def __post_init__(self):
+        for name in ("auto_localgs", "auto_vanilla", "auto_backward"):
+            _check(f"tuning.{name}", getattr(self, name), IMPLEMENTATIONS)
+        _check("tuning.interpret", self.interpret, (None, True, False))
+        for name in ("triton_unroll_localgs", "triton_unroll_vanilla", "mosaic_unroll_localgs",
+                     "mosaic_unroll_vanilla", "tiles_group", "tiles_chunk"):
+            _check_int(f"tuning.{name}", getattr(self, name), 1)
+        for name in ("mosaic_forward_pixels", "mosaic_backward_pixels"):
+            _check(f"tuning.{name}", getattr(self, name), (None, 128, 256))
+        _check_int("tuning.mosaic_whole_tile_from", self.mosaic_whole_tile_from, 0)
+        _check_int("tuning.mosaic_chunk", self.mosaic_chunk, 0)
+        if self.mosaic_chunk % self.mosaic_unroll_localgs:
+            raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
+                             f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -19,7 +99,9 @@ class RasterConfig:
       convention: "3dgs" (alpha cap 0.99; a pixel stops when T·(1−α) < 1e-4) or "gsplat"
         (gsplat 1.5.3: alpha cap 0.999; stops when T·(1−α) <= 1e-4).
 
-    Local-GS switches (used by the `tiles` backend; the other backends ignore them):
+    Local-GS switches (the `tiles` and `pallas` backends; `brute`, `reference` and
+    `pallas_vanilla` compute the contract's difference form and honour only `convention` and,
+    for `pallas_vanilla`, `blend`):
       blend: "exact" (per-pixel termination and alpha tests as masks: the contract's image) or
         "fast" (the paper's warp-coherent blending, Sec. III-D: a 16x2 strip stops only when all
         32 pixels have T < 1e-4; deviates from the contract by at most 1e-4/(1 − cap)·max|rgb −
@@ -33,11 +115,10 @@ class RasterConfig:
 
     Implementation (the `pallas` backends only; same image either way):
       kernel: "triton" or "mosaic" (Mosaic GPU) Pallas kernels, forward and backward; "auto"
-        takes the one measured faster per kernel (lgs_jax.backends.pallas.auto: on the GPU,
-        Mosaic GPU for all three, the Local-GS and vanilla forwards and the backward; in
-        interpret mode, without a GPU, Triton) and, under differentiation, the forward of the
-        backward's implementation, so that forward and backward evaluate α with the same
-        compiler's arithmetic.
+        takes `tuning.auto_*` per kernel on the GPU and Triton in interpret mode, and, under
+        differentiation, the forward of the backward's implementation, so that forward and
+        backward evaluate α with the same compiler's arithmetic.
+      tuning: the kernels' performance settings (`KernelConfig`).
     """
 
     convention: Literal["3dgs", "gsplat"] = "3dgs"
@@ -47,21 +128,19 @@ class RasterConfig:
     local_coords: bool = True
     origin: Literal["corner", "center"] = "corner"
     kernel: Literal["auto", "triton", "mosaic"] = "auto"
+    tuning: KernelConfig = KernelConfig()
 
     def __post_init__(self):
-        if self.convention not in _ALPHA_CAP:
-            raise ValueError(f"config.convention: expected '3dgs' or 'gsplat', "
-                             f"got {self.convention!r}")
-        if self.blend not in ("exact", "fast"):
-            raise ValueError(f"config.blend: expected 'exact' or 'fast', got {self.blend!r}")
-        if self.origin not in ("corner", "center"):
-            raise ValueError(f"config.origin: expected 'corner' or 'center', got {self.origin!r}")
-        if self.kernel not in ("auto", "triton", "mosaic"):
-            raise ValueError(f"config.kernel: expected 'auto', 'triton' or 'mosaic', "
-                             f"got {self.kernel!r}")
+        _check("config.convention", self.convention, tuple(_ALPHA_CAP))
+        _check("config.blend", self.blend, ("exact", "fast"))
+        _check("config.origin", self.origin, ("corner", "center"))
+        _check("config.kernel", self.kernel, ("auto",) + IMPLEMENTATIONS)
         for name in ("hoist", "warp_cull", "local_coords"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"config.{name}: expected a bool, got {getattr(self, name)!r}")
+        if not isinstance(self.tuning, KernelConfig):
+            raise ValueError(f"config.tuning: expected a KernelConfig, got "
+                             f"{type(self.tuning).__name__}")
 
     @property
     def alpha_cap(self) -> float:

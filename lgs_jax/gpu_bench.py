@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import binning, render
-from .backends import pallas, tiles
+from .backends import REGISTRY, pallas
 from .bench import parse_scene
 from .config import RasterConfig
 from .projection import project
@@ -44,13 +44,11 @@ C = RasterConfig
 
 def _row(backend, config):
     """(backend, config, rasterize stage from projected and binned inputs) of a forward row."""
-    vanilla = backend == "pallas_vanilla"
-    stage = ((lambda p, b, w, h: tiles.rasterize(p, b, w, h, config)) if backend == "tiles" else
-             (lambda p, b, w, h: pallas.rasterize(p, b, w, h, config, vanilla=vanilla)))
-    return backend, config, stage
+    rasterize = REGISTRY[backend].rasterize
+    return backend, config, lambda p, b, w, h: rasterize(p, b, w, h, config)
 
 
-OURS = {  # row -> (backend, config, rasterize stage); "auto" rows run pallas.auto's choice
+OURS = {  # row -> (backend, config, rasterize stage); "auto" rows run KernelConfig's auto_*
     "pallas": _row("pallas", C()),
     "pallas:fast": _row("pallas", C(blend="fast")),
     "pallas:no_cull": _row("pallas", C(warp_cull=False)),
@@ -107,7 +105,7 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
         backend, config, stage = OURS[name]
         f = jax.jit(lambda g, c, b=backend, cf=config: render(g, c, backend=b, config=cf,
                                                                capacity=cap).image)
-        r = jax.jit(lambda p, b, st=stage: st(p, b, w, h)[0].color)
+        r = jax.jit(lambda p, b, st=stage: st(p, b, w, h).color)
         try:
             images[name] = np.asarray(f(g, cam))
             jax.block_until_ready(r(p, bins))
@@ -345,7 +343,7 @@ def main(argv=None) -> int:
     specs = args.scene + (_preset(args.data) if args.preset else [])
     dev = jax.devices()[0]
     print(f"device {dev.device_kind}; JAX {jax.__version__}; Pallas kernels interpreted: "
-          f"{pallas.interpreted()}", flush=True)
+          f"{pallas.interpreted(C())}", flush=True)
     rows = []
     for spec in specs:
         case = parse_scene(spec)

@@ -1,7 +1,8 @@
 """The public entry point: `render(gaussians, camera, ...) -> RenderOutput`.
 
 Pipeline: validate -> project (lgs_jax.projection) -> bin into 16x16 tiles (lgs_jax.binning)
--> rasterize with the chosen backend -> image, alpha, depth and stats.
+-> rasterize with the chosen backend (lgs_jax.backends.REGISTRY) -> image, alpha, depth and
+stats.
 
 Capacity: tile–Gaussian pairs live in a static buffer of `capacity` pairs. An eager call with
 `capacity=None` counts the pairs first and rounds up to a power of two (few recompiles). Under
@@ -21,13 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import binning
-from .backends import brute, pallas, reference, tiles
-from .composite import finish
+from .backends import REGISTRY, RasterResult
+from .composite import PixelState, finish
 from .config import RasterConfig
+from .layout import tiles_to_image
 from .projection import Projected, project
 from .scene import Camera, Gaussians, validate_camera, validate_gaussians
 
-BACKENDS = ("brute", "reference", "tiles", "pallas", "pallas_vanilla")
+BACKENDS = tuple(REGISTRY)
 
 
 class CapacityError(ValueError):
@@ -107,22 +109,18 @@ def _count(g: Gaussians, cam: Camera, width: int, height: int):
     return binning.count_pairs(project(g, cam), width, height)
 
 
-def _kernel(backend: str, config: RasterConfig) -> str:
-    return pallas.kernel_name(backend, config) if backend in pallas.KERNELS else ""
-
-
-def _stats(p: Projected, backend: str, config: RasterConfig, capacity: int,
-           bins: binning.TileBins | None, strip_pairs=None) -> RenderStats:
+def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
+           result: RasterResult) -> RenderStats:
     i32 = functools.partial(jnp.sum, dtype=jnp.int32)
     zero = jnp.int32(0)
+    strip_pairs = result.strip_pairs
     return RenderStats(
         n_valid=i32(p.valid), n_invalid=i32(p.invalid), n_transparent=i32(~p.valid & ~p.invalid),
         n_unbounded=bins.n_unbounded if bins else zero,
         pairs_required=bins.pairs_required if bins else zero,
         strip_pairs=zero if strip_pairs is None else strip_pairs.astype(jnp.int32),
         capacity=jnp.int32(capacity), overflow=bins.overflow if bins else jnp.bool_(False),
-        backend=backend, kernel=_kernel(backend, config),
-        interpreted=backend in pallas.KERNELS and pallas.interpreted())
+        backend=backend, kernel=result.kernel, interpreted=result.interpreted)
 
 
 @functools.partial(jax.jit, static_argnames=("backend", "config", "capacity"))
@@ -132,22 +130,15 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     p = project(g, cam)
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
-    bins = strip_pairs = None
-    if backend == "brute":
-        state = brute.rasterize(p, width, height, config)
-    else:
-        bins = binning.bin_gaussians(p, width, height, capacity)
-        if backend == "tiles":
-            state, strip_pairs = tiles.rasterize(p, bins, width, height, config)
-        elif backend in pallas.KERNELS:
-            state, strip_pairs = pallas.rasterize(p, bins, width, height, config,
-                                                  vanilla=backend == "pallas_vanilla")
-        else:
-            state = reference.rasterize(p, bins, width, height, config)
+    spec = REGISTRY[backend]
+    bins = binning.bin_gaussians(p, width, height, capacity) if spec.binned else None
+    result = spec.rasterize(p, bins, width, height, config)
+    state = PixelState(color=result.color, trans=result.trans, depth=result.depth, done=None)
+    state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)
     image, alpha, depth = finish(state, background)
     return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
                         depth=depth.reshape(height, width),
-                        stats=_stats(p, backend, config, capacity, bins, strip_pairs),
+                        stats=_stats(p, backend, capacity, bins, result),
                         visible=_visible(p, width, height))
 
 
@@ -160,11 +151,11 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
                   config: RasterConfig) -> RenderOutput:
     h, w = cam.height, cam.width
     zero = jnp.int32(0)
+    kernel, interpreted = REGISTRY[backend].describe(config)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
                         pairs_required=zero, strip_pairs=zero, capacity=zero,
-                        overflow=jnp.bool_(False), backend=backend,
-                        kernel=_kernel(backend, config),
-                        interpreted=backend in pallas.KERNELS and pallas.interpreted())
+                        overflow=jnp.bool_(False), backend=backend, kernel=kernel,
+                        interpreted=interpreted)
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
                         stats=stats, visible=jnp.zeros((0,), bool))
@@ -215,7 +206,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if gaussians.num == 0:
         return _empty_render(camera, background, dt, backend, config)
     traced = _is_traced((gaussians, camera, background))
-    if backend == "brute":
+    if not REGISTRY[backend].binned:
         capacity = 0  # no pair buffer
     elif capacity is None:
         if traced:

@@ -31,3 +31,19 @@ def synthetic_camera(width: int = 1280, height: int = 720) -> Camera:
     f = 0.5 * width / np.tan(np.radians(30))
     return Camera(viewmat=np.eye(4, dtype=np.float32), fx=np.float32(f), fy=np.float32(f),
                   cx=np.float32(width / 2), cy=np.float32(height / 2), width=width, height=height)
+
+
+def densified(g: Gaussians, k: int, seed: int = 0) -> Gaussians:
+    """A denser scene of similar look: every Gaussian replaced by k copies whose means are
+    jittered by N(0, 1)·max(exp(log_scales)) (per Gaussian, per axis), log_scales lowered by
+    ln(k)/3, opacity, rotation and SH unchanged. Copy j of Gaussian i is row i·k + j."""
+    rng = np.random.default_rng(seed)
+    rep = lambda x: np.repeat(np.asarray(x), k, axis=0)
+    log_scales = np.asarray(g.log_scales, np.float64)
+    sigma = np.exp(np.max(np.where(np.isfinite(log_scales), log_scales, -np.inf), axis=1))
+    sigma = np.where(np.isfinite(sigma), sigma, 0.0)
+    jitter = rng.standard_normal((g.num * k, 3)) * np.repeat(sigma, k)[:, None]
+    means = np.asarray(g.means, np.float64).repeat(k, 0) + jitter
+    dt = np.asarray(g.means).dtype
+    return Gaussians(means.astype(dt), rep(g.quats), (rep(log_scales) - np.log(k) / 3).astype(dt),
+                     rep(g.logit_opacities), rep(g.sh))

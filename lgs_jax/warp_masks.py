@@ -22,9 +22,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .binning import TILE
+from .layout import STRIPS, TILE
 
-STRIPS = TILE // 2  # eight 16x2 strips per tile
 FULL_MASK = (1 << STRIPS) - 1
 
 

@@ -154,11 +154,12 @@ def backward_kernel_and_walk(seed: int, config, dtype):
     p = project(g, cam)
     bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
     args = (p, bins, cam.width, cam.height, config)
-    state, stop_at, _, saved = pallas._forward(*args, vanilla=False)
+    plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
+    state, stop_at, _, saved = pallas._forward(p, bins, cam.width, cam.height, plan)
     rng = np.random.default_rng(seed % 2**16)
     cot = tuple(rng.normal(size=x.shape).astype(dtype)
                 for x in (state.color, state.trans, state.depth))
-    got = pallas._gradients(*args, state.trans, stop_at, saved, cot, vanilla=False)
+    got = pallas._gradients(p, bins, cam.width, cam.height, plan, state.trans, stop_at, saved, cot)
     masks, records, _ = saved
     want = tiles._gradients(*args, state.trans, stop_at,
                             (masks, records[:, :7] if config.hoist else None), cot)

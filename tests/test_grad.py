@@ -10,7 +10,6 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lgs_jax
-from lgs_jax.backends import pallas
 from lgs_jax.projection import project
 from tests import scenes
 
@@ -187,8 +186,8 @@ def test_fast_backends_float32_gradients_are_close_to_float64(backend):
 
 
 # `auto` differentiates through Mosaic GPU on the GPU and through Triton in interpret mode
-# (pallas.auto); the `other` rows run the implementation auto does not pick here.
-OTHER = "triton" if pallas.auto("backward") == "mosaic" else "mosaic"
+# (KernelConfig); the `other` rows run the implementation auto does not pick here.
+OTHER = "triton" if jax.default_backend() == "gpu" else "mosaic"
 PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
           "global": ("pallas", C(local_coords=False)), "gsplat": ("pallas", C("gsplat")),
           "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat")),

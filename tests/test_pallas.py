@@ -16,13 +16,17 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lgs_jax
-from lgs_jax.backends import pallas
+from lgs_jax.backends import pallas, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import assert_render_close
 from tests.test_tiles import F32_ATOL
 
 C = lgs_jax.RasterConfig
+K = lgs_jax.KernelConfig
+ON_GPU = jax.default_backend() == "gpu"
+AUTO = "mosaic" if ON_GPU else "triton"  # what kernel="auto" runs here (KernelConfig)
+KERNEL = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
 LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
     "local_gs": C(),
     "no_cull": C(warp_cull=False),
@@ -43,8 +47,8 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
     config = LOCALGS[name]
     ref = scenes.render(g, cam, "reference", C(config.convention))
     out = scenes.render(g, cam, "pallas", config)
-    assert out.stats.kernel == f"localgs-{pallas.auto('localgs')}"
-    assert out.stats.interpreted == (jax.default_backend() != "gpu")
+    assert out.stats.kernel == f"localgs-{AUTO}"
+    assert out.stats.interpreted == (not ON_GPU)
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=1e-9, what=field)
 
@@ -79,7 +83,7 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     cam = scenes.camera(dtype=dtype)
     ref = scenes.render(g, cam, "reference", C(convention))
     out = scenes.render(g, cam, "pallas_vanilla", C(convention))
-    assert out.stats.kernel == f"vanilla-{pallas.auto('vanilla')}"
+    assert out.stats.kernel == f"vanilla-{AUTO}"
     for field in ("image", "alpha", "depth"):
         # float32: 1e-5 of the field's scale (depth is in scene units). On the GPU the Mosaic
         # kernel's exp and multiply-adds round differently from XLA's (H100, measured: depth
@@ -109,11 +113,11 @@ def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
     cam = scenes.camera(dtype=dtype)
     outs = {k: scenes.render(g, cam, backend, dataclasses.replace(config, kernel=k))
             for k in ("triton", "mosaic")}
-    assert outs["mosaic"].stats.kernel == pallas.KERNELS[backend] + "-mosaic"
+    assert outs["mosaic"].stats.kernel == KERNEL[backend] + "-mosaic"
     for field in ("image", "alpha", "depth"):
         got, want = getattr(outs["mosaic"], field), getattr(outs["triton"], field)
-        if pallas.interpreted() or dtype == np.float64:
-            np.testing.assert_allclose(got, want, rtol=0, atol=0 if pallas.interpreted() else 1e-9,
+        if not ON_GPU or dtype == np.float64:
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 if ON_GPU else 0,
                                        err_msg=field)
         else:  # the GPU's float32 exp and multiply-add contraction differ between the compilers
             # Global coordinates: the hoisted sum's cancellation (numerics/) amplifies those ulps
@@ -127,49 +131,58 @@ def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
 @settings(max_examples=3)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_mosaic_layouts_equal(chunk, pixels, seed):
-    """The Mosaic GPU forward kernels in each layout (`mosaic.BLOCK_PIXELS`: half-tile or
-    whole-tile warpgroup blocks; Local-GS float32 records staged through shared memory, with
-    chunks small enough that every tile list of the test scenes spans several: chunk
-    boundaries, partial last chunks, the copy still in flight at an early exit) equal the
+    """The Mosaic GPU forward kernels in each layout (`KernelConfig.mosaic_forward_pixels`:
+    half-tile or whole-tile warpgroup blocks; Local-GS float32 records staged through shared
+    memory, with chunks small enough that every tile list of the test scenes spans several:
+    chunk boundaries, partial last chunks, the copy still in flight at an early exit) equal the
     simplest layout (half tiles, records read from global memory) bit for bit; an empty scene
     (no pair anywhere) renders the background. float64 records are never staged (no 64-bit
     float TMA)."""
-    from lgs_jax.backends import mosaic
-
     dtype = np.float32
-    assert not mosaic.staged(np.float64)
+    assert not pallas_mosaic.staged(C(), np.float64) and pallas_mosaic.staged(C(), np.float32)
     g = scenes.cast(scenes.scene(seed), dtype)
     empty = scenes.cast(scenes.scene(seed, kinds=("behind", "invalid")), dtype)
     cam = scenes.camera(dtype=dtype)
-    config = C(kernel="mosaic")
-    outs, default = {}, (mosaic.CHUNK, mosaic.BLOCK_PIXELS["forward"])
-    try:
-        for layout in ((0, 128), (chunk, pixels)):
-            jax.clear_caches()  # `render`'s traces are cached per config: retrace with `layout`
-            mosaic.CHUNK, mosaic.BLOCK_PIXELS["forward"] = layout
-            for backend in ("pallas", "pallas_vanilla"):
-                outs[layout, backend] = scenes.render(g, cam, backend, config)
-                background = scenes.render(empty, cam, backend, config).image
-                np.testing.assert_array_equal(background, np.broadcast_to(
-                    np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
-    finally:
-        mosaic.CHUNK, mosaic.BLOCK_PIXELS["forward"] = default
-        jax.clear_caches()
+    outs = {}
+    for layout in ((0, 128), (chunk, pixels)):
+        config = C(kernel="mosaic", tuning=K(mosaic_chunk=layout[0], mosaic_unroll_localgs=8,
+                                             mosaic_forward_pixels=layout[1]))
+        for backend in ("pallas", "pallas_vanilla"):
+            outs[layout, backend] = scenes.render(g, cam, backend, config)
+            background = scenes.render(empty, cam, backend, config).image
+            np.testing.assert_array_equal(background, np.broadcast_to(
+                np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
     for backend, field in itertools.product(("pallas", "pallas_vanilla"),
                                             ("image", "alpha", "depth")):
         np.testing.assert_array_equal(getattr(outs[(chunk, pixels), backend], field),
                                       getattr(outs[(0, 128), backend], field))
 
 
-def test_mosaic_block_pixels_rule(monkeypatch):
-    """Whole-tile blocks from WHOLE_TILE_BLOCKS_FROM tiles on, half tiles below, unless
-    BLOCK_PIXELS fixes a kernel's size."""
-    from lgs_jax.backends import mosaic
-
-    monkeypatch.setattr(mosaic, "BLOCK_PIXELS", {"forward": None, "backward": 256})
-    n = mosaic.WHOLE_TILE_BLOCKS_FROM
-    assert [mosaic.block_pixels("forward", t) for t in (1, n - 1, n)] == [128, 128, 256]
-    assert mosaic.block_pixels("backward", 1) == 256
+def test_plan_resolves_implementation_and_block_size():
+    """kernel="auto" runs Mosaic GPU for every kernel on the GPU (`KernelConfig.auto_*`) and
+    Triton in interpret mode; an explicit kernel runs everywhere; under differentiation "auto"
+    runs the backward's implementation forward. Mosaic blocks are whole tiles from
+    `mosaic_whole_tile_from` tiles on, half tiles below, unless fixed."""
+    gpu = C(tuning=K(interpret=False))
+    assert [pallas.plan(gpu, v, 1).forward for v in (False, True)] == ["mosaic", "mosaic"]
+    mixed = C(tuning=K(interpret=False, auto_localgs="triton"))
+    assert (pallas.plan(mixed, False, 1).forward, pallas.plan(mixed, False, 1).backward) == (
+        "triton", "mosaic")
+    assert pallas.plan(mixed, False, 1).for_gradients().forward == "mosaic"
+    explicit = C(kernel="triton", tuning=K(interpret=False, auto_localgs="mosaic"))
+    assert pallas.plan(explicit, False, 1).for_gradients().forward == "triton"
+    interp = C(tuning=K(interpret=True))
+    assert (pallas.plan(interp, False, 1).forward, pallas.plan(interp, True, 1).backward) == (
+        "triton", "triton")
+    assert pallas.plan(interp, True, 1).kernel_name == "vanilla-triton"
+    n = K().mosaic_whole_tile_from
+    assert [pallas.plan(gpu, False, t).forward_pixels for t in (1, n - 1, n)] == [128, 128, 256]
+    fixed = C(tuning=K(mosaic_backward_pixels=256))
+    assert pallas.plan(fixed, False, 1).backward_pixels == 256
+    with pytest.raises(ValueError, match="tuning.mosaic_chunk"):
+        K(mosaic_chunk=12)
+    with pytest.raises(ValueError, match="tuning.mosaic_forward_pixels"):
+        K(mosaic_forward_pixels=64)
 
 
 @pytest.mark.parametrize("convention,kernel", list(itertools.product(["3dgs", "gsplat"],
@@ -236,16 +249,10 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels
     (`tiles._gradients`: the same walk in XLA) on the same residuals (this kernel's forward:
     final T, stop pairs, masks, records) and random cotangents, both blending modes (`fast` has
     no reference image to compare with: this is where its backward is checked)."""
-    from lgs_jax.backends import mosaic
-
-    config = dataclasses.replace(BACKWARD[name], kernel=kernel)
-    default = dict(mosaic.BLOCK_PIXELS)
-    try:  # called outside jit: `block_pixels` is read on every call, no trace to clear
-        if pixels:
-            mosaic.BLOCK_PIXELS.update(forward=pixels, backward=pixels)
-        got, want = scenes.backward_kernel_and_walk(seed, config, dtype)
-    finally:
-        mosaic.BLOCK_PIXELS.update(default)
+    config = dataclasses.replace(BACKWARD[name], kernel=kernel,
+                                 tuning=K(mosaic_forward_pixels=pixels,
+                                          mosaic_backward_pixels=pixels))
+    got, want = scenes.backward_kernel_and_walk(seed, config, dtype)
     assert np.all(np.isfinite(got))
     # float32 on the GPU: the two compilers' rounding (FMA contraction, exp) meets the walk's
     # division by 1 − α (α up to 0.99): seed 5038 ("fast", Mosaic) differs by 1.9e-4 of max |∂|,
@@ -285,14 +292,11 @@ def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkey
     TMA copy)."""
     from jax._src.pallas.triton import gpu_info
 
-    from lgs_jax.backends import mosaic
-
-    jax.clear_caches()  # `render`'s traces are cached per config: retrace with GPU lowering
-    monkeypatch.setattr(mosaic, "CHUNK", chunk)
-    monkeypatch.setattr(mosaic, "BLOCK_PIXELS", {"forward": pixels, "backward": pixels})
-    monkeypatch.setenv("LGS_JAX_PALLAS_LOWER", "gpu")
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
+    config = dataclasses.replace(config, tuning=K(
+        interpret=False, mosaic_chunk=chunk, mosaic_forward_pixels=pixels,
+        mosaic_backward_pixels=pixels))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend=backend, config=config,
                                         capacity=4096).image
@@ -300,13 +304,10 @@ def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkey
     grad = jax.value_and_grad(lambda g, c: jax.numpy.sum(image(g, c) ** 2))
     lower = lambda f: jax.jit(f).trace(g, scenes.camera(dtype=dtype)).lower(
         lowering_platforms=("cuda",)).as_text()
-    try:
-        forward, both = lower(image), lower(grad)
-    finally:
-        jax.clear_caches()  # and drop those traces before other tests run kernels
+    forward, both = lower(image), lower(grad)
     marker = {"mosaic": "mosaic_gpu", "triton": "__gpu$xla.gpu.triton"}
-    assert marker[pallas.implementation(backend, config)] in forward
+    impl = "mosaic" if config.kernel == "auto" else config.kernel  # KernelConfig's auto_*
+    assert marker[impl] in forward
     # Under grad: the backward kernel and a forward of the same implementation.
-    impl = pallas.backward_implementation(config)
     assert both.count(marker[impl]) >= 2
     assert marker["triton" if impl == "mosaic" else "mosaic"] not in both

@@ -11,10 +11,11 @@ import pytest
 from hypothesis import given, strategies as st
 
 import lgs_jax
-from lgs_jax import binning, hoist
+from lgs_jax import binning, hoist, layout, pairs
 from lgs_jax.backends import tiles
+from lgs_jax.layout import STRIPS
 from lgs_jax.projection import project
-from lgs_jax.warp_masks import STRIPS, tight_box
+from lgs_jax.warp_masks import tight_box
 from tests import scenes
 from tests.compare import assert_render_close
 
@@ -116,16 +117,17 @@ def _check_masks(p, config, capacity=4096):
 
     Evaluates all `capacity` pair slots (a fixed shape: no recompiles), then keeps the real ones.
     """
-    tiles_x, _ = binning.tile_grid(W, H)
+    tiles_x, _ = layout.tile_grid(W, H)
     bins = binning.bin_gaussians(p, W, H, capacity)
     n = int(bins.pairs_required)
     assert n <= capacity
-    masks = np.asarray(tiles.pair_masks(p, bins, tiles_x, config))[:n]
-    vecs = tiles.pair_vectors(p, bins, tiles_x, config) if config.hoist else None
+    pg = pairs.gather(p, bins.gauss)
+    masks = np.asarray(pairs.strip_masks(pg, bins, tiles_x, config))[:n]
+    vecs = pairs.hoisted_vectors(pg, bins, tiles_x, config) if config.hoist else None
 
     def strip_hits(k):
         sid = bins.tile[k] * STRIPS + jnp.arange(STRIPS, dtype=jnp.int32)
-        lx, ly, px, py = tiles._strip_pixels(sid, tiles_x, p.mean2d.dtype)
+        lx, ly, px, py = layout.strip_pixels(sid, tiles_x, p.mean2d.dtype)
         basis = tiles.pixel_basis(lx, ly, px, py, config)
         g = jnp.full((STRIPS, 1), bins.gauss[k])
         v = None if vecs is None else jnp.broadcast_to(vecs[k], (STRIPS, 1, 7))

@@ -28,16 +28,37 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from .. import alpha as alpha_model
+from .. import hoist
 from ..binning import TileBins
-from ..composite import gaussian_alpha, passes
 from ..config import RasterConfig
 from ..projection import Projected
 
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
 
-def walk(bins: TileBins, config: RasterConfig, rgb, depth, trans, stop_at, g_color, g_trans,
-         g_depth, pair_alpha, n_model: int):
+def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents):
+    """One pair of the walk at a set of pixels (any shape; `rgb`, `z` broadcast): the module
+    docstring's recurrence, the one both the XLA walk and the Pallas backward kernels take.
+
+    rgb = (r, g, b); sums = (S_r, S_g, S_b, S_Z) behind this pair; cotangents = (ḡ_r, ḡ_g, ḡ_b,
+    ḡ_D, ḡ_T·T_N). Returns (T_k where hit else T_{k+1}: the next carry, w = α·T_k, ∂L/∂α (zero
+    where not hit), the sums including this pair).
+    """
+    g_r, g_g, g_b, g_d, g_bg = cotangents
+    s_r, s_g, s_b, s_z = sums
+    one_minus = jnp.where(hit, 1 - alpha, 1)
+    t_k = t_next / one_minus
+    w = jnp.where(hit, alpha * t_k, 0)
+    dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
+    dot_s = g_r * s_r + g_g * s_g + g_b * s_b
+    d_alpha = jnp.where(hit, t_k * (dot_c + g_d * z) - (dot_s + g_d * s_z + g_bg) / one_minus, 0)
+    sums = (s_r + w * rgb[0], s_g + w * rgb[1], s_b + w * rgb[2], s_z + w * z)
+    return jnp.where(hit, t_k, t_next), w, d_alpha, sums
+
+
+def walk(bins: TileBins, rgb, depth, trans, stop_at, g_color, g_trans, g_depth, pair_alpha,
+         n_model: int):
     """(capacity, n_model + 4) gradient rows of every pair, walking all tiles back to front in
     lockstep (step s visits each tile's pair end − 1 − s).
 
@@ -50,65 +71,71 @@ def walk(bins: TileBins, config: RasterConfig, rgb, depth, trans, stop_at, g_col
     dt = trans.dtype
     cap = bins.gauss.shape[0]
     start, end = bins.tile_start, bins.tile_end
-    g_bg = g_trans * trans  # ḡ_T·T_N, per pixel
+    cot = (g_color[..., 0], g_color[..., 1], g_color[..., 2], g_depth, g_trans * trans)
 
     def body(carry):
-        s, t_next, s_c, s_z, rows = carry
+        s, t_next, sums, rows = carry
         k = end - 1 - s
         active = k >= start
         kk = jnp.clip(k, 0, cap - 1)
         g = bins.gauss[kk]
-        c, z = rgb[g], depth[g]
+        c, z = rgb[g], depth[g][:, None]
         alpha, hit, model_grads = pair_alpha(kk, g)
         hit = hit & active[:, None] & (k[:, None] < stop_at)
-        one_minus = jnp.where(hit, 1 - alpha, 1)
-        t_k = t_next / one_minus
-        w = jnp.where(hit, alpha * t_k, 0)
-        dot_c = jnp.sum(g_color * c[:, None, :], -1)  # ḡ_C·rgb_k
-        dot_s = jnp.sum(g_color * s_c, -1)  # ḡ_C·S_C
-        d_alpha = t_k * (dot_c + g_depth * z[:, None]) - (dot_s + g_depth * s_z + g_bg) / one_minus
-        row = jnp.stack(model_grads(jnp.where(hit, d_alpha, 0)) + [
-            jnp.sum(w * g_color[..., 0], -1), jnp.sum(w * g_color[..., 1], -1),
-            jnp.sum(w * g_color[..., 2], -1),  # ∂/∂rgb
+        t, w, d_alpha, sums = walk_step(t_next, alpha, hit, [c[:, None, i] for i in range(3)], z,
+                                        sums, cot)
+        row = jnp.stack(model_grads(d_alpha) + [
+            jnp.sum(w * cot[0], -1), jnp.sum(w * cot[1], -1), jnp.sum(w * cot[2], -1),  # ∂/∂rgb
             jnp.sum(w * g_depth, -1),  # ∂/∂z
         ], -1)
         slot = jnp.where(active, k, cap)  # each tile's own pair: distinct slots, plain stores
         rows = rows.at[slot].set(row, mode="drop", unique_indices=True)
-        s_c = s_c + w[..., None] * c[:, None, :]
-        s_z = s_z + w * z[:, None]
-        return s + 1, jnp.where(hit, t_k, t_next), s_c, s_z, rows
+        return s + 1, t, sums, rows
 
-    init = (jnp.int32(0), trans, jnp.zeros(g_color.shape, dt), jnp.zeros(trans.shape, dt),
-            jnp.zeros((cap, n_model + 4), dt))
-    return lax.while_loop(lambda c: c[0] < jnp.max(end - start), body, init)[4]
+    zero = jnp.zeros(trans.shape, dt)
+    init = (jnp.int32(0), trans, (zero,) * 4, jnp.zeros((cap, n_model + 4), dt))
+    return lax.while_loop(lambda c: c[0] < jnp.max(end - start), body, init)[3]
 
 
 def difference_alpha(mean2d, conic, opacity, pixels, config: RasterConfig, gate=None):
-    """The `pair_alpha` of the 3DGS difference form (lgs_jax.composite): six model columns,
-    ∂L/∂(μx, μy, a, b, c, o). `gate(kk)` (optional): which pixels a pair may touch at all."""
+    """The walk's `pair_alpha` of the difference form (lgs_jax.alpha.difference): six model
+    columns, ∂L/∂(μx, μy, a, b, c, o). `gate(kk)` (optional): which pixels a pair may touch."""
     px, py = pixels
-    dt = mean2d.dtype
-    alpha_cap = jnp.asarray(config.alpha_cap, dt)
+    cap = jnp.asarray(config.alpha_cap, mean2d.dtype)
 
     def pair_alpha(kk, g):
-        m, q, o = mean2d[g], conic[g], opacity[g]
-        dx, dy = m[:, 0:1] - px, m[:, 1:2] - py
-        a, b, cc = q[:, 0:1], q[:, 1:2], q[:, 2:3]
-        power, alpha = gaussian_alpha((m[:, 0:1], m[:, 1:2]), (a, b, cc), o[:, None], px, py,
-                                      alpha_cap)
-        hit = passes(power, alpha)
+        m, q, o = mean2d[g], conic[g], opacity[g][:, None]
+        mean, conic_g = (m[:, 0:1], m[:, 1:2]), (q[:, 0:1], q[:, 1:2], q[:, 2:3])
+        alpha, hit, power = alpha_model.difference(mean, conic_g, o, px, py, cap)
         if gate is not None:
             hit = hit & gate(kk)
 
         def grads(d_alpha):
-            unclamped = o[:, None] * jnp.exp(power) < alpha_cap
-            d_power = jnp.where(unclamped, d_alpha * alpha, 0)
-            return [jnp.sum(-d_power * (a * dx + b * dy), -1),  # ∂/∂μx (dx = μx − px)
-                    jnp.sum(-d_power * (cc * dy + b * dx), -1),  # ∂/∂μy
-                    jnp.sum(-0.5 * d_power * dx * dx, -1),  # ∂/∂a
-                    jnp.sum(-d_power * dx * dy, -1),  # ∂/∂b
-                    jnp.sum(-0.5 * d_power * dy * dy, -1),  # ∂/∂c
-                    jnp.sum(jnp.where(unclamped, d_alpha * jnp.exp(power), 0), -1)]  # ∂/∂o
+            return [jnp.sum(col, -1) for col in alpha_model.difference_vjp(
+                d_alpha, alpha, power, mean, conic_g, o, px, py, cap)]
+
+        return alpha, hit, grads
+
+    return pair_alpha
+
+
+def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
+    """The walk's `pair_alpha` of the hoisted form (lgs_jax.alpha.hoisted, raw = V·B as
+    `hoist.dot_basis`): seven model columns, ∂L/∂V (Eq. 8's six components, ∂(V·B)/∂V = B) and
+    ∂L/∂ln o (where the clamp binds). vectors: (capacity, 7) from
+    `lgs_jax.pairs.hoisted_vectors`; basis: (n_tiles, 256, 6)."""
+    cap = jnp.asarray(config.alpha_cap, vectors.dtype)
+
+    def pair_alpha(kk, g):
+        v = vectors[kk]
+        raw = hoist.dot_basis(v[:, None, :6], basis)
+        alpha, hit, ln_a = alpha_model.hoisted(raw, v[:, 6:7], cap)
+        if gate is not None:
+            hit = hit & gate(kk)
+
+        def grads(d_alpha):
+            d_raw, d_ln_o = alpha_model.hoisted_vjp(d_alpha, alpha, ln_a, raw, v[:, 6:7], cap)
+            return [jnp.sum(d_raw * basis[..., i], -1) for i in range(6)] + [jnp.sum(d_ln_o, -1)]
 
         return alpha, hit, grads
 
@@ -120,7 +147,7 @@ def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_
     """(capacity, PAIR_COLUMNS) gradient rows of the difference form (the reference backend).
     fields = (mean2d, conic, opacity, rgb, depth); pixels = (px, py), (n_tiles, 256)."""
     mean2d, conic, opacity, rgb, depth = fields
-    return walk(bins, config, rgb, depth, trans, stop_at, g_color, g_trans, g_depth,
+    return walk(bins, rgb, depth, trans, stop_at, g_color, g_trans, g_depth,
                 difference_alpha(mean2d, conic, opacity, pixels, config), 6)
 
 
@@ -154,18 +181,19 @@ def differentiable(forward, gradients, forward_for_gradients=None):
     `forward_for_gradients` (same signature; default `forward`) is the forward run when the
     backward will follow (under `jax.grad` / `jax.vjp`).
 
-    Returns composite(p, bins, width, height, config) -> (color, trans, depth, extra), per tile.
+    Returns composite(p, bins, width, height, config) -> (color, trans, depth, stop_at, extra),
+    per tile (stop_at: int32, not differentiated).
     Reverse-mode cannot go through the forward's while loops; this is the only way in.
     """
     @functools.partial(jax.custom_vjp, nondiff_argnums=(2, 3, 4))
     def composite(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
-        state, _, extra, _ = forward(p, bins, width, height, config)
-        return state.color, state.trans, state.depth, extra
+        state, stop_at, extra, _ = forward(p, bins, width, height, config)
+        return state.color, state.trans, state.depth, stop_at, extra
 
     def composite_fwd(p, bins, width, height, config):
         state, stop_at, extra, saved = (forward_for_gradients or forward)(p, bins, width, height,
                                                                           config)
-        return ((state.color, state.trans, state.depth, extra),
+        return ((state.color, state.trans, state.depth, stop_at, extra),
                 (p, bins, state.trans, stop_at, saved))
 
     def composite_bwd(width, height, config, residuals, cotangents):

@@ -15,30 +15,13 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from ..binning import TILE, TileBins, tile_grid
+from ..binning import TileBins
 from ..composite import PixelState, blend
 from ..config import RasterConfig
+from ..layout import TILE_PIXELS, tile_pixels
 from ..projection import Projected
 from . import backward
-
-
-def tiles_to_image(x, width: int, height: int):
-    """(tiles_y·tiles_x, 256, ...) per-tile pixel arrays -> (H·W, ...) row-major pixels."""
-    tiles_x, tiles_y = tile_grid(width, height)
-    rest = x.shape[2:]
-    x = x.reshape((tiles_y, tiles_x, TILE, TILE) + rest)
-    x = jnp.moveaxis(x, 2, 1).reshape((tiles_y * TILE, tiles_x * TILE) + rest)
-    return x[:height, :width].reshape((height * width,) + rest)
-
-
-def tile_pixels(width: int, height: int, dtype):
-    """Pixel centres (px, py), each (n_tiles, 256): every tile's pixels, row-major."""
-    tiles_x, tiles_y = tile_grid(width, height)
-    local_j, local_i = jnp.meshgrid(jnp.arange(TILE), jnp.arange(TILE))
-    tile = jnp.arange(tiles_x * tiles_y)[:, None]
-    px = ((tile % tiles_x) * TILE + local_j.reshape(-1) + 0.5).astype(dtype)
-    py = ((tile // tiles_x) * TILE + local_i.reshape(-1) + 0.5).astype(dtype)
-    return px, py
+from .interface import Backend, RasterResult
 
 
 def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
@@ -60,25 +43,27 @@ def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
                         config)
             return k + 1, new, jnp.where(new.done & ~state.done, k, stop_at)
 
-        init = (start, PixelState.empty(TILE * TILE, dt), jnp.full((TILE * TILE,), end))
+        init = (start, PixelState.empty(TILE_PIXELS, dt), jnp.full((TILE_PIXELS,), end))
         _, state, stop_at = lax.while_loop(cond, body, init)
         return state, stop_at
 
     return jax.vmap(one_tile)(*pixels, bins.tile_start, bins.tile_end)
 
 
+def _fields(p: Projected):
+    return p.mean2d, p.conic, p.opacity, p.rgb, p.depth
+
+
 def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
-    fields = (p.mean2d, p.conic, p.opacity, p.rgb, p.depth)
-    state, stop_at = composite_tiles(fields, bins, tile_pixels(width, height, p.mean2d.dtype),
+    state, stop_at = composite_tiles(_fields(p), bins, tile_pixels(width, height, p.mean2d.dtype),
                                      config)
     return state, stop_at, None, None
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
                trans, stop_at, saved, cotangents):
-    fields = (p.mean2d, p.conic, p.opacity, p.rgb, p.depth)
-    rows = backward.pair_rows(fields, bins, tile_pixels(width, height, p.mean2d.dtype), config,
-                              trans, stop_at, *cotangents)
+    rows = backward.pair_rows(_fields(p), bins, tile_pixels(width, height, p.mean2d.dtype),
+                              config, trans, stop_at, *cotangents)
     return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
 
 
@@ -86,8 +71,10 @@ _composite = backward.differentiable(_forward, _gradients)
 
 
 def rasterize(p: Projected, bins: TileBins, width: int, height: int,
-              config: RasterConfig) -> PixelState:
-    """Composite every tile; returns the (H·W,) row-major pixel state (differentiable)."""
-    color, trans, depth, _ = _composite(p, bins, width, height, config)
-    state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
-    return jax.tree.map(lambda x: tiles_to_image(x, width, height), state)
+              config: RasterConfig) -> RasterResult:
+    """Composite every tile (differentiable)."""
+    color, trans, depth, stop, _ = _composite(p, bins, width, height, config)
+    return RasterResult(color=color, trans=trans, depth=depth, stop=stop)
+
+
+BACKEND = Backend("reference", rasterize)

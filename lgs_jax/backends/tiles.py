@@ -6,10 +6,11 @@ pairs whose strip-mask bit is set (emitted once by prefix counts and a store to 
 otherwise the tile's whole list.
 
 Work scales with the pairs a scene has, not with its worst tile: strips are sorted by list
-length and processed in groups of GROUP strips; a group runs only as many CHUNK-Gaussian steps as
-its longest list needs (empty strips run none) and stops early once all its pixels are done.
+length and processed in groups of `tuning.tiles_group` strips; a group runs only as many
+`tuning.tiles_chunk`-Gaussian steps as its longest list needs (empty strips run none) and stops
+early once all its pixels are done.
 
-Per staged chunk, ln α for GROUP x 32 pixels x CHUNK Gaussians is the pixel basis times the
+Per staged chunk, ln α for group x 32 pixels x chunk Gaussians is the pixel basis times the
 hoisted vectors (Eq. 9–10) as six fused elementwise products (`hoist.dot_basis`: no matrix unit,
 so no TF32 on GPUs, and the backward reproduces the forward's bits under any batching), or the
 difference form when `hoist` is off; the chunk is then blended in order (Algorithm 1,
@@ -32,12 +33,9 @@ i.e. 0.01 (3dgs, cap 0.99) or 0.1 (gsplat, cap 0.999) times the colour range, pl
 
 Differentiable: `rasterize` is a custom_vjp. The forward records where each pixel stopped (the
 pair whose stop test fired, or the first pair its strip never processed); the backward
-(lgs_jax.backends.backward.walk) walks each tile back to front with the same α model — V·B
-clamped at ln o (`hoisted_alpha`) or the difference form — gated by the same strip masks, and
-chains ∂L/∂V to the Gaussian through Eq. 8.
-
-The hoisted forms clamp ln α at ln o (its exact maximum) instead of the difference form's
-`power > 0` skip: in the expanded form that skip would fire on rounding at Gaussian centres.
+(lgs_jax.backends.backward.walk) walks each tile back to front with the same α model
+(lgs_jax.alpha: V·B clamped at ln o, or the difference form) gated by the same strip masks, and
+chains ∂L/∂V to the Gaussian through Eq. 8 (lgs_jax.pairs.chain_hoisted_rows).
 """
 
 from __future__ import annotations
@@ -46,93 +44,40 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .. import hoist
-from ..binning import TILE, TileBins, padded_ellipse, tile_grid
-from ..composite import PixelState, blend_weights, gaussian_alpha, passes, stops
-from ..config import ALPHA_MIN, RasterConfig
+from .. import alpha as alpha_model
+from .. import hoist, pairs
+from ..binning import TileBins
+from ..composite import PixelState, blend_weights, stops
+from ..config import RasterConfig
+from ..layout import (STRIP_PIXELS, STRIPS, TILE_PIXELS, frame, pixel_centres, strip_pixels,
+                      tile_grid)
 from ..projection import Projected
-from ..warp_masks import FULL_MASK, STRIPS, strip_mask
 from . import backward
-from .reference import tile_pixels, tiles_to_image
-
-GROUP = 256  # strips processed together
-CHUNK = 16  # Gaussians per staged batch
-STRIP_PIXELS = 2 * TILE
-
-
-def _origin_offset(config: RasterConfig) -> float:
-    """Offset of the tile-local origin from the tile corner, in pixels (both axes)."""
-    return TILE / 2 if config.origin == "center" else 0.0
-
-
-def tile_origin(tile_x, tile_y, config: RasterConfig, dtype):
-    """Origin T of the hoisting frame (Eq. 1): tile corner or centre; (0, 0) for global coords."""
-    if not config.local_coords:
-        return jnp.zeros(jnp.shape(tile_x) + (2,), dtype)
-    off = _origin_offset(config)
-    return jnp.stack([tile_x * TILE + off, tile_y * TILE + off], -1).astype(dtype)
-
-
-def pair_masks(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
-    """Strip masks of every pair (FULL_MASK for Gaussians the binning could not bound)."""
-    dt = p.mean2d.dtype
-    u = jnp.finfo(dt).eps / 2
-    e = padded_ellipse(p)
-    g, t = bins.gauss, bins.tile
-    tx, ty = t % tiles_x, t // tiles_x
-    tau = e.tau_pad[g]
-    if config.hoist:
-        origin = tile_origin(tx, ty, config, dt)
-        corner = jnp.stack([tx * TILE, ty * TILE], -1).astype(dt)
-        reach = jnp.maximum(jnp.abs(corner + 0.5 - origin), jnp.abs(corner + TILE - 0.5 - origin))
-        err = hoist.error_bound(p.mean2d[g], p.conic[g], jnp.log(p.opacity[g]), origin,
-                                reach[:, 0], reach[:, 1], 16 * u)
-        tau = jnp.maximum(tau, e.tau[g] * (1 + 4 * u) + 128 * u + 2 * err)
-    mask = strip_mask(p.mean2d[g], p.conic[g], tau, e.det_lo[g], tx, ty)
-    mask = jnp.where(e.unbounded[g], FULL_MASK, mask)
-    return jnp.where(t < bins.tile_start.shape[0], mask, 0)
-
-
-def pair_vectors(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
-    """What each pair stages (capacity, 7): the hoisted V (Eq. 8) relative to its tile's origin,
-    then ln o (the clamp of ln α)."""
-    g, t = bins.gauss, bins.tile
-    origin = tile_origin(t % tiles_x, t // tiles_x, config, p.mean2d.dtype)
-    log_o = jnp.log(p.opacity[g])
-    return jnp.concatenate([hoist.hoist(p.mean2d[g], p.conic[g], log_o, origin),
-                            log_o[:, None]], -1)
+from .interface import Backend, RasterResult, stop_within
 
 
 def pixel_basis(lx, ly, px, py, config: RasterConfig):
-    """Pixel basis (Eq. 9) in the hoisting frame, from tile-local (lx, ly) and global (px, py)
-    pixel centres; None without hoisting."""
-    if not config.hoist:
-        return None
-    if not config.local_coords:
-        return hoist.basis(px, py)
-    off = _origin_offset(config)  # x' = pixel − origin: exact in any float
-    return hoist.basis(lx - off, ly - off)
+    """Pixel basis (Eq. 9) in the hoisting frame (lgs_jax.layout.frame), from tile-local
+    (lx, ly) and global (px, py) pixel centres; None without hoisting."""
+    return hoist.basis(*frame(lx, ly, px, py, config)) if config.hoist else None
 
 
 def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
     """(α, hit) of Gaussians g (n, G) at the pixels of n strips (n, P): arrays (G, n, P).
 
-    hoist: with v (n, G, 7) from `pair_vectors`, ln α = basis·V (Eq. 10, `hoist.dot_basis`),
-    clamped at ln o; α = min(cap, e^{ln α});
-    hit = ln α >= ln(1/255) (the test in the log domain). Difference form otherwise, exactly as
-    lgs_jax.composite: hit = power <= 0 and α >= 1/255.
+    hoist: with v (n, G, 7) from `pairs.hoisted_vectors`, raw = basis·V (Eq. 10,
+    `hoist.dot_basis`) and `alpha.hoisted`. Otherwise the difference form, `alpha.difference`.
     """
-    dt = p.mean2d.dtype
-    cap = jnp.asarray(config.alpha_cap, dt)
+    cap = jnp.asarray(config.alpha_cap, p.mean2d.dtype)
     if config.hoist:
-        ln_a = hoist.dot_basis(jnp.swapaxes(v, 0, 1)[:, :, None, :6], basis[None])
-        ln_a = jnp.minimum(ln_a, v[..., 6].T[:, :, None])
-        return jnp.minimum(cap, jnp.exp(ln_a)), ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, dt))
+        raw = hoist.dot_basis(jnp.swapaxes(v, 0, 1)[:, :, None, :6], basis[None])
+        alpha, hit, _ = alpha_model.hoisted(raw, v[..., 6].T[:, :, None], cap)
+        return alpha, hit
     m, q = jnp.swapaxes(p.mean2d[g], 0, 1), jnp.swapaxes(p.conic[g], 0, 1)  # (G, n, ...)
-    power, alpha = gaussian_alpha((m[:, :, None, 0], m[:, :, None, 1]),
-                                  tuple(q[:, :, None, i] for i in range(3)),
-                                  p.opacity[g].T[:, :, None], px[None], py[None], cap)
-    return alpha, passes(power, alpha)
+    alpha, hit, _ = alpha_model.difference((m[:, :, None, 0], m[:, :, None, 1]),
+                                           tuple(q[:, :, None, i] for i in range(3)),
+                                           p.opacity[g].T[:, :, None], px[None], py[None], cap)
+    return alpha, hit
 
 
 def blend_chunk(state: PixelState, stop_at, alpha, hit, feats, pair, config: RasterConfig):
@@ -176,7 +121,9 @@ def strip_lists(bins: TileBins, masks, warp_cull: bool):
         return counts, lambda sid, j: base[sid][:, None] + j
     cap = bins.gauss.shape[0]
     if STRIPS * cap >= 2**31:
-        raise ValueError(f"capacity: {cap} is too large for warp_cull strip lists (< 2^28)")
+        raise ValueError(f"backend='tiles' with warp_cull indexes strip lists of 8 x {cap} "
+                         f"pair slots in int32, so it renders at most 2^28 tile-Gaussian pairs; "
+                         f"use backend='pallas', or RasterConfig(warp_cull=False)")
     n_tiles = start.shape[0]
     bits = (masks[None, :] >> jnp.arange(STRIPS, dtype=jnp.int32)[:, None]) & 1  # (8, cap)
     before = jnp.cumsum(bits, axis=1, dtype=jnp.int32) - bits  # exclusive prefix count
@@ -196,130 +143,105 @@ def strip_lists(bins: TileBins, masks, warp_cull: bool):
                                                     STRIPS * cap - 1)]
 
 
-def _strip_pixels(sid, tiles_x: int, dtype):
-    """Pixel centres of strips `sid`, each (n, 32), row-major within a strip: tile-local
-    (lx, ly) relative to the tile corner, and global (px, py)."""
-    t, s = sid // STRIPS, sid % STRIPS
-    k = jnp.arange(STRIP_PIXELS)
-    lx = jnp.broadcast_to(k % TILE, (sid.shape[0], STRIP_PIXELS)) + 0.5
-    ly = 2 * s[:, None] + k // TILE + 0.5
-    px = (t % tiles_x)[:, None] * TILE + lx
-    py = (t // tiles_x)[:, None] * TILE + ly
-    return tuple(v.astype(dtype) for v in (lx, ly, px, py))
+def _strip_order(counts, group: int):
+    """Strips by decreasing list length, padded to whole groups: (order, sorted counts,
+    number of groups)."""
+    n_strips = counts.shape[0]
+    n_groups = -(-n_strips // group)
+    pad = jnp.zeros(n_groups * group - n_strips, jnp.int32)
+    order = jnp.argsort(-counts, stable=True).astype(jnp.int32)
+    return (jnp.concatenate([order, pad]), jnp.concatenate([counts[order], pad]), n_groups)
+
+
+def _run_group(sid, cnt, lookup, p: Projected, bins: TileBins, pair_v, feats, tiles_x: int,
+               config: RasterConfig):
+    """Composite one group of strips `sid` with list lengths `cnt` (sorted, longest first):
+    chunks of `tiles_chunk` pairs while any strip of the group still blends. Returns the
+    group's state and stop pairs (capacity where a strip ran through its list)."""
+    dt = p.mean2d.dtype
+    cap = bins.gauss.shape[0]
+    group, chunk = sid.shape[0], config.tuning.tiles_chunk
+    lx, ly, px, py = strip_pixels(sid, tiles_x, dt)
+    basis = pixel_basis(lx, ly, px, py, config)
+    n_chunks = (cnt[0] + chunk - 1) // chunk
+
+    def active(c, state):
+        more = c * chunk < cnt
+        if config.blend == "exact":
+            return more & ~jnp.all(state.done, -1)
+        return more & ~jnp.all(stops(state.trans, config), -1)
+
+    def record_strip_stops(c, state, stop_at):
+        """Strips that stopped with pairs left: those pairs were never blended."""
+        left = (c * chunk < cnt) & ~active(c, state)
+        first = jnp.clip(lookup(sid, jnp.full((group, 1), c * chunk)), 0, cap - 1)
+        return jnp.where(left[:, None] & (stop_at == cap), first, stop_at)
+
+    def cond(carry):
+        c, state, _ = carry
+        return (c < n_chunks) & jnp.any(active(c, state))
+
+    def body(carry):
+        c, state, stop_at = carry
+        stop_at = record_strip_stops(c, state, stop_at)
+        j = c * chunk + jnp.arange(chunk, dtype=jnp.int32)
+        valid = (j[None, :] < cnt[:, None]) & active(c, state)[:, None]
+        k = jnp.clip(lookup(sid, j[None, :]), 0, cap - 1)  # (group, chunk)
+        g = bins.gauss[k]
+        alpha, hit = evaluate(p, g, pair_v[k] if config.hoist else None, basis, px, py, config)
+        hit = hit & valid.T[:, :, None]
+        state, stop_at = blend_chunk(state, stop_at, alpha, hit, feats[g.T], k.T, config)
+        return c + 1, state, stop_at
+
+    init = (jnp.int32(0), PixelState.empty((group, STRIP_PIXELS), dt),
+            jnp.full((group, STRIP_PIXELS), cap, jnp.int32))
+    c, state, stop_at = lax.while_loop(cond, body, init)
+    return state, record_strip_stops(c, state, stop_at)
 
 
 def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
     """Per tile (n_tiles, 256): the state, each pixel's stop pair index (the pair whose stop test
-    fired, or the first pair its strip never processed; capacity if neither), the number of
-    strip–Gaussian pairs, and (masks, pair vectors) for the backward (None where switched off)."""
+    fired, or the first pair its strip never processed; the tile's end if neither), the number
+    of strip–Gaussian pairs, and (masks, pair vectors) for the backward (None where off)."""
     dt = p.mean2d.dtype
     cap = bins.gauss.shape[0]
+    group = config.tuning.tiles_group
     tiles_x, tiles_y = tile_grid(width, height)
     n_strips = tiles_x * tiles_y * STRIPS
-    n_groups = -(-n_strips // GROUP)
-
-    masks = None
+    masks = pair_v = None
+    if config.warp_cull or config.hoist:
+        pg = pairs.gather(p, bins.gauss)
     if config.warp_cull:
         # Materialise the masks once: fused into their (8, capacity) consumers, XLA would
         # recompute the tight box for every strip bit (measured 4x slower on CPU).
-        masks = lax.optimization_barrier(pair_masks(p, bins, tiles_x, config))
+        masks = lax.optimization_barrier(pairs.strip_masks(pg, bins, tiles_x, config))
+    if config.hoist:
+        pair_v = pairs.hoisted_vectors(pg, bins, tiles_x, config)
     counts, lookup = strip_lists(bins, masks, config.warp_cull)
-    order = jnp.argsort(-counts, stable=True).astype(jnp.int32)
-    order = jnp.concatenate([order, jnp.zeros(n_groups * GROUP - n_strips, jnp.int32)])
-    counts_sorted = jnp.concatenate([counts[order[:n_strips]],
-                                     jnp.zeros(n_groups * GROUP - n_strips, jnp.int32)])
-    pair_v = pair_vectors(p, bins, tiles_x, config) if config.hoist else None
+    order, counts_sorted, n_groups = _strip_order(counts, group)
     feats = jnp.concatenate([p.rgb, p.depth[:, None]], -1)  # (N, 4): colour and depth
-
-    def run_group(gi):
-        sid = lax.dynamic_slice(order, (gi * GROUP,), (GROUP,))
-        cnt = lax.dynamic_slice(counts_sorted, (gi * GROUP,), (GROUP,))
-        lx, ly, px, py = _strip_pixels(sid, tiles_x, dt)
-        basis = pixel_basis(lx, ly, px, py, config)
-        n_chunks = (cnt[0] + CHUNK - 1) // CHUNK
-
-        def active(c, state):
-            more = c * CHUNK < cnt
-            if config.blend == "exact":
-                return more & ~jnp.all(state.done, -1)
-            return more & ~jnp.all(stops(state.trans, config), -1)
-
-        def record_strip_stops(c, state, stop_at):
-            """Strips that stopped with pairs left: those pairs were never blended."""
-            left = (c * CHUNK < cnt) & ~active(c, state)
-            first = jnp.clip(lookup(sid, jnp.full((GROUP, 1), c * CHUNK)), 0, cap - 1)
-            return jnp.where(left[:, None] & (stop_at == cap), first, stop_at)
-
-        def cond(carry):
-            c, state, _ = carry
-            return (c < n_chunks) & jnp.any(active(c, state))
-
-        def body(carry):
-            c, state, stop_at = carry
-            stop_at = record_strip_stops(c, state, stop_at)
-            j = c * CHUNK + jnp.arange(CHUNK, dtype=jnp.int32)
-            valid = (j[None, :] < cnt[:, None]) & active(c, state)[:, None]
-            k = jnp.clip(lookup(sid, j[None, :]), 0, cap - 1)  # (GROUP, CHUNK)
-            g = bins.gauss[k]
-            alpha, hit = evaluate(p, g, pair_v[k] if config.hoist else None, basis, px, py,
-                                  config)
-            hit = hit & valid.T[:, :, None]
-            state, stop_at = blend_chunk(state, stop_at, alpha, hit, feats[g.T], k.T, config)
-            return c + 1, state, stop_at
-
-        init = (jnp.int32(0), PixelState.empty((GROUP, STRIP_PIXELS), dt),
-                jnp.full((GROUP, STRIP_PIXELS), cap, jnp.int32))
-        c, state, stop_at = lax.while_loop(cond, body, init)
-        return state, record_strip_stops(c, state, stop_at)
 
     def group_cond(carry):
         gi, _ = carry
-        return (gi < n_groups) & (counts_sorted[jnp.minimum(gi, n_groups - 1) * GROUP] > 0)
+        return (gi < n_groups) & (counts_sorted[jnp.minimum(gi, n_groups - 1) * group] > 0)
 
     def group_body(carry):
         gi, out = carry
-        out = jax.tree.map(lambda o, s: lax.dynamic_update_slice_in_dim(o, s, gi * GROUP, 0),
-                           out, run_group(gi))
+        sid = lax.dynamic_slice(order, (gi * group,), (group,))
+        cnt = lax.dynamic_slice(counts_sorted, (gi * group,), (group,))
+        done = _run_group(sid, cnt, lookup, p, bins, pair_v, feats, tiles_x, config)
+        out = jax.tree.map(lambda o, x: lax.dynamic_update_slice_in_dim(o, x, gi * group, 0),
+                           out, done)
         return gi + 1, out
 
-    out = (PixelState.empty((n_groups * GROUP, STRIP_PIXELS), dt),
-           jnp.full((n_groups * GROUP, STRIP_PIXELS), cap, jnp.int32))
+    out = (PixelState.empty((n_groups * group, STRIP_PIXELS), dt),
+           jnp.full((n_groups * group, STRIP_PIXELS), cap, jnp.int32))
     out = lax.while_loop(group_cond, group_body, (jnp.int32(0), out))[1]
     inverse = jnp.argsort(order[:n_strips]).astype(jnp.int32)  # strip id -> sorted position
     # (n_strips, 32) in tile-major strip order is exactly (n_tiles, 16 rows, 16 cols) per tile.
-    state, stop_at = jax.tree.map(lambda x: x[inverse].reshape((tiles_x * tiles_y, TILE * TILE)
+    state, stop_at = jax.tree.map(lambda x: x[inverse].reshape((tiles_x * tiles_y, TILE_PIXELS)
                                                                + x.shape[2:]), out)
-    return state, stop_at, jnp.sum(counts), (masks, pair_v)
-
-
-def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
-    """The backward's `pair_alpha` (lgs_jax.backends.backward.walk) of the hoisted form:
-    ln α = min(V·B, ln o) per pixel (Eq. 10), α = min(cap, e^{ln α}); seven model columns,
-    ∂L/∂V (Eq. 8's six components, ∂(V·B)/∂V = B) and ∂L/∂ln o (where the clamp binds).
-    vectors: (capacity, 7) from `pair_vectors`; basis: (n_tiles, 256, 6)."""
-    dt = vectors.dtype
-    alpha_cap = jnp.asarray(config.alpha_cap, dt)
-    ln_min = jnp.log(jnp.asarray(ALPHA_MIN, dt))
-
-    def pair_alpha(kk, g):
-        v = vectors[kk]
-        raw = hoist.dot_basis(v[:, None, :6], basis)
-        ln_a = jnp.minimum(raw, v[:, 6:7])
-        e = jnp.exp(ln_a)
-        alpha, hit = jnp.minimum(alpha_cap, e), ln_a >= ln_min
-        if gate is not None:
-            hit = hit & gate(kk)
-
-        def grads(d_alpha):
-            d_ln = jnp.where(e < alpha_cap, d_alpha * alpha, 0)
-            on_v = raw <= v[:, 6:7]
-            d_raw = jnp.where(on_v, d_ln, 0)
-            return ([jnp.sum(d_raw * basis[..., i], -1) for i in range(6)]
-                    + [jnp.sum(jnp.where(on_v, 0, d_ln), -1)])
-
-        return alpha, hit, grads
-
-    return pair_alpha
+    return state, stop_within(stop_at, bins.tile_end), jnp.sum(counts), (masks, pair_v)
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
@@ -328,47 +250,36 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     with the forward's own arithmetic (hoisted or difference form) and its strip masks."""
     masks, pair_v = saved
     dt = p.mean2d.dtype
-    tiles_x, _ = tile_grid(width, height)
-    px, py = tile_pixels(width, height, dt)
+    tiles_x, tiles_y = tile_grid(width, height)
+    tile = jnp.arange(tiles_x * tiles_y, dtype=jnp.int32)[:, None]
+    k = jnp.arange(TILE_PIXELS, dtype=jnp.int32)
+    lx, ly, px, py = pixel_centres(tile, k[None], tiles_x, dt)
     gate = None
     if config.warp_cull:
-        strip = (jnp.arange(TILE * TILE) // STRIP_PIXELS).astype(jnp.int32)
+        strip = k // STRIP_PIXELS
         gate = lambda kk: ((masks[kk][:, None] >> strip[None]) & 1) == 1
-    common = (bins, config, p.rgb, p.depth, trans, stop_at) + tuple(cotangents)
+    common = (bins, p.rgb, p.depth, trans, stop_at) + tuple(cotangents)
     if not config.hoist:
         rows = backward.walk(*common, backward.difference_alpha(
             p.mean2d, p.conic, p.opacity, (px, py), config, gate), 6)
     else:
-        k = jnp.arange(TILE * TILE)
-        lx = jnp.broadcast_to(k % TILE + 0.5, px.shape).astype(dt)
-        ly = jnp.broadcast_to(k // TILE + 0.5, px.shape).astype(dt)
-        basis = pixel_basis(lx, ly, px, py, config)
-        rows = backward.walk(*common, hoisted_alpha(pair_v, basis, config, gate), 7)
-        rows = chain_hoisted_rows(p, bins, rows, tiles_x, config)
+        basis = pixel_basis(jnp.broadcast_to(lx, px.shape), jnp.broadcast_to(ly, px.shape), px,
+                            py, config)
+        rows = backward.walk(*common, backward.hoisted_alpha(pair_v, basis, config, gate), 7)
+        rows = pairs.chain_hoisted_rows(pairs.gather(p, bins.gauss), bins, rows, tiles_x, config)
     return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
-
-
-def chain_hoisted_rows(p: Projected, bins: TileBins, rows, tiles_x: int, config: RasterConfig):
-    """Pair rows (∂L/∂V, ∂L/∂ln o from the clamp, ∂L/∂rgb, ∂L/∂z: capacity x 11) chained to
-    the pair's Gaussian through Eq. 8 (the vjp of `hoist.hoist`): (capacity, PAIR_COLUMNS)."""
-    g, t = bins.gauss, bins.tile
-    origin = tile_origin(t % tiles_x, t // tiles_x, config, p.mean2d.dtype)
-    o = p.opacity[g]
-    _, vjp = jax.vjp(lambda m, q, lo: hoist.hoist(m, q, lo, origin), p.mean2d[g], p.conic[g],
-                     jnp.log(jnp.where(o > 0, o, 1)))
-    d_mean, d_conic, d_log_o = vjp(rows[:, :6])
-    d_o = jnp.where(o > 0, (d_log_o + rows[:, 6]) / jnp.where(o > 0, o, 1), 0)
-    return jnp.concatenate([d_mean, d_conic, d_o[:, None], rows[:, 7:]], -1)
 
 
 _composite = backward.differentiable(_forward, _gradients)
 
 
 def rasterize(p: Projected, bins: TileBins, width: int, height: int,
-              config: RasterConfig) -> tuple[PixelState, jax.Array]:
-    """Returns the (H·W,) pixel state (differentiable: a custom_vjp whose backward walks each
-    tile back to front with this backend's own α arithmetic and strip masks) and the number of
-    strip–Gaussian pairs processed."""
-    color, trans, depth, strip_pairs = _composite(p, bins, width, height, config)
-    state = PixelState(color=color, trans=trans, depth=depth, done=jnp.zeros(trans.shape, bool))
-    return jax.tree.map(lambda x: tiles_to_image(x, width, height), state), strip_pairs
+              config: RasterConfig) -> RasterResult:
+    """Composite every strip (differentiable: a custom_vjp whose backward walks each tile back
+    to front with this backend's own α arithmetic and strip masks)."""
+    color, trans, depth, stop, strip_pairs = _composite(p, bins, width, height, config)
+    return RasterResult(color=color, trans=trans, depth=depth, stop=stop,
+                        strip_pairs=strip_pairs)
+
+
+BACKEND = Backend("tiles", rasterize)

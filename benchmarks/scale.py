@@ -1,0 +1,352 @@
+"""Speed and memory at scale against gsplat 1.5.3: forward (and with --grad forward+backward) of
+0.06M–10M Gaussians at 720p–4K, ours and gsplat's in one process, all rows alternating within
+each round.
+
+    XLA_PYTHON_CLIENT_PREALLOCATE=false python -m benchmarks.scale [--data DIR] [--scenes a,b]
+        [--rows localgs,localgs:fast,vanilla] [--grad] [--repeat 20] [--csv FILE]
+
+Scenes (`SCENES`): guitar (91k) and lego_sh3 (60k) as they are, densified copies of guitar
+(lgs_jax.synthetic.densified: x16 1.5M, x64 5.8M, x110 10M) and lego_sh3 (x16 1M), and
+`synthetic` scenes (lgs_jax.synthetic.random_scene), each through view 0 of its cameras scaled
+to the size shown. Every row renders in the "gsplat" convention (gsplat 1.5.3's alpha cap and
+stop test), so the images can be compared: PSNR against gsplat's image.
+
+Forward rows: per stage (`project`, `emit` = pair emission, `sort` = tile sort and ranges;
+gsplat: projection + SH, `isect_tiles`, `isect_offset_encode`), the rasterization stage alone
+(`raster`: from projected and binned inputs, per-pair preparation included; gsplat's
+`rasterize_to_pixels`; `pair_prep`: the Local-GS strip masks and pair records alone), and end
+to end (`e2e`: one jitted `render` / one `gsplat.rasterization` call). Memory: ours is XLA's
+compiled memory analysis of the e2e program (temporaries + outputs, not the arguments), gsplat's
+the peak torch allocates during the call above what it held before (its inputs), in MiB.
+
+--grad rows: the gradient of Σ image·w (w fixed, random) with respect to every Gaussian field,
+ours jitted (`value_and_grad`) and gsplat's `rasterization` + `backward()`, with memory as above,
+and whether two of our calls give the same bits.
+
+Times are medians over `--repeat` rounds (fewer for scenes of 5M Gaussians or more) after one
+warm-up call each; every call ends with `block_until_ready` / `torch.cuda.synchronize`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import lgs_jax
+from lgs_jax import binning, pairs
+from lgs_jax.backends import REGISTRY, kernel_steps
+from lgs_jax.layout import tile_grid
+from lgs_jax.projection import project
+from lgs_jax.synthetic import densified, random_scene, synthetic_camera
+
+C = lgs_jax.RasterConfig
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# name -> (base scene, densify factor, width, height); base "synthetic:N" or a data folder
+SCENES = {
+    "guitar_720p": ("guitar", 1, 1280, 720),
+    "guitar_4k": ("guitar", 1, 3840, 2160),
+    "lego_800": ("lego_sh3", 1, 800, 800),
+    "guitar_x16_1080p": ("guitar", 16, 1920, 1080),
+    "lego_x16_1080p": ("lego_sh3", 16, 1920, 1080),
+    "guitar_x64_1080p": ("guitar", 64, 1920, 1080),
+    "guitar_x110_4k": ("guitar", 110, 3840, 2160),
+    "synthetic4M_1080p": ("synthetic:4000000", 1, 1920, 1080),
+    "synthetic10M_4k": ("synthetic:10000000", 1, 3840, 2160),
+}
+FILES = {"guitar": ("guitar/guitar.ply", "guitar/orbit_cameras.json"),
+         "lego_sh3": ("lego_sh3/lego_sh3.ply", "lego_sh3/lego_cameras.json")}
+# row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
+ROWS = {
+    "localgs": ("pallas", C("gsplat")),
+    "localgs:fast": ("pallas", C("gsplat", blend="fast")),
+    "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
+    "vanilla": ("pallas_vanilla", C("gsplat")),
+    "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
+}
+
+
+def load_scene(name: str, data: str):
+    """(Gaussians, Camera) of a `SCENES` entry."""
+    base, k, w, h = SCENES[name]
+    if base.startswith("synthetic:"):
+        return random_scene(int(base.split(":")[1])), synthetic_camera(w, h)
+    ply, cams = FILES[base]
+    g = lgs_jax.load_ply(os.path.join(data, ply))
+    cam = lgs_jax.load_cameras(os.path.join(data, cams), width=w, height=h)[0]
+    return (densified(g, k, seed=0) if k > 1 else g), cam
+
+
+def median_ms(fns: dict, repeat: int) -> dict:
+    """{name: median ms} over `repeat` rounds, each calling every fn once, in turn (each fn
+    blocks until its work is done), after one untimed warm-up call each."""
+    for f in fns.values():
+        f()
+    times = {name: [] for name in fns}
+    for _ in range(repeat):
+        for name, f in fns.items():
+            t0 = time.perf_counter()
+            f()
+            times[name].append(time.perf_counter() - t0)
+    return {name: 1e3 * statistics.median(t) for name, t in times.items()}
+
+
+def psnr(a, b) -> float:
+    mse = float(np.mean(np.square(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
+    return float("inf") if mse == 0 else -10 * np.log10(mse)
+
+
+def _compiled_mib(f, *args) -> float:
+    mem = f.lower(*args).compile().memory_analysis()
+    return (mem.temp_size_in_bytes + mem.output_size_in_bytes) / 2**20
+
+
+def ours_forward(g, cam, rows):
+    """Timed callables (stages, then raster and e2e per row), images and memory."""
+    w, h = cam.width, cam.height
+    cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
+    n_tiles = int(np.prod(tile_grid(w, h)))
+    proj = jax.jit(project)
+    emit = jax.jit(lambda p: binning.emit_pairs(p, w, h, cap))
+    sort = jax.jit(lambda t, i: binning.sort_pairs(t, i, n_tiles))
+    p = proj(g, cam)
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    t, gi, _, _ = emit(p)
+    tiles_x = tile_grid(w, h)[0]
+    def pair_prep(p, b):
+        pg = pairs.gather(p, b.gauss)
+        masks = pairs.strip_masks(pg, b, tiles_x, C())
+        return kernel_steps.pair_records(pg, b, tiles_x, C(), masks)
+
+    prep = jax.jit(pair_prep)
+    fns = {"ours:project": lambda: jax.block_until_ready(proj(g, cam)),
+           "ours:emit": lambda: jax.block_until_ready(emit(p)),
+           "ours:sort": lambda: jax.block_until_ready(sort(t, gi)),
+           "ours:pair_prep": lambda: jax.block_until_ready(prep(p, bins))}
+    images, memory = {}, {}
+    for name in rows:
+        backend, config = ROWS[name]
+        rasterize = REGISTRY[backend].rasterize
+        e2e = jax.jit(lambda g, c, b=backend, cf=config: lgs_jax.render(
+            g, c, backend=b, config=cf, capacity=cap).image)
+        raster = jax.jit(lambda p, b, r=rasterize, cf=config: r(p, b, w, h, cf).color)
+        images[name] = np.asarray(e2e(g, cam))
+        memory[name] = _compiled_mib(e2e, g, cam)
+        fns[f"{name}:raster"] = lambda r=raster: jax.block_until_ready(r(p, bins))
+        fns[f"{name}:e2e"] = lambda f=e2e: jax.block_until_ready(f(g, cam))
+    return fns, images, memory, int(bins.pairs_required)
+
+
+def gsplat_peer(g, cam):
+    """gsplat 1.5.3 on the same scene and camera: (timed callables, image, peak MiB, pairs), or
+    None where gsplat does not import."""
+    try:
+        import torch
+        from gsplat import rasterization
+        from gsplat.cuda._wrapper import (fully_fused_projection, isect_offset_encode,
+                                          isect_tiles, rasterize_to_pixels, spherical_harmonics)
+    except Exception as e:  # noqa: BLE001 - any import failure means no peer
+        print(f"gsplat unavailable: {e}", file=sys.stderr)
+        return None
+    dev = torch.device("cuda")
+    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    viewmat = t(cam.viewmat)[None]
+    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
+    deg = int(round(np.sqrt(g.sh.shape[1]))) - 1
+    w, h, near, far = cam.width, cam.height, float(cam.near), float(cam.far)
+    means, quats, sh = t(g.means), t(g.quats), t(g.sh)
+    scales, opac = torch.exp(t(g.log_scales)), torch.sigmoid(t(g.logit_opacities))
+    sync = torch.cuda.synchronize
+
+    def e2e():
+        out = rasterization(means, quats, scales, opac, sh, viewmat, K, w, h, near_plane=near,
+                            far_plane=far, sh_degree=deg, packed=False,
+                            rasterize_mode="classic")[0]
+        sync()
+        return out
+
+    def proj():
+        radii, m2d, depths, conics, _ = fully_fused_projection(
+            means, None, quats, scales, viewmat, K, w, h, near_plane=near, far_plane=far,
+            opacities=opac)
+        dirs = means[None] - torch.linalg.inv(viewmat)[:, None, :3, 3]
+        colors = spherical_harmonics(deg, dirs, sh[None].expand(1, -1, -1, -1),
+                                     masks=(radii > 0).all(dim=-1))
+        out = radii, m2d, depths, conics, torch.clamp_min(colors + 0.5, 0.0)
+        sync()
+        return out
+
+    radii, m2d, depths, conics, colors = proj()
+    tw, th = tile_grid(w, h)
+    isect = lambda: (isect_tiles(m2d, radii, depths, 16, tw, th, packed=False), sync())[0]
+    _, isect_ids, flatten_ids = isect()
+    offsets = lambda: (isect_offset_encode(isect_ids, 1, tw, th).reshape(1, th, tw), sync())[0]
+    offs = offsets()
+    raster = lambda: (rasterize_to_pixels(m2d, conics, colors, opac[None], w, h, 16, offs,
+                                          flatten_ids), sync())
+    image = e2e()[0].float().cpu().numpy()
+    fns = {"gsplat:project": proj, "gsplat:emit": isect, "gsplat:sort": offsets,
+           "gsplat:raster": raster, "gsplat:e2e": e2e}
+    return fns, image, torch_peak_mib(e2e), int(isect_ids.shape[0])
+
+
+def torch_peak_mib(f) -> float:
+    """Peak CUDA memory (MiB) torch allocates during one call of f, above what it held before."""
+    import torch
+
+    torch.cuda.synchronize()
+    torch.cuda.reset_peak_memory_stats()
+    base = torch.cuda.memory_allocated()
+    f()
+    torch.cuda.synchronize()
+    return (torch.cuda.max_memory_allocated() - base) / 2**20
+
+
+def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
+    g, cam = jax.device_put(g), jax.device_put(cam)
+    fns, images, memory, n_pairs = ours_forward(g, cam, rows)
+    peer = gsplat_peer(g, cam) if with_gsplat else None
+    if peer:
+        fns.update(peer[0])
+    ms = median_ms(fns, repeat)
+    base = dict(scene=scene, gaussians=g.num, width=cam.width, height=cam.height)
+    out = []
+    for name in rows:
+        r = dict(base, row=name, pairs=n_pairs, project_ms=ms["ours:project"],
+                 emit_ms=ms["ours:emit"], sort_ms=ms["ours:sort"],
+                 pair_prep_ms=ms["ours:pair_prep"], raster_ms=ms[f"{name}:raster"],
+                 e2e_ms=ms[f"{name}:e2e"], memory_mib=memory[name])
+        if peer:
+            r.update(psnr_vs_gsplat=psnr(images[name], peer[1]),
+                     e2e_vs_gsplat=r["e2e_ms"] / ms["gsplat:e2e"],
+                     memory_vs_gsplat=r["memory_mib"] / peer[2])
+        out.append(r)
+    if peer:
+        out.append(dict(base, row="gsplat", pairs=peer[3], project_ms=ms["gsplat:project"],
+                        emit_ms=ms["gsplat:emit"], sort_ms=ms["gsplat:sort"],
+                        raster_ms=ms["gsplat:raster"], e2e_ms=ms["gsplat:e2e"],
+                        memory_mib=peer[2]))
+    return out
+
+
+def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
+    g, cam = jax.device_put(g), jax.device_put(cam)
+    w, h = cam.width, cam.height
+    cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
+    weights = jax.random.normal(jax.random.key(0), (h, w, 3), jnp.float32)
+    fns, extra = {}, {}
+    for name in rows:
+        backend, config = ROWS[name]
+        image = lambda g, b=backend, cf=config: lgs_jax.render(g, cam, backend=b, config=cf,
+                                                               capacity=cap).image
+        f = jax.jit(jax.value_and_grad(lambda g, image=image: jnp.sum(image(g) * weights)))
+        first, again = f(g)[1], f(g)[1]
+        same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
+                                                                 jax.tree.leaves(again)))
+        extra[name] = dict(memory_mib=_compiled_mib(f, g), bitwise_repeatable=same)
+        fns[name] = lambda f=f: jax.block_until_ready(f(g))
+    if with_gsplat:
+        step = gsplat_grad_step(g, cam, weights)
+        if step:
+            fns["gsplat"] = step
+            extra["gsplat"] = dict(memory_mib=torch_peak_mib(step))
+    ms = median_ms(fns, repeat)
+    out = []
+    for name in fns:
+        r = dict(scene=scene, gaussians=g.num, width=w, height=h, row=f"grad:{name}",
+                 fwd_bwd_ms=ms[name], **extra[name])
+        if "gsplat" in fns:
+            r.update(fwd_bwd_vs_gsplat=ms[name] / ms["gsplat"],
+                     memory_vs_gsplat=r["memory_mib"] / extra["gsplat"]["memory_mib"])
+        out.append(r)
+    return out
+
+
+def gsplat_grad_step(g, cam, weights):
+    """gsplat's rasterization + backward() of Σ image·w w.r.t. all parameters, or None."""
+    try:
+        import torch
+        from gsplat import rasterization
+    except Exception as e:  # noqa: BLE001
+        print(f"gsplat unavailable: {e}", file=sys.stderr)
+        return None
+    dev = torch.device("cuda")
+    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    params = [t(g.means), t(g.quats), t(g.log_scales), t(g.logit_opacities), t(g.sh)]
+    for x in params:
+        x.requires_grad_(True)
+    viewmat = t(cam.viewmat)[None]
+    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
+    deg = int(round(np.sqrt(g.sh.shape[1]))) - 1
+    tw = t(np.asarray(weights))
+
+    def step():
+        for x in params:
+            x.grad = None
+        image = rasterization(params[0], params[1], torch.exp(params[2]),
+                              torch.sigmoid(params[3]), params[4], viewmat, K, cam.width,
+                              cam.height, near_plane=float(cam.near), far_plane=float(cam.far),
+                              sh_degree=deg, packed=False, rasterize_mode="classic")[0]
+        (image[0] * tw).sum().backward()
+        torch.cuda.synchronize()
+
+    return step
+
+
+def _format(r) -> str:
+    head = f"{r['scene']:>18s} {r['gaussians'] / 1e6:5.2f}M {r['row']:<16s}"
+    if "fwd_bwd_ms" in r:
+        vs = (f" | {r['fwd_bwd_vs_gsplat']:5.2f}x time {r['memory_vs_gsplat']:5.2f}x memory of "
+              f"gsplat" if "fwd_bwd_vs_gsplat" in r else "")
+        same = {True: " bitwise", False: " NOT BITWISE"}.get(r.get("bitwise_repeatable"), "")
+        return f"{head} fwd+bwd {r['fwd_bwd_ms']:8.2f} ms mem {r['memory_mib']:8.0f} MiB{vs}{same}"
+    vs = (f" | {r['e2e_vs_gsplat']:5.2f}x time {r['memory_vs_gsplat']:5.2f}x memory of gsplat, "
+          f"{r['psnr_vs_gsplat']:5.1f} dB" if "e2e_vs_gsplat" in r else "")
+    prep = f" (pair prep {r['pair_prep_ms']:6.2f})" if "pair_prep_ms" in r else ""
+    return (f"{head} e2e {r['e2e_ms']:7.2f} raster {r['raster_ms']:7.2f}{prep} proj "
+            f"{r['project_ms']:6.2f} emit {r['emit_ms']:6.2f} sort {r['sort_ms']:6.2f} ms "
+            f"mem {r['memory_mib']:7.0f} MiB pairs {r['pairs'] / 1e6:6.2f}M{vs}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.scale", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
+    ap.add_argument("--scenes", default=",".join(SCENES))
+    ap.add_argument("--rows", default="localgs,localgs:fast,vanilla")
+    ap.add_argument("--grad", action="store_true")
+    ap.add_argument("--repeat", type=int, default=20)
+    ap.add_argument("--big-repeat", type=int, default=7, help="rounds for >= 5M Gaussians")
+    ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--csv")
+    args = ap.parse_args(argv)
+    rows = args.rows.split(",")
+    for name in rows:
+        if name not in ROWS:
+            ap.error(f"--rows: unknown row {name!r} (known: {', '.join(ROWS)})")
+    print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
+    results = []
+    for scene in args.scenes.split(","):
+        g, cam = load_scene(scene, args.data)
+        repeat = args.big_repeat if g.num >= 5_000_000 else args.repeat
+        run = grad_rows if args.grad else forward_rows
+        for r in run(scene, g, cam, rows, repeat, not args.no_gsplat):
+            print(_format(r), flush=True)
+            results.append(r)
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            wr = csv.DictWriter(f, fieldnames=list(dict.fromkeys(k for r in results for k in r)))
+            wr.writeheader()
+            wr.writerows(results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""What a backend is: one `rasterize` function and the result type every backend returns.
+
+A backend composites projected Gaussians (lgs_jax.projection) into per-tile pixel state:
+
+    rasterize(p, bins, width, height, config) -> RasterResult
+
+with `bins` the sorted tile–Gaussian pairs (lgs_jax.binning; None for a backend that declares
+`binned=False`). It must compute the rendering contract (conventions.md) and be differentiable
+with respect to `p`'s float fields. Register it in lgs_jax/backends/__init__.py; `render` looks
+it up by name and needs nothing else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+
+# A pixel that never stopped records the end of its tile's list (its `tile_end`): the stop pair
+# is always "the first pair this pixel did not blend because it was finished".
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class RasterResult:
+    """Per-tile output of a backend, (n_tiles, 256, ...) with pixel k of a tile at row k // 16,
+    column k % 16 (lgs_jax.layout).
+
+    Attributes:
+      color: (n_tiles, 256, 3) Σ rgb·α·T over the blended Gaussians.
+      trans: (n_tiles, 256) final transmittance T.
+      depth: (n_tiles, 256) Σ z·α·T.
+      stop: (n_tiles, 256) int32 pair index at which each pixel stopped (its stop test fired,
+        or the first pair its program never processed; the tile's end if it ran through its
+        list); None for backends without pairs.
+      strip_pairs: int32 strip–Gaussian pairs processed (Local-GS backends; 8·pairs without
+        warp culling), or None.
+      kernel: name of the Pallas forward kernel that ran ("" for the XLA backends) (static).
+      interpreted: the kernel ran in Pallas interpret mode (static).
+    """
+
+    color: Any
+    trans: Any
+    depth: Any
+    stop: Any = None
+    strip_pairs: Any = None
+    kernel: str = dataclasses.field(default="", metadata=dict(static=True))
+    interpreted: bool = dataclasses.field(default=False, metadata=dict(static=True))
+
+
+def no_kernel(config) -> tuple[str, bool]:
+    """`Backend.describe` of backends that run no Pallas kernel."""
+    return "", False
+
+
+@dataclasses.dataclass(frozen=True)
+class Backend:
+    """A registered backend.
+
+    Attributes:
+      name: the `render(..., backend=name)` string.
+      rasterize: (p, bins, width, height, config) -> RasterResult (module docstring).
+      binned: whether it needs the tile–Gaussian pairs (False: `bins` is None).
+      describe: config -> (kernel name, interpreted), what `rasterize` would report, for renders
+        that run no backend (an empty scene).
+    """
+
+    name: str
+    rasterize: Callable[..., RasterResult]
+    binned: bool = True
+    describe: Callable[[Any], tuple[str, bool]] = no_kernel
+
+
+def stop_within(stop, tile_end):
+    """Stop records clipped to each tile's end (the one sentinel of `RasterResult.stop`)."""
+    return jnp.minimum(stop, tile_end[:, None])

@@ -1,0 +1,196 @@
+"""The per-pair arithmetic the Triton and Mosaic GPU kernels share (lgs_jax.backends.pallas_triton,
+lgs_jax.backends.pallas_mosaic): the record layouts, α per record, the blend step and its loop,
+and the backward step. Written on lane vectors (one value per pixel a thread holds) and scalars
+loaded from refs, so both Pallas lowerings compile the same functions.
+
+Record layouts, built in XLA before the kernels run:
+  pair record (Local-GS kernel, `pair_records`, one row per pair in pair order, no indirection):
+    hoisted: V (Eq. 8, 6 values) relative to the pair's tile origin, ln o, rgb, z, strip mask;
+    difference form: μx, μy, a, b, c, o, 0, rgb, z, strip mask.
+  Gaussian row (vanilla kernel, `gaussian_rows`, loaded through each pair's Gaussian id as the
+    original rasterizer does): μx, μy, a, b, c, ln o, o, rgb, z, 0.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax.numpy as jnp
+from jax import lax
+
+from .. import alpha as alpha_model
+from .. import hoist, pairs
+from ..binning import TileBins
+from ..composite import blend_weights, stops
+from ..config import RasterConfig
+from ..layout import STRIP_PIXELS, frame, pixel_centres
+from ..projection import Projected
+from . import backward
+
+ROW = 12  # Gaussian row (vanilla)
+REC = 12  # pair record (Local-GS); the strip mask in the last column (exact as a float: < 2^8)
+GRAD_VALUES = 11  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z
+
+
+def gaussian_rows(p: Projected):
+    """(N, ROW) per-Gaussian rows of the vanilla kernel."""
+    o = p.opacity
+    cols = [p.mean2d[:, 0], p.mean2d[:, 1], p.conic[:, 0], p.conic[:, 1], p.conic[:, 2],
+            jnp.log(o), o, p.rgb[:, 0], p.rgb[:, 1], p.rgb[:, 2], p.depth, jnp.zeros_like(o)]
+    return jnp.stack(cols, -1)
+
+
+def pair_records(pg: pairs.PairGaussians, bins: TileBins, tiles_x: int, config: RasterConfig,
+                 masks=None):
+    """(capacity, REC) pair records of the Local-GS kernel (module docstring), in pair order,
+    from the pairs' Gaussian fields (`pairs.gather`): the hoisted vector is built once per
+    (tile, Gaussian) pair, as the paper stages it per tile, not once per strip. `masks`: the
+    pairs' strip masks (0 in the last column if None)."""
+    if config.hoist:
+        head = pairs.hoisted_vectors(pg, bins, tiles_x, config)  # (capacity, 7): V, ln o
+    else:
+        head = jnp.concatenate([pg.mean2d, pg.conic, pg.opacity[:, None],
+                                jnp.zeros_like(pg.opacity[:, None])], -1)
+    bits = jnp.zeros_like(pg.depth) if masks is None else masks.astype(pg.depth.dtype)
+    tail = jnp.concatenate([pg.rgb, pg.depth[:, None], bits[:, None]], -1)
+    return jnp.concatenate([head, tail], -1)
+
+
+def lane_coordinates(tile, k, tiles_x: int, config: RasterConfig, dt):
+    """(frame, pixel) of pixels k of `tile`: the hoisting frame (x', y') and the pixel centre
+    (px, py) (lgs_jax.layout)."""
+    lx, ly, px, py = pixel_centres(tile, k, tiles_x, dt)
+    return frame(lx, ly, px, py, config), (px, py)
+
+
+def record_alpha(rec, frame_xy, pixel, config: RasterConfig):
+    """(α, hit, aux) of one pair record at a lane vector of pixels (lgs_jax.alpha): hoisted,
+    raw = `hoist.evaluate_terms` (Eq. 10) and aux = (ln α, raw); or the difference form, aux =
+    power."""
+    cap = jnp.asarray(config.alpha_cap, frame_xy[0].dtype)
+    if config.hoist:
+        raw = hoist.evaluate_terms(rec[:6], *frame_xy)
+        alpha, hit, ln_a = alpha_model.hoisted(raw, rec[6], cap)
+        return alpha, hit, (ln_a, raw)
+    alpha, hit, power = alpha_model.difference(rec[0:2], rec[2:5], rec[5], *pixel, cap)
+    return alpha, hit, power
+
+
+def blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
+    """One Gaussian (pair index `pair`) over a lane vector of pixels by the blending rule
+    (`lgs_jax.composite.blend_weights`); state = (r, g, b, T, D, done, stop pair), `done` as
+    int32 0/1 (Mosaic GPU holds no 1-bit registers); exact blending records the pair at which
+    a pixel's stop test fired."""
+    r, g, b, t, d, done, stop_at = state
+    exact = config.blend == "exact"
+    w, t, stopped = blend_weights(t, alpha, hit & (done == 0) if exact else hit, config)
+    if exact:
+        done, stop_at = jnp.where(stopped, 1, done), jnp.where(stopped, pair, stop_at)
+    return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, done, stop_at
+
+
+def running(state, config: RasterConfig):
+    """Whether any lane still blends: the program-uniform loop condition."""
+    if config.blend == "exact":
+        return jnp.min(state[5]) == 0
+    return jnp.min(stops(state[3], config).astype(jnp.int32)) == 0
+
+
+def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterConfig, unroll: int,
+                take=None, stage=None):
+    """Walk pairs [start, end) `unroll` at a time while some lane still blends; returns
+    (r, g, b, T, D, stop pair) per lane.
+
+    `fetch(j)` loads pair j's small index data (Gaussian id, mask bit) one iteration ahead.
+    Each iteration evaluates its `unroll` pairs first (`pair_alpha(fetched) -> (α, hit, rgb, z)`,
+    independent of the pixel state, so their loads and arithmetic overlap) and then blends them
+    in order. `take(fetched)` (optional) says whether a pair concerns this program at all (its
+    mask bit): pairs without it do not blend, and a group with none is skipped by one
+    program-uniform branch. `stage = (begin, finish)` (optional): `begin(j)` runs at the start of
+    each iteration (before its pairs are evaluated) and `finish(j)` after the loop, with the first
+    pair not processed. A lane's stop pair is where its stop test fired (exact), else the first
+    pair the loop did not process (`end` or beyond when it ran to the end).
+    """
+    def cond(carry):
+        j, _, st = carry
+        return (j < end) & running(st, config)
+
+    def body(carry):
+        j, cur, st = carry
+        if stage is not None:
+            stage[0](j)
+        nxt = [fetch(j + unroll + u) for u in range(unroll)]
+        takes = [(j + u < end) & (True if take is None else take(cur[u])) for u in range(unroll)]
+
+        def group(st):
+            evaluated = [pair_alpha(f) for f in cur]
+            for u, ((alpha, hit, rgb, z), ok) in enumerate(zip(evaluated, takes)):
+                st = blend(st, alpha, hit & ok, rgb, z, j + u, config)
+            return st
+
+        if take is None:
+            return j + unroll, nxt, group(st)
+        return j + unroll, nxt, lax.cond(functools.reduce(jnp.logical_or, takes), group,
+                                         lambda st: st, st)
+
+    zero = jnp.zeros((lanes,), dt)
+    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
+             jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
+    first = [fetch(start + u) for u in range(unroll)]
+    j, _, st = lax.while_loop(cond, body, (start, first, empty))
+    if stage is not None:
+        stage[1](j)
+    stop_at = jnp.minimum(st[6], j) if config.blend == "exact" else jnp.full((lanes,), j)
+    return st[:5] + (stop_at,)
+
+
+def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: int):
+    """The vanilla kernels' (fetch, pair_alpha) for `staged_loop`: a pair's Gaussian id, then
+    that Gaussian's row, the difference form at `pixel`."""
+    cap = jnp.asarray(config.alpha_cap, rows_ref.dtype)
+
+    def fetch(j):
+        return gauss_ref[jnp.minimum(j, last_pair)]
+
+    def pair_alpha(gi):
+        row = [rows_ref[gi, c] for c in range(ROW - 1)]
+        alpha, hit, _ = alpha_model.difference(row[0:2], row[2:5], row[6], *pixel, cap)
+        return alpha, hit, row[7:10], row[10]
+
+    return fetch, pair_alpha
+
+
+def backward_lanes(tile, k, tiles_x: int, config: RasterConfig, dt, trans, stop_at, cotangents):
+    """The per-lane data of `backward_step` for lanes k of `tile`, from the rows of the final
+    T, stop pairs and cotangents (r, g, b, T, D) the kernel loaded: (frame, pixel, strip bit,
+    stop pair, ḡ_r, ḡ_g, ḡ_b, ḡ_D, ḡ_T·T_N)."""
+    frame_xy, pixel = lane_coordinates(tile, k, tiles_x, config, dt)
+    bit = jnp.left_shift(jnp.int32(1), k // STRIP_PIXELS)  # each lane's strip
+    g_r, g_g, g_b, g_t, g_d = cotangents
+    return frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_t * trans
+
+
+def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
+    """Pair j's step of the backward walk (`backward.walk_step`, equations in
+    lgs_jax.backends.backward) at a lane vector of pixels: its per-lane gradient terms (7
+    α-model columns, ∂L/∂rgb, ∂L/∂z; the kernels reduce them over their pixels) and the new
+    carry (T_{k+1}, S_r, S_g, S_b, S_Z)."""
+    frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
+    cap = jnp.asarray(config.alpha_cap, rec[0].dtype)
+    alpha, hit, aux = record_alpha(rec, frame_xy, pixel, config)
+    hit = hit & (j < stop_at)
+    if config.warp_cull:
+        hit = hit & ((mask_word & bit) != 0)
+    rgb, z = rec[7:10], rec[10]
+    t, w, d_alpha, sums = backward.walk_step(carry[0], alpha, hit, rgb, z, carry[1:],
+                                             (g_r, g_g, g_b, g_d, g_bg))
+    if config.hoist:  # ∂(V·B)/∂V = B; the clamp at ln o passes ∂ to ln o instead
+        ln_a, raw = aux
+        d_raw, d_ln_o = alpha_model.hoisted_vjp(d_alpha, alpha, ln_a, raw, rec[6], cap)
+        x, y = frame_xy
+        model = [d_raw * (x * x), d_raw * (x * y), d_raw * (y * y), d_raw * x, d_raw * y, d_raw,
+                 d_ln_o]
+    else:
+        model = alpha_model.difference_vjp(d_alpha, alpha, aux, rec[0:2], rec[2:5], rec[5],
+                                           *pixel, cap) + [None]
+    return model + [w * g_r, w * g_g, w * g_b, w * g_d], (t,) + sums

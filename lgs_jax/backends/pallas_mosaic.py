@@ -1,0 +1,266 @@
+"""The Local-GS and vanilla forward kernels and the backward kernel on Mosaic GPU
+(`jax.experimental.pallas.mosaic_gpu`), the Pallas GPU backend JAX supports going forward. The
+per-pair arithmetic is lgs_jax.backends.kernel_steps, shared with the Triton kernels
+(lgs_jax.backends.pallas_triton); lgs_jax.backends.pallas picks between the two.
+
+Mapping. A Mosaic GPU (Pallas) thread is a 128-lane warpgroup, and each block is one
+warpgroup on a grid (tiles in longest-list-first order, blocks per tile) of one of two sizes
+(`pixels`, resolved by lgs_jax.backends.pallas.block_pixels): 128 pixels (a half tile of four
+16x2 strips, one per hardware warp: lane l of block w is tile pixel 128·w + l) or 256 (the whole
+tile in one block, each lane holding two adjacent pixels of one row: Mosaic GPU's strided layout
+of a (256,) array, so a hardware warp holds two strips). A block walks its tile's pairs and
+stops as soon as its pixels are done. (Two warpgroups in one block with independent early exits
+crashed on the H100 with CUDA_ERROR_ILLEGAL_INSTRUCTION on real scenes: the loop's cross-warp
+reductions synchronise the block; two pixels per lane avoid that and share every record load
+and loop step between them.) Whole tiles win where tiles are many and their lists short, half
+tiles where lists are long (two blocks stop independently; the backward skips the pairs none of
+a block's four strips takes): BENCHMARKS.md §6 has the measurements behind the default.
+
+Culling. The strip-mask bit of a pair is tested per lane (each lane's strip); as a lane
+predicate it is uniform within each strip's lanes, so the hardware never diverges inside one,
+but Pallas:MGPU has no way to *skip* work per warp inside a warpgroup (`plgpu.warp_map` runs
+scalar per-warp code, not array code), so the α of a pair whose bit is clear for some of the
+block's strips is still computed there. Branching around a staged group with no bit set in any
+of the block's strips measured slower than predicating (BENCHMARKS.md §6), so the kernel stages
+`tuning.mosaic_unroll_localgs` pairs per iteration and lets the lane predicates do the culling.
+
+Staging (`tuning.mosaic_chunk` > 0; float32 only: TMA has no 64-bit float type). The Local-GS
+kernel stages the tile's pair records in shared memory: chunk records per TMA copy,
+double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only where the
+list reaches it, and the block waits for the one in flight before it exits), the strip mask read
+from the record's last column. Bit for bit the unstaged kernel's output.
+
+Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
+images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
+multiply-add contraction differ by ulps); both record per-pixel stop pairs for the backward.
+
+Backward. The same blocks walk the tile's pairs back to front from the last pair any of their
+pixels blended (`kernel_steps.backward_step`), and reduce each pair's 11 gradient terms over
+their pixels (11 warpgroup reductions: Mosaic GPU reduces a warpgroup array to a scalar, but has
+no multi-column cross-warp reduction like the Triton kernel's (256, 16) one). A pair none of the
+block's strips takes (mask bits clear) is skipped by one uniform branch: unlike the forward's
+staged groups, a backward step is long enough for the branch to pay. Each block writes its own
+row per pair (`backward_rows` masks the pairs it did not visit and adds a tile's blocks): one
+writer per row, no atomics, deterministic.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jax.experimental import pallas as pl
+from jax.experimental.pallas import mosaic_gpu as plgpu
+
+from ..config import RasterConfig
+from ..layout import STRIP_PIXELS, TILE_PIXELS
+from . import kernel_steps as ks
+
+
+def _ranges(bins):
+    """(n_tiles, 2) [start, end) per tile as one fresh buffer: Mosaic GPU requires 256-byte
+    aligned operands, and XLA may pass `tile_end` (a slice of the ranges scan) at an offset."""
+    return jnp.stack([bins.tile_start, bins.tile_end], -1)
+
+
+def _interpret_params(interpret: bool):
+    return plgpu.InterpretGPUParams() if interpret else None
+
+
+def _lanes(wg, pixels: int):
+    """Tile pixel indices of block `wg` of `pixels` pixels (a warpgroup array: one or two per
+    lane) and their strips (0..7), and the block's slice of a tile row."""
+    k = lax.broadcasted_iota(jnp.int32, (pixels,), 0) + wg * pixels
+    return k, k // STRIP_PIXELS, pl.ds(wg * pixels, pixels)
+
+
+def _store(refs, tile, cols, outputs):
+    """Write a block's pixels (`cols`, from `_lanes`) of row `tile` of the (n_tiles, 256)
+    outputs."""
+    for ref, x in zip(refs, outputs):
+        ref[tile, cols] = x.astype(ref.dtype)
+
+
+def _strip_bits(wg, pixels: int):
+    """The mask bits of the strips of block `wg` of `pixels` pixels (a uniform branch's test)."""
+    per_block = pixels // STRIP_PIXELS
+    return jnp.left_shift(jnp.int32((1 << per_block) - 1), wg * per_block)
+
+
+def staged(config: RasterConfig, dt) -> bool:
+    """Whether the Local-GS kernel stages records of dtype `dt` in shared memory: a chunk is set
+    and the records are float32 (TMA has no 64-bit float type: Mosaic GPU raises "unsupported
+    TMA dtype f64" when compiling for the GPU; interpret mode has no TMA and would not
+    notice)."""
+    return config.tuning.mosaic_chunk > 0 and jnp.dtype(dt) == jnp.float32
+
+
+def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
+                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int):
+    """The Local-GS forward for one warpgroup; `refs` = the six outputs, then, when `staged`,
+    the shared-memory record buffers and their barriers."""
+    out_refs, scratch = refs[:6], refs[6:]
+    dt = rec_ref.dtype
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
+    k, strip, cols = _lanes(wg, pixels)
+    frame, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
+    bit = jnp.left_shift(jnp.int32(1), strip)
+
+    def evaluate(rec, mask_word):
+        alpha, hit, _ = ks.record_alpha(rec, frame, pixel, config)
+        if config.warp_cull:
+            hit = hit & ((mask_word & bit) != 0)
+        return alpha, hit, rec[7:10], rec[10]
+
+    if scratch:
+        fetch, pair_alpha, stage = _smem_records(rec_ref, *scratch, start, end, evaluate, config)
+    else:
+        def fetch(j):
+            jj = jnp.minimum(j, last_pair)
+            return jj, mask_ref[jj] if config.warp_cull else None
+
+        def pair_alpha(fetched):
+            return evaluate([rec_ref[fetched[0], c] for c in range(ks.REC - 1)], fetched[1])
+
+        stage = None
+    _store(out_refs, tile, cols,
+           ks.staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha, config,
+                          config.tuning.mosaic_unroll_localgs, stage=stage))
+
+
+def _smem_records(rec_ref, smem, barriers, start, end, evaluate, config: RasterConfig):
+    """`staged_loop`'s (fetch, pair_alpha, stage) for records [start, end) staged in shared
+    memory: `tuning.mosaic_chunk` records at a time by TMA, double-buffered (chunk c + 1 is in
+    flight while chunk c is blended), the strip mask read from the record's last column."""
+    unroll, chunk = config.tuning.mosaic_unroll_localgs, config.tuning.mosaic_chunk
+
+    def copy(c):  # chunk c of the tile's records into slot c % 2, if the list reaches it
+        @pl.when(start + c * chunk < end)
+        def _():
+            plgpu.copy_gmem_to_smem(rec_ref.at[pl.ds(start + c * chunk, chunk)], smem.at[c % 2],
+                                    barriers.at[c % 2])
+
+    def begin(j):  # at a chunk's first group: wait for it, start the next one's copy
+        c = (j - start) // chunk
+
+        @pl.when((j - start) % chunk == 0)
+        def _():
+            plgpu.barrier_wait(barriers.at[c % 2])
+            copy(c + 1)
+
+    def finish(j):  # wait for the copy still in flight (if any) before the block exits
+        c = (j - start - unroll) // chunk + 1  # the last chunk copy() was called for
+
+        @pl.when(start + c * chunk < end)
+        def _():
+            plgpu.barrier_wait(barriers.at[c % 2])
+
+    def pair_alpha(j):
+        i = j - start
+        rec = [smem[(i // chunk) % 2, i % chunk, c] for c in range(ks.REC)]
+        return evaluate(rec, rec[ks.REC - 1].astype(jnp.int32))
+
+    copy(0)
+    return (lambda j: j), pair_alpha, (begin, finish)
+
+
+def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
+                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int):
+    """The original 3DGS forward for one warpgroup."""
+    dt = rows_ref.dtype
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    k, _, cols = _lanes(wg, pixels)
+    _, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
+    fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
+    _store(out_refs, tile, cols,
+           ks.staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], k.shape[0], dt, fetch,
+                          pair_alpha, config, config.tuning.mosaic_unroll_vanilla))
+
+
+def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, tiles_x: int,
+            order, bins, data, dt):
+    """Run the vanilla (data = (Gaussian ids, rows)) or Local-GS (data = (masks, records))
+    forward kernel on a (n_tiles, 256 / pixels) grid of one-warpgroup blocks; outputs
+    (n_tiles, 256) each: r, g, b, T, D and the stop pair."""
+    n_tiles = bins.tile_start.shape[0]
+    kernel = functools.partial(vanilla_kernel if vanilla else localgs_kernel, config=config,
+                               tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
+                               pixels=pixels)
+    scratch = ()
+    if not vanilla and staged(config, dt):
+        chunk = config.tuning.mosaic_chunk
+        scratch = (plgpu.SMEM((2, chunk, ks.REC), dt), plgpu.Barrier(num_barriers=2))
+    out = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), dt)
+    stop = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), jnp.int32)
+    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
+                        grid=(n_tiles, TILE_PIXELS // pixels), grid_names=("tile", "wg"),
+                        interpret=_interpret_params(interpret),
+                        kernel_name=kernel.func.__name__)(order, _ranges(bins), *data)
+
+
+def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
+                    g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *, config: RasterConfig,
+                    tiles_x: int, pixels: int):
+    """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, j] =
+    pair j's gradient summed over this block's pixels, for the pairs before the block's last
+    stop pair (the others are left unwritten; `backward_rows` masks them)."""
+    dt = rec_ref.dtype
+    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile = order_ref[tid]
+    k, _, half = _lanes(wg, pixels)
+    trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
+    lane = ks.backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
+                             [ref[tile, half] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
+                                                          g_d_ref)])
+    start = ranges_ref[tile, 0]
+    last = jnp.minimum(ranges_ref[tile, 1], jnp.max(stop_at))
+    mine = _strip_bits(wg, pixels)
+    zero_row = [jnp.zeros((), dt)] * ks.GRAD_VALUES
+
+    def step(j, carry):
+        rec = [rec_ref[j, c] for c in range(ks.REC - 1)]
+        values, carry = ks.backward_step(j, rec, mask_ref[j] if config.warp_cull else None, lane,
+                                         carry, config)
+        return [zero_row[0] if v is None else jnp.sum(v) for v in values], carry
+
+    def body(i, carry):
+        j = last - 1 - i
+        if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
+            sums, carry = lax.cond((mask_ref[j] & mine) != 0, step,
+                                   lambda j, carry: (zero_row, carry), j, carry)
+        else:
+            sums, carry = step(j, carry)
+        for c, s in enumerate(sums):
+            rows_ref[wg, j, c] = s
+        return carry
+
+    zero = jnp.zeros(k.shape, dt)
+    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
+
+
+def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, order, bins,
+                  masks, records, lane_rows, dt):
+    """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, blocks per
+    tile) grid: each block's rows, zero where that block did not visit the pair (pairs at or
+    after its last stop pair, padding pairs), summed over a tile's blocks in a fixed order.
+    `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D)."""
+    capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
+    n = TILE_PIXELS // pixels
+    kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels)
+    out = jax.ShapeDtypeStruct((n, capacity, ks.GRAD_VALUES), dt)
+    rows = plgpu.kernel(kernel, out_type=out, grid=(n_tiles, n), grid_names=("tile", "wg"),
+                        interpret=_interpret_params(interpret),
+                        kernel_name="localgs_backward_mosaic")(
+        order, _ranges(bins), masks, records, *lane_rows)
+    stop_at = lane_rows[1]
+    last = jnp.minimum(bins.tile_end[:, None],
+                       jnp.max(stop_at.reshape(n_tiles, n, pixels), -1))
+    tile = jnp.minimum(bins.tile, n_tiles - 1)
+    j = jnp.arange(capacity)
+    visited = (bins.tile[None] < n_tiles) & (j[None] < last[tile].T)  # (blocks, capacity)
+    return jnp.sum(jnp.where(visited[..., None], rows, 0), axis=0)
