@@ -1,7 +1,7 @@
 """A small 3DGS training loop on optax: fixed Gaussian count, L1 + D-SSIM, per-group Adam.
 
-    python -m lgs_jax fit --data ../shared/data/lego_train --steps N --out DIR [--resume]
-        [--backend reference|tiles|pallas|pallas_vanilla]
+    python -m lgs_jax fit --data ../shared/data/lego_train --steps N --out DIR
+        [--resume | --overwrite] [--backend reference|tiles|pallas|pallas_vanilla]
 
 Pieces (each usable alone):
   `ssim`            SSIM with an 11x11 Gaussian window (σ = 1.5), reflect padding, the map
@@ -13,9 +13,10 @@ Pieces (each usable alone):
                     (means decayed exponentially from 1.6e-4 to 1.6e-6 times the scene extent).
   `sh_mask`         the SH-degree schedule: one more band every `sh_every` steps.
   `fit`             the loop: capacity grown whenever a batch overflows (never a silent drop),
-                    progress line, metrics log (JSONL), checkpoints (scene as INRIA PLY plus the
-                    optimizer state, so a run resumes), held-out evaluation with scikit-image
-                    PSNR/SSIM and renders of the held-out views.
+                    a tqdm progress bar, metrics log (JSONL), checkpoints (scene as INRIA PLY plus
+                    the optimizer state, so a run resumes), held-out evaluation with
+                    scikit-image PSNR/SSIM and renders of the held-out views. A run directory
+                    holds one run: a non-empty one needs resume or overwrite.
 Gradients come from the chosen backend's custom_vjp (lgs_jax.backends.backward; the Pallas
 backends' backward kernel on GPUs). The default is `pallas` on GPUs and `tiles` elsewhere (the
 Pallas kernels run interpreted, slowly, without a GPU).
@@ -276,6 +277,9 @@ def _load_views(data: str, crop) -> _Views:
         cams = [c.cropped(x0, y0, w, h) for c in cams]
         images = images[:, y0:y0 + h, x0:x0 + w]
     held = (ids % 10 == 0) & (ids <= 90)
+    if held.all() or not held.any():
+        raise ValueError(f"data: {data} needs training views and held-out views (ids 0, 10, "
+                         f"..., 90); it has {int(held.sum())} held-out of {len(ids)}")
     centers = np.stack([np.linalg.inv(np.asarray(c.viewmat))[:3, 3] for c in cams])
     extent = float(np.linalg.norm(centers - centers.mean(0), axis=1).max())
     return _Views(cams, images, ids, np.flatnonzero(~held), np.flatnonzero(held), extent)
@@ -350,14 +354,14 @@ def fit(data: str, steps: int, out: str, n_gaussians: int = 20000, resume: bool 
         raise ValueError(f"out: {problem}")
     if backend is None:
         backend = "pallas" if jax.default_backend() == "gpu" else "tiles"
+    views = _load_views(data, crop)  # before touching `out`: a bad folder deletes nothing
+    if settings.batch > len(views.train_idx):
+        raise ValueError(f"settings.batch: {settings.batch} views per step, but {data} has "
+                         f"{len(views.train_idx)} training views")
     if overwrite and os.path.isdir(out):
         for name in _run_files(out):
             os.remove(os.path.join(out, name))
     os.makedirs(out, exist_ok=True)
-    views = _load_views(data, crop)
-    if settings.batch > len(views.train_idx):
-        raise ValueError(f"settings.batch: {settings.batch} views per step, but {data} has "
-                         f"{len(views.train_idx)} training views")
     bg = jnp.ones(3, jnp.float32)
     opt = optimizer(steps, views.extent, settings)
     params, opt_state, start, capacity = _start(out, resume, views, opt, n_gaussians, seed, log)

@@ -82,15 +82,18 @@ def test_unwritable_out_directory_is_refused_before_rendering(tmp_path, capsys, 
     assert "not writable" in _error_line(capsys)
 
 
-@pytest.mark.parametrize("content,match", [
-    ("[{", "not valid JSON"), ('[{"fx": "abc"}]', "camera 0: missing 'rotation'"),
-    ('{"camera_angle_x": 0.7, "frames": []}', "'frames' is empty"),
-    ("[]", "holds no cameras"),
+@pytest.mark.parametrize("content,size,match", [
+    ("[{", [], "not valid JSON"), ('[{"fx": "abc"}]', [], "camera 0: missing 'rotation'"),
+    ('{"camera_angle_x": 0.7, "frames": []}', [], "'frames' is empty"),
+    ('{"camera_angle_x": 0.7, "frames": []}', ["--width", "8"], "'frames' is empty"),
+    ('{"camera_angle_x": 0.7, "frames": []}', ["--width", "8", "--height", "8"],
+     "holds no cameras"),
+    ("[]", [], "holds no cameras"),
 ])
-def test_bad_camera_files_give_one_line(tmp_path, capsys, content, match):
+def test_bad_camera_files_give_one_line(tmp_path, capsys, content, size, match):
     path = tmp_path / "cams.json"
     path.write_text(content)
-    code = main(["render", "--cameras", str(path), "--out", str(tmp_path / "x.png")])
+    code = main(["render", "--cameras", str(path), "--out", str(tmp_path / "x.png"), *size])
     assert code == (2 if match == "holds no cameras" else 1)
     assert match in _error_line(capsys)
 

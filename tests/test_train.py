@@ -133,3 +133,18 @@ def test_progress_bar_redraws_while_a_step_runs():
     bar.close()
     last = stream.getvalue().split("\r")[-1]
     assert "2/10" in last and "loss=0.1250" in last and "<" in last and "step/s" in last
+
+
+def test_fit_needs_held_out_views(tmp_path):
+    import matplotlib.image
+
+    data = tmp_path / "data"
+    (data / "train").mkdir(parents=True)
+    frames = []
+    for i in (1, 2):
+        matplotlib.image.imsave(data / "train" / f"r_{i}.png", np.zeros((8, 8, 4)))
+        frames.append(dict(file_path=f"./train/r_{i}", transform_matrix=np.eye(4).tolist()))
+    (data / "transforms_train.json").write_text(json.dumps(dict(camera_angle_x=0.7,
+                                                                frames=frames)))
+    with pytest.raises(ValueError, match="needs training views and held-out views"):
+        train.fit(str(data), 1, str(tmp_path / "out"))
