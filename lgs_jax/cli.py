@@ -1,47 +1,164 @@
 """Command line: `python -m lgs_jax render ...`, `python -m lgs_jax info SCENE.ply` and
-`python -m lgs_jax fit --data DIR --steps N --out DIR` (lgs_jax.train)."""
+`python -m lgs_jax fit --data DIR --steps N --out DIR` (lgs_jax.train).
+
+Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
+options, input paths, --view, --out, an existing fit run), 1 for a failure while working (a
+malformed file, a render error); `--debug` shows the traceback instead.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 import time
 
 import numpy as np
 
 DEFAULT_BACKEND = "tiles"  # the fastest exact backend available (exact blending by default)
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
+EXIT_FAILURE, EXIT_USAGE = 1, 2
 
 
-def _render(args) -> int:
+class UsageError(Exception):
+    """A bad command line found before any work starts (exit code 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage dump), exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _int_at_least(low: int):
+    """An argparse type: an int >= `low`."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
+        return v
+    return parse
+
+
+def _finite_float(text: str) -> float:
+    """An argparse type: a finite float (no nan or inf)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return v
+
+
+def _check_input(path: str, what: str) -> None:
+    """Raise `UsageError` unless `path` is an existing file."""
+    if not os.path.exists(path):
+        raise UsageError(f"{what}: {path}: no such file")
+    if not os.path.isfile(path):
+        raise UsageError(f"{what}: {path}: not a file")
+
+
+def _check_out(path: str) -> None:
+    """Raise `UsageError` unless `path` can be written as an image: a known image extension in
+    an existing, writable directory (checked before rendering, not after)."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in IMAGE_EXTENSIONS:
+        raise UsageError(f"--out: {path}: extension {ext or '(none)'!r} is not an image format "
+                         f"written here; use one of {', '.join(IMAGE_EXTENSIONS)}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"--out: {path}: directory {folder} does not exist")
+    if os.path.isdir(path):
+        raise UsageError(f"--out: {path} is a directory")
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise UsageError(f"--out: {path}: not writable")
+
+
+def _camera(args):
+    """The camera to render: --view of --cameras (0 by default), or of the default scene (its
+    framing camera by default), resized by --width/--height."""
+    import lgs_jax
+    from lgs_jax import data
+
+    if args.cameras:
+        cams = lgs_jax.load_cameras(args.cameras, width=args.width, height=args.height)
+        if not cams:
+            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
+        view = args.view or 0
+        if view >= len(cams):
+            raise UsageError(f"--view: {view} is out of range: {args.cameras} has {len(cams)} "
+                             f"cameras (0..{len(cams) - 1})")
+        return cams[view]
+    if args.scene:
+        raise UsageError("--cameras: needed to render a scene file (the default scene has its own)")
+    if args.view is not None and args.view >= data.ORBIT_VIEWS:
+        raise UsageError(f"--view: {args.view} is out of range: the default scene has "
+                         f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
+    return lgs_jax.default_camera(args.view, args.width, args.height)
+
+
+def _merged_seconds(spans) -> float:
+    """Total length of the union of (start, end) intervals (nested compilations count once)."""
+    total, reach = 0.0, -math.inf
+    for start, end in sorted(spans):
+        if end > reach:
+            total += end - max(start, reach)
+            reach = end
+    return total
+
+
+def _timed_render(scene, cam, **kwargs):
+    """(output, seconds, compile seconds) of one `lgs_jax.render` call: the compile seconds are
+    the wall time JAX spent tracing, lowering and compiling (or loading compiled code) in it."""
     import jax
 
     import lgs_jax
 
+    spans = []
+
+    def listener(event, start, end, **_):
+        if event.startswith("/jax/core/compile/"):
+            spans.append((start, end))
+
+    jax.monitoring.register_event_time_span_listener(listener)
+    try:
+        t0 = time.time()
+        out = jax.block_until_ready(lgs_jax.render(scene, cam, **kwargs))
+        seconds = time.time() - t0
+    finally:
+        jax.monitoring.unregister_event_time_span_listener(listener)
+    return out, seconds, _merged_seconds(spans)
+
+
+def _render(args) -> int:
+    """`render`: check the arguments, load, render once, report, write the image."""
+    import jax
+
+    import lgs_jax
+
+    for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
+        if path:
+            _check_input(path, what)
+    _check_out(args.out)
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
-    if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras, width=args.width, height=args.height)
-        if not 0 <= args.view < len(cams):
-            raise SystemExit(f"--view: {args.view} out of range, {args.cameras} has {len(cams)}")
-        cam = cams[args.view]
-    elif args.scene:
-        raise SystemExit("--cameras: needed to render a scene file (the default scene has its own)")
-    else:
-        cam = lgs_jax.default_camera(args.view, args.width, args.height)
-    bg = np.asarray(args.background, np.float32)
-    config = lgs_jax.RasterConfig(convention=args.convention)
-    t0 = time.perf_counter()
-    out = lgs_jax.render(scene, cam, background=bg, backend=args.backend, config=config)
-    jax.block_until_ready(out)
-    t1 = time.perf_counter()
-    out = lgs_jax.render(scene, cam, background=bg, backend=args.backend, config=config,
-                         capacity=int(out.stats.capacity) or None)
-    jax.block_until_ready(out)
-    t2 = time.perf_counter()
+    cam = _camera(args)
+    out, seconds, compiling = _timed_render(
+        scene, cam, background=np.asarray(args.background, np.float32), backend=args.backend,
+        config=lgs_jax.RasterConfig(convention=args.convention))
     s = out.stats
     print(f"scene: {scene.num} Gaussians (SH degree {scene.sh_degree}); image {cam.width}x"
           f"{cam.height}; backend {s.backend}; device {jax.devices()[0].platform}")
-    print(f"first call (compile + run): {t1 - t0:.3f} s; second call: {1e3 * (t2 - t1):.1f} ms")
+    print(f"time: {seconds:.3f} s, of which {compiling:.3f} s compiling (a first call at a new "
+          f"size compiles) and {seconds - compiling:.3f} s rendering")
+    if s.interpreted:
+        print("note: the Pallas kernel ran in interpret mode (no GPU): exact but slow")
     print(f"valid {int(s.n_valid)}, invalid {int(s.n_invalid)}, below 1/255 "
           f"{int(s.n_transparent)}, unbounded {int(s.n_unbounded)}; tile-Gaussian pairs "
           f"{int(s.pairs_required)} (capacity {int(s.capacity)})")
@@ -53,8 +170,10 @@ def _render(args) -> int:
 
 
 def _info(args) -> int:
+    """`info`: counts, SH degree, bounds and non-finite values of a PLY."""
     import lgs_jax
 
+    _check_input(args.scene, "scene")
     g = lgs_jax.load_ply(args.scene)
     print(f"{args.scene}: {g.num} Gaussians, SH degree {g.sh_degree}, dtype {g.means.dtype}")
     m = np.asarray(g.means)
@@ -71,54 +190,128 @@ def _info(args) -> int:
 
 
 def _fit(args) -> int:
+    """`fit`: check --data and --out (an existing run needs --resume or --overwrite), train."""
     import dataclasses
 
     from . import train
 
+    if not os.path.isdir(args.data):
+        raise UsageError(f"--data: {args.data}: not a directory")
+    problem = train.run_dir_problem(args.out, args.resume, args.overwrite)
+    if problem:
+        raise UsageError(f"--out: {problem}")
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
                                    eval_every=args.eval_every)
     crop = tuple(args.crop) if args.crop else None
     result = train.fit(args.data, args.steps, args.out, n_gaussians=args.gaussians,
-                       resume=args.resume, settings=settings, seed=args.seed, crop=crop,
-                       backend=args.backend)
+                       resume=args.resume, overwrite=args.overwrite, settings=settings,
+                       seed=args.seed, crop=crop, backend=args.backend)
     print(json.dumps(result, indent=1))
     return 0
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m lgs_jax", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("render", help="render a scene (the bundled default scene if none given)")
-    r.add_argument("scene", nargs="?", help="INRIA PLY file")
-    r.add_argument("--cameras", help="cameras.json or transforms.json")
-    r.add_argument("--view", type=int, default=0)
-    r.add_argument("--width", type=int)
-    r.add_argument("--height", type=int)
-    r.add_argument("--backend", default=DEFAULT_BACKEND)
-    r.add_argument("--convention", default="3dgs", choices=["3dgs", "gsplat"])
-    r.add_argument("--background", type=float, nargs=3, default=[0.0, 0.0, 0.0])
-    r.add_argument("--out", default="out.png")
+def _render_parser(sub, common) -> None:
+    """The `render` subcommand's options (backends from lgs_jax.BACKENDS)."""
+    from .render import BACKENDS
+
+    r = sub.add_parser(
+        "render", parents=[common], help="render a scene (the bundled default scene if none given)",
+        description="Render one view once and write it as an image (--out). Prints the scene and "
+                    "image size, the backend, the time (compilation separately), and the counts "
+                    "of valid, invalid and culled Gaussians and tile-Gaussian pairs. Image size: "
+                    "one of --width/--height keeps the camera's aspect ratio; both with another "
+                    "aspect ratio scale the view to cover that size and crop its centre (never "
+                    "stretched). Errors: one line on stderr, exit code 2 for a bad command line "
+                    "(checked before rendering), 1 for a failure (e.g. a malformed file).")
+    r.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
+                                            "scene, a label reading MIXED DROPS)")
+    r.add_argument("--cameras", help="cameras.json or transforms.json (needed with a scene file)")
+    r.add_argument("--view", type=_int_at_least(0),
+                   help="camera index (default: 0 of --cameras; for the default scene its "
+                        "framing camera, or orbit view 0..7)")
+    r.add_argument("--width", type=_int_at_least(1),
+                   help="image width in pixels (default: the camera's, 1280 for the default scene)")
+    r.add_argument("--height", type=_int_at_least(1),
+                   help="image height in pixels (default: the camera's, 720 for the default scene)")
+    r.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKENDS,
+                   help=f"rasterizer (default: {DEFAULT_BACKEND}, the fastest exact one on a "
+                        "CPU; pallas and pallas_vanilla run interpreted without a GPU)")
+    r.add_argument("--convention", default="3dgs", choices=["3dgs", "gsplat"],
+                   help="compositing rule (default: 3dgs)")
+    r.add_argument("--background", type=_finite_float, nargs=3, default=[0.0, 0.0, 0.0],
+                   metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
+    r.add_argument("--out", default="out.png",
+                   help=f"image to write, {'/'.join(IMAGE_EXTENSIONS)} (default: out.png)")
     r.set_defaults(func=_render)
-    i = sub.add_parser("info", help="print counts, SH degree, bounds and non-finite values")
-    i.add_argument("scene")
-    i.set_defaults(func=_info)
-    f = sub.add_parser("fit", help="train Gaussians on a NeRF-synthetic folder (ids 0,10,..,90 "
-                                   "held out); writes scene.ply, metrics.jsonl, held-out renders")
+
+
+def _fit_parser(sub, common) -> None:
+    """The `fit` subcommand's options."""
+    f = sub.add_parser("fit", parents=[common],
+                       help="train Gaussians on a NeRF-synthetic folder (ids 0,10,..,90 held "
+                            "out); writes scene.ply, metrics.jsonl, held-out renders")
     f.add_argument("--data", required=True, help="folder with transforms_train.json")
-    f.add_argument("--steps", type=int, required=True)
-    f.add_argument("--out", required=True)
-    f.add_argument("--gaussians", type=int, default=20000)
-    f.add_argument("--batch", type=int, default=1, help="views per step")
-    f.add_argument("--eval-every", type=int, default=500)
-    f.add_argument("--crop", type=int, nargs=4, metavar=("X0", "Y0", "W", "H"))
+    f.add_argument("--steps", type=_int_at_least(0), required=True)
+    f.add_argument("--out", required=True, help="run directory (new or empty, unless --resume "
+                                                "or --overwrite)")
+    f.add_argument("--gaussians", type=_int_at_least(1), default=20000)
+    f.add_argument("--batch", type=_int_at_least(1), default=1, help="views per step")
+    f.add_argument("--eval-every", type=_int_at_least(1), default=500)
+    f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"))
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--backend", default=None,
                    choices=["reference", "tiles", "pallas", "pallas_vanilla"],
                    help="differentiable backend (default: pallas on GPUs, tiles elsewhere)")
-    f.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
+    again = f.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
+    again.add_argument("--overwrite", action="store_true",
+                       help="delete OUT's previous run (its checkpoint, metrics and renders)")
     f.set_defaults(func=_fit)
-    args = ap.parse_args(argv)
-    return args.func(args)
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The command line: `render`, `info` and `fit`, each with `--debug`."""
+    common = _Parser(add_help=False)
+    common.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    ap = _Parser(prog="python -m lgs_jax", description=__doc__,
+                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    _render_parser(sub, common)
+    i = sub.add_parser("info", parents=[common],
+                       help="print counts, SH degree, bounds and non-finite values")
+    i.add_argument("scene")
+    i.set_defaults(func=_info)
+    _fit_parser(sub, common)
+    return ap
+
+
+def _one_line(e: BaseException) -> str:
+    """A one-line message for an error: the file and reason for OS errors, the message for
+    ValueErrors (the library's bad-input errors), the type and message otherwise."""
+    if isinstance(e, OSError) and e.strerror:
+        text = f"{e.filename}: {e.strerror}" if e.filename else e.strerror
+    elif isinstance(e, ValueError):
+        text = str(e)
+    else:
+        text = f"{type(e).__name__}: {e} (--debug shows the traceback)"
+    return " ".join(text.split())
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit code (0 success, 1 failure, 2 usage error)."""
+    args = _parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except UsageError as e:
+        if args.debug:
+            raise
+        print(f"python -m lgs_jax {args.cmd}: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as e:
+        if args.debug:
+            raise
+        print(f"python -m lgs_jax {args.cmd}: error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_FAILURE
 
 
 if __name__ == "__main__":

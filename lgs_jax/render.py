@@ -27,7 +27,8 @@ from .composite import PixelState, finish
 from .config import RasterConfig
 from .layout import tiles_to_image
 from .projection import Projected, project
-from .scene import Camera, Gaussians, validate_camera, validate_gaussians
+from .scene import (Camera, Gaussians, validate_background, validate_camera,
+                    validate_gaussians)
 
 BACKENDS = tuple(REGISTRY)
 
@@ -197,8 +198,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     dt = gaussians.dtype
     if background is None:
         background = jnp.zeros((3,), dt)
-    if np.shape(background) != (3,):
-        raise ValueError(f"background: expected shape (3,), got {np.shape(background)}")
+    validate_background(background)
     background = jnp.asarray(background, dt)
     if capacity is not None and (not isinstance(capacity, (int, np.integer))
                                  or not 0 < capacity <= binning.MAX_PAIRS):

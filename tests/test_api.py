@@ -141,3 +141,65 @@ def test_bad_convention_raises():
 def test_stack_cameras_needs_one_size():
     with pytest.raises(ValueError, match="cameras"):
         lgs_jax.stack_cameras([scenes.camera(), scenes.camera(width=32)])
+
+
+def test_float64_without_x64_raises(scene32):
+    g64 = scenes.cast(scene32, np.float64)
+    with jax.enable_x64(False):
+        with pytest.raises(ValueError, match="gaussians.means: float64 needs .*jax_enable_x64"):
+            lgs_jax.render(g64, scenes.camera())
+        with pytest.raises(ValueError, match="gaussians.sh: dtype float64 differs"):
+            lgs_jax.render(_replace(scene32, sh=np.asarray(scene32.sh, np.float64)),
+                           scenes.camera())
+
+
+@pytest.mark.parametrize("field", ["means", "logit_opacities", "sh"])
+def test_python_lists_as_gaussian_fields_raise(scene32, field):
+    value = np.asarray(getattr(scene32, field)).tolist()
+    with pytest.raises(ValueError, match=f"gaussians.{field}: expected a numpy or JAX array, "
+                                         "got list"):
+        lgs_jax.render(_replace(scene32, **{field: value}), scenes.camera())
+
+
+def _rot_z(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+@pytest.mark.parametrize("rotation,last_row,match", [
+    (np.eye(3), [0, 0, 0.5, 1], "last row must be"),
+    (np.eye(3), [0, 0, 0, 2], "last row must be"),
+    (np.diag([1.0, 1.0, 1.001]), [0, 0, 0, 1], "not orthonormal"),
+    (2 * _rot_z(0.3), [0, 0, 0, 1], "not orthonormal"),
+    (np.diag([1.0, -1.0, 1.0]), [0, 0, 0, 1], "reflection"),
+])
+def test_bad_viewmat_values_raise(scene32, rotation, last_row, match):
+    view = np.eye(4)
+    view[:3, :3], view[3] = rotation, last_row
+    with pytest.raises(ValueError, match=f"camera.viewmat: .*{match}"):
+        lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=view.astype(np.float32)))
+
+
+def test_viewmat_within_float32_rounding_and_traced_cameras_pass(scene32):
+    view = np.eye(4, dtype=np.float32)
+    view[:3, :3] = _rot_z(0.3) * (1 + 2e-7)  # float32 rounding of a stored rotation
+    lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=view))
+    bad = np.eye(4, dtype=np.float32) * 2  # not checked when traced (values unknown)
+    jax.jit(lambda v: lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=v),
+                                     capacity=1024).image)(bad)
+
+
+def test_viewmat_as_list_raises(scene32):
+    with pytest.raises(ValueError, match="camera.viewmat: expected a numpy or JAX array"):
+        lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=np.eye(4).tolist()))
+
+
+@pytest.mark.parametrize("background", [[np.nan, 0, 0], np.array([0, np.inf, 0])])
+def test_non_finite_background_raises(scene32, background):
+    with pytest.raises(ValueError, match="background: must be finite"):
+        lgs_jax.render(scene32, scenes.camera(), background=background)
+
+
+def test_background_list_is_accepted(scene32):
+    out = lgs_jax.render(scene32, scenes.camera(), background=[0.1, 0.2, 0.3])
+    assert out.image.dtype == np.float32

@@ -1,7 +1,11 @@
+import dataclasses
 import os
+import re
 
 import matplotlib.image
+import pytest
 
+import lgs_jax
 from lgs_jax.cli import main
 
 
@@ -27,3 +31,128 @@ def test_info_reports_non_finite(data_dir, capsys):
     assert main(["info", os.path.join(data_dir, "guitar", "guitar.ply")]) == 0
     text = capsys.readouterr().out
     assert "90854 Gaussians" in text and "667" in text
+
+
+def _error_line(capsys):
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err  # one line, no traceback
+    return err
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--width", "0"], "--width: must be >= 1, got 0"),
+    (["--height", "-3"], "--height: must be >= 1, got -3"),
+    (["--width", "abc"], "--width: expected an integer, got 'abc'"),
+    (["--view", "-1"], "--view: must be >= 0, got -1"),
+    (["--background", "nan", "0", "0"], "--background: must be finite, got 'nan'"),
+    (["--backend", "cuda"], "--backend: invalid choice: 'cuda'"),
+])
+def test_bad_option_values_are_usage_errors(capsys, args, match):
+    with pytest.raises(SystemExit) as exit_:
+        main(["render", *args])
+    assert exit_.value.code == 2
+    assert match in _error_line(capsys)
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--view", "8"], "--view: 8 is out of range: the default scene has 8 orbit views (0..7)"),
+    (["--view", "99"], "--view: 99 is out of range"),
+    (["--out", "x.npy"], "--out: x.npy: extension '.npy' is not an image format"),
+    (["--out", "x.exr"], "extension '.exr' is not an image format"),
+    (["--out", "x"], "extension '(none)'"),
+    (["--out", "{tmp}/missing/x.png"], "directory {tmp}/missing does not exist"),
+    (["--out", "{tmp}"], "extension"),
+    (["{tmp}"], "scene: {tmp}: not a file"),
+    (["{tmp}/missing.ply"], "scene: {tmp}/missing.ply: no such file"),
+    (["--cameras", "{tmp}/none.json"], "--cameras: {tmp}/none.json: no such file"),
+    (["{ply}"], "--cameras: needed to render a scene file"),
+])
+def test_bad_command_lines_exit_2_with_one_line(tmp_path, capsys, args, match):
+    ply = tmp_path / "s.ply"
+    lgs_jax.save_ply(ply, lgs_jax.default_scene())
+    fill = lambda s: s.format(tmp=tmp_path, ply=ply)
+    assert main(["render", *map(fill, args)]) == 2
+    assert fill(match) in _error_line(capsys)
+
+
+def test_unwritable_out_directory_is_refused_before_rendering(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(os, "access", lambda path, mode: False)  # tests run as root
+    monkeypatch.setattr(lgs_jax, "render", lambda *a, **k: pytest.fail("rendered"))
+    assert main(["render", "--out", str(tmp_path / "x.png")]) == 2
+    assert "not writable" in _error_line(capsys)
+
+
+@pytest.mark.parametrize("content,size,match", [
+    ("[{", [], "not valid JSON"), ('[{"fx": "abc"}]', [], "camera 0: missing 'rotation'"),
+    ('{"camera_angle_x": 0.7, "frames": []}', [], "'frames' is empty"),
+    ('{"camera_angle_x": 0.7, "frames": []}', ["--width", "8"], "'frames' is empty"),
+    ('{"camera_angle_x": 0.7, "frames": []}', ["--width", "8", "--height", "8"],
+     "holds no cameras"),
+    ("[]", [], "holds no cameras"),
+])
+def test_bad_camera_files_give_one_line(tmp_path, capsys, content, size, match):
+    path = tmp_path / "cams.json"
+    path.write_text(content)
+    code = main(["render", "--cameras", str(path), "--out", str(tmp_path / "x.png"), *size])
+    assert code == (2 if match == "holds no cameras" else 1)
+    assert match in _error_line(capsys)
+
+
+def test_malformed_ply_gives_one_line_and_debug_the_traceback(tmp_path, capsys):
+    ply = tmp_path / "bad.ply"
+    ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex -1\nend_header\n")
+    cams = tmp_path / "cams.json"
+    cams.write_text("[]")
+    args = ["render", str(ply), "--cameras", str(cams), "--out", str(tmp_path / "x.png")]
+    assert main(args) == 1
+    assert f"{ply}: line 3: 'element vertex -1': the vertex count" in _error_line(capsys)
+    with pytest.raises(lgs_jax.PlyError):
+        main(args + ["--debug"])
+
+
+def test_render_help_lists_backends_outputs_and_defaults(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["render", "--help"])
+    assert exit_.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for backend in lgs_jax.BACKENDS:
+        assert backend in text
+    for phrase in ("default: tiles", "default: out.png", ".png/.jpg", "exit code 2",
+                   "crop its centre", "compilation separately"):
+        assert phrase in text, phrase
+
+
+def test_render_runs_once_reports_compile_time_and_interpret_mode(tmp_path, capsys,
+                                                                 monkeypatch):
+    calls = []
+
+    def once(*args, **kwargs):
+        calls.append(kwargs["backend"])
+        out = real(*args, **kwargs)
+        return dataclasses.replace(out, stats=dataclasses.replace(out.stats, interpreted=True))
+
+    real = lgs_jax.render
+    monkeypatch.setattr(lgs_jax, "render", once)
+    out = tmp_path / "x.jpg"
+    assert main(["render", "--width", "96", "--height", "54", "--out", str(out),
+                 "--backend", "brute"]) == 0
+    assert calls == ["brute"]
+    text = capsys.readouterr().out
+    assert re.search(r"time: [\d.]+ s, of which [\d.]+ s compiling", text)
+    assert "interpret mode" in text
+    assert matplotlib.image.imread(out).shape[:2] == (54, 96)
+
+
+def test_one_size_keeps_the_aspect_ratio(tmp_path):
+    out = tmp_path / "x.png"
+    assert main(["render", "--view", "0", "--width", "96", "--out", str(out)]) == 0
+    assert matplotlib.image.imread(out).shape[:2] == (54, 96)
+
+
+def test_readme_test_command_is_what_ci_runs():
+    root = os.path.join(os.path.dirname(__file__), "..")
+    readme = open(os.path.join(root, "README.md")).read()
+    ci = open(os.path.join(root, ".ci", "run")).read().strip().splitlines()
+    command = readme.split("Run the tests")[1].split("```bash\n")[1].split("\n")[0]
+    assert command == ". .venv/bin/activate && " + ci[-1]
+    assert ci[-1] == "python -m pytest -n 2"

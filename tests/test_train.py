@@ -1,8 +1,10 @@
 """lgs_jax.train: SSIM against scikit-image, the loss falls on a tiny crop (CPU), checkpoints
-resume, and the `fit` CLI writes its outputs."""
+resume, the `fit` CLI writes its outputs and never mixes two runs, the progress bar."""
 
+import io
 import json
 import os
+import time
 
 import jax
 import jax.numpy as jnp
@@ -65,7 +67,7 @@ def test_loss_falls_on_a_tiny_crop(data_dir):
     assert losses[-1] < 0.95 * losses[0], losses
 
 
-def test_fit_writes_outputs_and_resumes(data_dir, tmp_path):
+def test_fit_writes_outputs_refuses_mixing_resumes_and_overwrites(data_dir, tmp_path, capsys):
     out = str(tmp_path / "run")
     args = ["fit", "--data", _data_dir(data_dir), "--steps", "4", "--out", out, "--gaussians",
             "256", "--eval-every", "2", "--crop", "80", "80", "32", "32", "--backend", "tiles"]
@@ -75,7 +77,74 @@ def test_fit_writes_outputs_and_resumes(data_dir, tmp_path):
         assert os.path.getsize(os.path.join(out, name)) > 0, name
     assert json.load(open(os.path.join(out, "checkpoint.json")))["step"] == 4
     args[args.index("--steps") + 1] = "6"
+    assert cli.main(args) == 2  # an existing run is never silently mixed with a new one
+    assert "--resume" in capsys.readouterr().err
     assert cli.main(args + ["--resume"]) == 0
     steps = [json.loads(line).get("step") for line in open(os.path.join(out, "metrics.jsonl"))]
     assert steps.count(5) >= 1 and steps.count(1) == 1  # resumed at 4, did not restart
     assert lgs_jax.load_ply(os.path.join(out, "scene.ply")).num == 256
+    args[args.index("--steps") + 1] = "0"
+    assert cli.main(args + ["--overwrite"]) == 0  # clears the old run: nothing of it is left
+    result = json.load(open(os.path.join(out, "result.json")))
+    assert result["steps"] == 0 and result["ms_per_step"] is None
+    rows = [json.loads(line) for line in open(os.path.join(out, "metrics.jsonl"))]
+    assert [r["step"] for r in rows] == [0] and "heldout_psnr" in rows[0]
+    assert not os.path.exists(os.path.join(out, "checkpoint.json"))
+
+
+def test_run_dir_rules(tmp_path):
+    assert train.run_dir_problem(str(tmp_path / "new")) is None
+    assert train.run_dir_problem(str(tmp_path)) is None  # empty
+    (tmp_path / "metrics.jsonl").write_text("{}\n")
+    assert "--resume" in train.run_dir_problem(str(tmp_path))
+    assert "no checkpoint.json" in train.run_dir_problem(str(tmp_path), resume=True)
+    assert train.run_dir_problem(str(tmp_path), overwrite=True) is None
+    assert "exclude" in train.run_dir_problem(str(tmp_path), resume=True, overwrite=True)
+    assert "not a directory" in train.run_dir_problem(str(tmp_path / "metrics.jsonl"))
+    with pytest.raises(ValueError, match="out: .* is not empty"):
+        train.fit("unused", 1, str(tmp_path))
+
+
+@pytest.mark.parametrize("kwargs,match", [(dict(steps=-1), "steps: expected an int >= 0"),
+                                          (dict(n_gaussians=0), "n_gaussians")])
+def test_fit_refuses_bad_counts(tmp_path, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
+
+
+def test_fit_usage_errors_exit_2(tmp_path, capsys):
+    assert cli.main(["fit", "--data", str(tmp_path / "none"), "--steps", "1", "--out",
+                     str(tmp_path / "o")]) == 2
+    assert "--data" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out", str(tmp_path),
+                  "--resume", "--overwrite"])
+    assert exit_.value.code == 2
+
+
+def test_progress_bar_redraws_while_a_step_runs():
+    """Step, loss, rate and ETA; redrawn by the timer without any step finishing."""
+    stream = io.StringIO()
+    bar = train._Progress(0, 10, file=stream, interval=0.05)
+    time.sleep(0.5)
+    assert stream.getvalue().count("compiling the first step") >= 4
+    bar.step(0.25)
+    bar.step(0.125)
+    bar.close()
+    last = stream.getvalue().split("\r")[-1]
+    assert "2/10" in last and "loss=0.1250" in last and "<" in last and "step/s" in last
+
+
+def test_fit_needs_held_out_views(tmp_path):
+    import matplotlib.image
+
+    data = tmp_path / "data"
+    (data / "train").mkdir(parents=True)
+    frames = []
+    for i in (1, 2):
+        matplotlib.image.imsave(data / "train" / f"r_{i}.png", np.zeros((8, 8, 4)))
+        frames.append(dict(file_path=f"./train/r_{i}", transform_matrix=np.eye(4).tolist()))
+    (data / "transforms_train.json").write_text(json.dumps(dict(camera_angle_x=0.7,
+                                                                frames=frames)))
+    with pytest.raises(ValueError, match="needs training views and held-out views"):
+        train.fit(str(data), 1, str(tmp_path / "out"))

@@ -25,34 +25,61 @@ class PlyError(ValueError):
     """A PLY file that is not a binary little-endian INRIA Gaussian file; the message says why."""
 
 
+def _header_lines(f, path):
+    """Yield (line number, words) of the header lines up to `end_header` (excluded)."""
+    number = 1
+    while True:
+        line = f.readline()
+        number += 1
+        if not line:
+            raise PlyError(f"{path}: truncated header (no end_header)")
+        if not line.endswith(b"\n"):
+            raise PlyError(f"{path}: header cut off in line {number} ({line[:40]!r}; "
+                           "no end_header)")
+        words = line.decode("ascii", "replace").split()
+        if words and words[0] == "end_header":
+            return
+        if words and words[0] not in ("comment", "obj_info"):
+            yield number, words
+
+
+def _vertex_count(words, path, number) -> int:
+    """The count of an `element vertex COUNT` line: a non-negative integer."""
+    if len(words) != 3 or not words[2].isdigit():
+        raise PlyError(f"{path}: line {number}: {' '.join(words)!r}: the vertex count must be a "
+                       "non-negative integer")
+    return int(words[2])
+
+
+def _property(words, path, number):
+    """(name, numpy type) of a `property TYPE NAME` line of the vertex element."""
+    if len(words) > 1 and words[1] == "list":
+        raise PlyError(f"{path}: list property {words[-1]!r} in vertex is not supported")
+    if len(words) != 3:
+        raise PlyError(f"{path}: line {number}: {' '.join(words)!r} is not 'property TYPE NAME'")
+    if words[1] not in _PLY_TYPES:
+        raise PlyError(f"{path}: line {number}: unknown property type {words[1]!r}")
+    return words[2], "<" + _PLY_TYPES[words[1]]
+
+
 def _read_header(f, path):
+    """Parse the header: (vertex count, numpy dtype of one vertex record)."""
     first = f.readline()
     if first.rstrip(b"\r\n") != b"ply":
         raise PlyError(f"{path}: not a PLY file (first line {first[:20]!r})")
     fmt, count, props, in_vertex = None, None, [], False
-    while True:
-        line = f.readline()
-        if not line:
-            raise PlyError(f"{path}: truncated header (no end_header)")
-        words = line.decode("ascii", "replace").split()
-        if not words or words[0] in ("comment", "obj_info"):
-            continue
-        if words[0] == "end_header":
-            break
+    for number, words in _header_lines(f, path):
         if words[0] == "format":
             fmt = words[1] if len(words) > 1 else ""
         elif words[0] == "element":
-            in_vertex = words[1] == "vertex"
+            in_vertex = len(words) > 1 and words[1] == "vertex"
             if in_vertex:
-                count = int(words[2])
+                count = _vertex_count(words, path, number)
             elif count is not None:
-                raise PlyError(f"{path}: element {words[1]!r} after vertex is not supported")
+                name = words[1] if len(words) > 1 else ""
+                raise PlyError(f"{path}: element {name!r} after vertex is not supported")
         elif words[0] == "property" and in_vertex:
-            if words[1] == "list":
-                raise PlyError(f"{path}: list property {words[-1]!r} in vertex is not supported")
-            if words[1] not in _PLY_TYPES:
-                raise PlyError(f"{path}: unknown property type {words[1]!r}")
-            props.append((words[2], "<" + _PLY_TYPES[words[1]]))
+            props.append(_property(words, path, number))
     if fmt != "binary_little_endian":
         raise PlyError(f"{path}: format {fmt!r} is not supported; need binary_little_endian")
     if count is None:
