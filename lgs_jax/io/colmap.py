@@ -287,4 +287,4 @@ def colmap_source(root: str) -> Source:
         view[:3, :3], view[:3, 3] = quat_to_rotation(im.qvec), im.tvec
         views.append(View(im.name.replace(os.sep, "/"), os.path.join(root, "images", im.name),
                           view, lenses[im.camera_id]))
-    return Source(images_file, views, model.points, model.colors)
+    return Source(images_file, cams_file, views, model.points, model.colors)

@@ -82,7 +82,8 @@ def _source(path: str) -> Source:
     if os.path.isfile(path) and path.endswith(".json"):
         return transforms_source(path)
     if not os.path.isdir(path):
-        raise DatasetError(f"{path}: no such dataset folder")
+        raise DatasetError(f"{path}: " + ("not a dataset folder or .json file"
+                                          if os.path.exists(path) else "no such file or folder"))
     for name in ("transforms.json", "transforms_train.json"):
         if os.path.isfile(os.path.join(path, name)):
             return transforms_source(os.path.join(path, name))
@@ -120,7 +121,7 @@ def _prepare(view: View, source: Source, background, undistorters, k) -> tuple[n
     lens = view.lens
     if image.shape[:2] != (lens.height, lens.width):
         raise DatasetError(f"{view.path}: image is {image.shape[1]}x{image.shape[0]} pixels but "
-                           f"{source.file} gives its camera {lens.width}x{lens.height}")
+                           f"its camera in {source.lens_file} is {lens.width}x{lens.height}")
     if image.shape[2] == 4:
         image = image[..., :3] * image[..., 3:] + background * (1 - image[..., 3:])
     if lens.distorted:
@@ -164,7 +165,8 @@ def load_dataset(path, *, downscale: int = 1) -> Dataset:
     if dupes:
         raise DatasetError(f"{source.file}: images listed more than once: {dupes[:5]}")
     background = WHITE if source.nerf_synthetic else BLACK
-    undistorters = {v.lens: undistorter(v.lens, source.file) for v in views if v.lens.distorted}
+    undistorters = {v.lens: undistorter(v.lens, source.lens_file) for v in views
+                    if v.lens.distorted}
     with concurrent.futures.ThreadPoolExecutor(min(8, os.cpu_count() or 1)) as pool:
         done = list(pool.map(lambda v: _prepare(v, source, background, undistorters,
                                                 int(downscale)), views))

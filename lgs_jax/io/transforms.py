@@ -90,5 +90,5 @@ def transforms_source(path: str) -> Source:
             raise DatasetError(f"{path}: frame {i} is malformed ({type(e).__name__}: {e})") \
                 from None
     empty = np.zeros((0, 3))
-    return Source(path, views, empty, empty.astype(np.uint8),
+    return Source(path, path, views, empty, empty.astype(np.uint8),
                   nerf_synthetic=os.path.basename(path) == "transforms_train.json")

@@ -70,12 +70,14 @@ class View:
 class Source:
     """A dataset as read from its files, before any image is loaded.
 
-    `file`: the model file that lists the views (for messages); `points` (M, 3) float64 and
+    `file`: the model file that lists the views and `lens_file` the one that defines their
+    cameras (the same file for transforms.json; for messages); `points` (M, 3) float64 and
     `colors` (M, 3) uint8: SfM points, (0, 3) where the format has none; `nerf_synthetic`: a
     NeRF-synthetic folder (white background, frame ids held out every 10th).
     """
 
     file: str
+    lens_file: str
     views: list[View]
     points: np.ndarray
     colors: np.ndarray
