@@ -260,12 +260,16 @@ def test_transforms_camera_projects_a_point_where_computed_by_hand(tmp_path):
     c2w[2, 3] = 5.0
     frames = [dict(file_path="images/a.png", transform_matrix=c2w.tolist()),
               dict(file_path="images/b.png", transform_matrix=c2w.tolist(), fl_x=60.0, fl_y=70.0,
-                   cx=21.0, cy=14.0)]
-    # frame a: the shared intrinsics; camera_angle_x = 2·atan(0.5) gives fx = w = 40, fy = fx.
+                   cx=21.0, cy=14.0),
+              dict(file_path="images/c.png", transform_matrix=c2w.tolist(),
+                   camera_angle_y=2 * math.atan(0.25))]
+    # frame a: the shared intrinsics; camera_angle_x = 2·atan(0.5) gives fx = w = 40, fy = fx;
+    # frame b: its own; frame c: fy = 0.5·h / tan(0.5·camera_angle_y) = 15 / 0.25.
     write_frames(tmp_path, dict(camera_angle_x=2 * math.atan(0.5)), frames)
     d = lgs_jax.load_dataset(tmp_path)
     point = np.array([1.0, 0.5, 0.0, 1.0])
-    for cam, (fx, fy, cx, cy) in zip(d.cameras, [(40, 40, 20, 15), (60, 70, 21, 14)]):
+    for cam, (fx, fy, cx, cy) in zip(d.cameras, [(40, 40, 20, 15), (60, 70, 21, 14),
+                                                 (40, 60, 20, 15)]):
         assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height) == (fx, fy, cx, cy, 40, 30)
         p = np.asarray(cam.viewmat, np.float64) @ point
         assert p[2] == pytest.approx(5.0)
@@ -468,3 +472,5 @@ def test_lego_train_matches_the_trainers_loader_with_ids_0_to_90_held_out(data_d
     for c, mine in zip(cams, [d.cameras[i] for i in order]):
         np.testing.assert_array_equal(mine.viewmat, c.viewmat)
         assert (mine.fx, mine.cx, mine.width) == (np.float32(c.fx / 2), np.float32(c.cx / 2), 100)
+    centers = np.stack([np.linalg.inv(np.asarray(c.viewmat, np.float64))[:3, 3] for c in cams])
+    assert d.extent == pytest.approx(np.linalg.norm(centers - centers.mean(0), axis=1).max())
