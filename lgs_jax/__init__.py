@@ -2,19 +2,22 @@
 
 Public API: `Gaussians`, `Camera`, `RasterConfig` (with its `KernelConfig`), `render`
 (-> `RenderOutput`), `render_growing`, `load_ply`, `save_ply`, `load_cameras`, `stack_cameras`,
-`default_scene`.
+`default_scene`, `load_dataset` (-> `Dataset`: COLMAP / transforms.json captures).
 """
 
 from .config import KernelConfig, RasterConfig
 from .data import default_camera, default_scene
 from .io.cameras import load_cameras
+from .io.dataset import Dataset, load_dataset
+from .io.views import DatasetError
 from .io.ply import PlyError, load_ply, save_ply
 from .render import BACKENDS, CapacityError, RenderOutput, RenderStats, render, render_growing
 from .scene import Camera, Gaussians, stack_cameras
 
 __all__ = [
-    "BACKENDS", "Camera", "CapacityError", "Gaussians", "KernelConfig", "PlyError",
-    "RasterConfig", "RenderOutput", "RenderStats", "default_camera", "default_scene",
-    "load_cameras", "load_ply", "render", "render_growing", "save_ply", "stack_cameras",
+    "BACKENDS", "Camera", "CapacityError", "Dataset", "DatasetError", "Gaussians",
+    "KernelConfig", "PlyError", "RasterConfig", "RenderOutput", "RenderStats", "default_camera",
+    "default_scene", "load_cameras", "load_dataset", "load_ply", "render", "render_growing",
+    "save_ply", "stack_cameras",
 ]
 __version__ = "0.1.0"

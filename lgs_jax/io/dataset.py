@@ -1,0 +1,178 @@
+"""Training datasets of real captures: `load_dataset` and `Dataset`.
+
+Formats, detected in this order in the folder given (or given as the json file itself):
+  `transforms.json`        instant-ngp / NeRF (`transforms.py`; lens distortion allowed);
+  `transforms_train.json`  NeRF-synthetic (white background; RGBA images);
+  `sparse/0/` or `sparse/` a COLMAP model, binary or text (`colmap.py`), images in `images/`.
+
+Each image is read as 8-bit RGB(A) / 255, checked against its camera's size, composited over the
+dataset's background where it has alpha (image = rgb·a + background·(1 − a)), undistorted to a
+pinhole camera with no invalid pixel where its lens has distortion (`undistort.py`, OpenCV), and
+downscaled by an integer k with an area filter: the last width % k columns and height % k rows are
+dropped and each k x k block is averaged, so that every intrinsic is divided by k exactly
+(`views.Lens.downscaled`).
+
+Split: NeRF-synthetic holds out the frames whose id (the last number in the file name) is a
+multiple of 10 (lego_train: r_0, r_10, ..., r_90); every other dataset holds out every 8th image in
+sorted name order (indices 0, 8, 16, ...), as Mip-NeRF 360 evaluations do.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import os
+import re
+
+import numpy as np
+
+from ..scene import Camera
+from .colmap import colmap_source, model_folder
+from .transforms import transforms_source
+from .undistort import undistorter
+from .views import DatasetError, Lens, Source, View, read_image
+
+WHITE, BLACK = np.ones(3, np.float32), np.zeros(3, np.float32)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Dataset:
+    """Images and cameras of one capture, ready for training.
+
+    Attributes:
+      path: the folder (or json file) it was loaded from.
+      names: image file names relative to the image folder, sorted; every field below follows
+        this order.
+      images: (N, H, W, 3) float32 RGB in [0, 1] (composited over `background` where the files
+        have alpha) when all views share one size, as in single-camera captures; otherwise a list
+        of (H_i, W_i, 3) arrays.
+      cameras: one pinhole `Camera` per image (OpenCV axes, undistorted and downscaled intrinsics).
+      points, colors: (M, 3) float32 SfM points and their RGB in [0, 1]; (0, 3) where the format
+        has none.
+      train, test: int64 index arrays of the split (module docstring).
+      background: (3,) float32 colour the images were composited over (white for NeRF-synthetic,
+        black otherwise): render training views over it.
+    """
+
+    path: str
+    names: tuple[str, ...]
+    images: np.ndarray | list
+    cameras: tuple[Camera, ...]
+    points: np.ndarray
+    colors: np.ndarray
+    train: np.ndarray
+    test: np.ndarray
+    background: np.ndarray
+
+    @property
+    def centers(self) -> np.ndarray:
+        """(N, 3) camera centres in world space."""
+        return np.stack([np.linalg.inv(np.asarray(c.viewmat, np.float64))[:3, 3]
+                         for c in self.cameras])
+
+    @property
+    def extent(self) -> float:
+        """Largest distance of a camera centre from their mean: the scene scale a trainer's
+        learning rates use (3DGS's `cameras_extent` is 1.1 times this)."""
+        c = self.centers
+        return float(np.linalg.norm(c - c.mean(0), axis=1).max())
+
+
+def _source(path: str) -> Source:
+    if os.path.isfile(path) and path.endswith(".json"):
+        return transforms_source(path)
+    if not os.path.isdir(path):
+        raise DatasetError(f"{path}: " + ("not a dataset folder or .json file"
+                                          if os.path.exists(path) else "no such file or folder"))
+    for name in ("transforms.json", "transforms_train.json"):
+        if os.path.isfile(os.path.join(path, name)):
+            return transforms_source(os.path.join(path, name))
+    if model_folder(path):
+        return colmap_source(path)
+    raise DatasetError(f"{path}: not a dataset folder (no transforms.json, transforms_train.json,"
+                       " sparse/0/cameras.bin or .txt)")
+
+
+def _held_out(names: list[str], nerf_synthetic: bool, where: str) -> np.ndarray:
+    if not nerf_synthetic:
+        return np.arange(len(names)) % 8 == 0
+    ids = []
+    for n in names:
+        digits = re.findall(r"\d+", os.path.basename(n))
+        if not digits:
+            raise DatasetError(f"{where}: frame {n!r} has no number in its name (NeRF-synthetic "
+                               "splits by frame id)")
+        ids.append(int(digits[-1]))
+    return np.asarray(ids) % 10 == 0
+
+
+def _downscale(image: np.ndarray, k: int) -> np.ndarray:
+    """Mean of k x k blocks after dropping the last H % k rows and W % k columns."""
+    if k == 1:
+        return image
+    h, w = image.shape[0] // k, image.shape[1] // k
+    blocks = image[:h * k, :w * k].reshape(h, k, w, k, image.shape[2])
+    return blocks.mean((1, 3), dtype=np.float64).astype(np.float32)
+
+
+def _prepare(view: View, source: Source, background, undistorters, k) -> tuple[np.ndarray, Lens]:
+    """The image of one view, composited, undistorted and downscaled, with its final lens."""
+    image = read_image(view.path, source.file)
+    lens = view.lens
+    if image.shape[:2] != (lens.height, lens.width):
+        raise DatasetError(f"{view.path}: image is {image.shape[1]}x{image.shape[0]} pixels but "
+                           f"its camera in {source.lens_file} is {lens.width}x{lens.height}")
+    if image.shape[2] == 4:
+        image = image[..., :3] * image[..., 3:] + background * (1 - image[..., 3:])
+    if lens.distorted:
+        lens, undistort = undistorters[lens]
+        image = undistort(image)
+    return _downscale(image, k), lens.downscaled(k)
+
+
+def _camera(view: View, lens: Lens) -> Camera:
+    f32 = np.float32
+    return Camera(viewmat=view.viewmat.astype(f32), fx=f32(lens.fx), fy=f32(lens.fy),
+                  cx=f32(lens.cx), cy=f32(lens.cy), width=lens.width, height=lens.height)
+
+
+def _stack(images: list[np.ndarray]) -> np.ndarray | list:
+    if len({im.shape for im in images}) > 1:
+        return images
+    out = np.empty((len(images),) + images[0].shape, np.float32)
+    for i in range(len(images)):
+        out[i], images[i] = images[i], None  # one copy in memory at a time
+    return out
+
+
+def load_dataset(path, *, downscale: int = 1) -> Dataset:
+    """Load a COLMAP, instant-ngp/NeRF or NeRF-synthetic dataset (module docstring).
+
+    `downscale`: integer factor k >= 1; images are averaged over k x k blocks and the cameras'
+    intrinsics divided by k (sizes rounded down: width // k, height // k).
+    Raises `DatasetError` (a `ValueError`) naming the file and the problem for a dataset that
+    cannot be loaded, and `ImportError` if a distorted camera needs OpenCV and it is missing
+    (install the `data` extra: pip install 'lgs_jax[data]').
+    """
+    if isinstance(downscale, bool) or not isinstance(downscale, (int, np.integer)) \
+            or downscale < 1:
+        raise ValueError(f"downscale: expected an integer >= 1, got {downscale!r}")
+    path = os.fspath(path)
+    source = _source(path)
+    views = sorted(source.views, key=lambda v: v.name)
+    names = [v.name for v in views]
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise DatasetError(f"{source.file}: images listed more than once: {dupes[:5]}")
+    background = WHITE if source.nerf_synthetic else BLACK
+    undistorters = {v.lens: undistorter(v.lens, source.lens_file) for v in views
+                    if v.lens.distorted}
+    with concurrent.futures.ThreadPoolExecutor(min(8, os.cpu_count() or 1)) as pool:
+        done = list(pool.map(lambda v: _prepare(v, source, background, undistorters,
+                                                int(downscale)), views))
+    held = _held_out(names, source.nerf_synthetic, source.file)
+    return Dataset(path=path, names=tuple(names), images=_stack([im for im, _ in done]),
+                   cameras=tuple(_camera(v, lens) for v, (_, lens) in zip(views, done)),
+                   points=source.points.astype(np.float32),
+                   colors=source.colors.astype(np.float32) / np.float32(255),
+                   train=np.flatnonzero(~held), test=np.flatnonzero(held), background=background)
