@@ -140,7 +140,7 @@ def test_screen_space_gradients_and_visibility_for_densification():
     got = np.asarray(jax.grad(loss)(zeros, "reference"))
     want = np.asarray(jax.grad(loss)(zeros, "brute"))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * max(np.abs(want).max(), 1.0))
-    out = lgs_jax.render(g, cam, background=bg, capacity=4096)
+    out = lgs_jax.render(g, cam, background=bg, backend="reference", capacity=4096)
     visible = np.asarray(out.visible)
     assert visible.shape == (g.num,) and visible.sum() > 0
     assert np.all(got[~visible] == 0)
