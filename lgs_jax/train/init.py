@@ -10,6 +10,7 @@ NeRF-synthetic scenes: 0.25 x Lego's scene scale of 5.2). Then
   opacities  logit(init_opacity);
   SH         band 0 = (rgb − 0.5) / C0, higher bands 0 (degree 3: 16 bases).
 Deterministic given the seed (numpy's generator; gsplat uses torch's, so draws differ).
+`start_gaussians` is what `fit` starts from (benchmarks/train_vs_gsplat.py gives gsplat the same).
 """
 
 from __future__ import annotations
@@ -53,3 +54,23 @@ def initial_gaussians(points: np.ndarray, colors: np.ndarray, init_opacity: floa
     return Gaussians(f32(points), f32(rng.uniform(size=(n, 4))),
                      f32(np.repeat(np.log(scale)[:, None], 3, 1)),
                      f32(np.full(n, np.log(init_opacity / (1 - init_opacity)))), f32(sh))
+
+
+def start_gaussians(rd, settings, strategy, seed: int, cap: int, log=print) -> Gaussians:
+    """The initial Gaussians of a run on `rd` (a `data.RunData`): its SfM points (a random
+    subset of `cap` if it has more) or `settings.init_points` random ones (at most `cap`) in the
+    cube of half-width init_extent · scene_scale (init_extent None: 0.25 for NeRF-synthetic
+    scenes, 3 otherwise), with the strategy's initial opacity and scale."""
+    points, colors = rd.points, rd.colors
+    if len(points) == 0:
+        extent = settings.init_extent
+        extent = extent if extent is not None else (0.25 if rd.nerf_synthetic else 3.0)
+        n = min(settings.init_points, cap)
+        log(f"no SfM points: {n} random points in a cube of half-width {extent:g} x scene scale")
+        points, colors = random_points(n, extent * rd.scene_scale, seed)
+    elif len(points) > cap:
+        keep = np.sort(np.random.default_rng([seed, 3]).choice(len(points), cap, False))
+        log(f"{len(points)} SfM points, more than the cap: a random {cap} of them")
+        points, colors = points[keep], colors[keep]
+    return initial_gaussians(points, colors, strategy.init_opacity, strategy.init_scale, seed,
+                             (settings.sh_degree + 1) ** 2)

@@ -22,10 +22,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..io.ply import save_ply
-from ..render import next_pow2, render
+from .. import binning
+from ..projection import project
+from ..render import next_pow2
 from . import checkpoint, report
 from .data import RunData, prepare, views_for_step
-from .init import initial_gaussians, random_points
+from .init import start_gaussians
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
 from .settings import Settings, Setup
@@ -46,22 +48,6 @@ class _State:
     skipped: int = 0
 
 
-def _initial_points(setup: Setup, rd: RunData, seed: int, cap: int, log):
-    """(points, colors): the SfM points (a random subset of `cap` if more), else random ones."""
-    s = setup.settings
-    if len(rd.points) == 0:
-        extent = s.init_extent if s.init_extent is not None else (
-            0.25 if rd.nerf_synthetic else 3.0)
-        n = min(s.init_points, cap)
-        log(f"no SfM points: {n} random points in a cube of half-width {extent:g} x scene scale")
-        return random_points(n, extent * rd.scene_scale, seed)
-    if len(rd.points) > cap:
-        keep = np.sort(np.random.default_rng([seed, 3]).choice(len(rd.points), cap, False))
-        log(f"{len(rd.points)} SfM points, more than max_gaussians: a random {cap} of them")
-        return rd.points[keep], rd.colors[keep]
-    return rd.points, rd.colors
-
-
 def _templates(setup: Setup, size: int, scene_scale: float, g=None):
     """(pool, opt_state, strategy_state) at `size` slots: from Gaussians g, or zeros."""
     bases = (setup.settings.sh_degree + 1) ** 2
@@ -77,18 +63,21 @@ def _templates(setup: Setup, size: int, scene_scale: float, g=None):
 
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
-    points, colors = _initial_points(setup, rd, seed, cap, log)
-    st = setup.strategy
-    g = initial_gaussians(points, colors, st.init_opacity, st.init_scale, seed,
-                          (setup.settings.sh_degree + 1) ** 2)
+    g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
     size = pool_size or min(cap, next_pow2(g.num))
     pool, opt_state, sstate = _templates(setup, max(size, g.num), rd.scene_scale, g)
-    cam = jax.tree.map(lambda x: x[0], rd.train_cams)
-    pairs = int(render(render_gaussians(pool.params, pool.active), cam).stats.pairs_required)
-    capacity = next_pow2(max(pairs, 1) * 2)
+    first = jax.tree.map(lambda x: x[0], rd.train_cams)
+    capacity = next_pow2(max(int(_pairs(pool, first)), 1) * 2)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
         f"{rd.scene_scale:.3f}")
     return _State(pool, opt_state, sstate, 0, capacity, capacity)
+
+
+@jax.jit
+def _pairs(pool: Pool, cam):
+    """Tile-Gaussian pairs of the pool in one view."""
+    return binning.count_pairs(project(render_gaussians(pool.params, pool.active), cam),
+                               cam.width, cam.height)
 
 
 def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
@@ -132,20 +121,18 @@ def _evaluate(st: _State, rd: RunData, backend: str, out: str | None = None):
     return report.heldout_metrics(images, rd.test_images)
 
 
-def _one_step(setup: Setup, st: _State, rd: RunData, seed: int):
-    """Run step st.step (capacity grown until nothing overflows); returns (metrics, key for
-    the refinement)."""
-    s = st.step
-    idx = jnp.asarray(views_for_step(s, setup.settings.batch, rd.train_images.shape[0], seed))
-    k_step, k_refine = jax.random.split(jax.random.fold_in(jax.random.key(seed), s))
+def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background):
+    """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
+    idx = jnp.asarray(views_for_step(st.step, setup.settings.batch, rd.train_images.shape[0],
+                                     seed))
     while True:
         new = train_step(st.pool, st.opt_state, st.strategy_state, rd.train_cams,
-                         rd.train_images, idx, jnp.asarray(rd.background), s, k_step,
-                         setup=setup, capacity=st.capacity)
+                         rd.train_images, idx, background, st.step, key, setup=setup,
+                         capacity=st.capacity)
         m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
         if not m["overflow"]:
             st.pool, st.opt_state, st.strategy_state = new[:3]
-            return m, k_refine
+            return m
         st.capacity = next_pow2(m["pairs"])
 
 
@@ -163,9 +150,11 @@ def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
     return count
 
 
-def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log):
-    """Steps st.step .. setup.steps (module docstring); returns the seconds spent in steps."""
+def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, clock):
+    """Steps st.step .. setup.steps (module docstring); returns the seconds spent in steps
+    (their compilation, timed by `clock`, included)."""
     progress, s = report.Progress(st.step, setup.steps), setup.settings
+    key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
     busy = 0.0
     try:
@@ -173,12 +162,13 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log):
             record = lambda **row: f.write(json.dumps(row) + "\n")
             while st.step < setup.steps:
                 t0 = time.perf_counter()
-                m, key = _one_step(setup, st, rd, seed)
+                with clock:
+                    m = _one_step(setup, st, rd, seed, key, background)
+                    if setup.strategy.refine_due(st.step):
+                        m["count"] = _refine(setup, st, key, cap, say, record)
                 if not m["ok"]:
                     st.skipped += 1
                     say(f"step {st.step + 1}: skipped (loss, gradients or parameters not finite)")
-                if setup.strategy.refine_due(st.step):
-                    m["count"] = _refine(setup, st, key, cap, say, record)
                 st.step += 1
                 busy += time.perf_counter() - t0
                 record(step=st.step, loss=m["loss"], psnr=m["psnr"], gaussians=m["count"],
@@ -237,7 +227,10 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     window of every image. backend: a differentiable backend of `render` (default `pallas` on
     GPUs, `tiles` elsewhere). `out` must be new or empty unless `resume` (continue from its
     checkpoint, bit-identically) or `overwrite` (delete its previous run's files first).
-    Progress is a tqdm bar on stderr; `log` gets the other lines.
+    Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
+    and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
+    time of the steps and refinements, their compilation included, evaluations and checkpoints
+    not; None when no step ran) and compile_seconds (of that, the time spent compiling).
     """
     _check_args(steps, max_gaussians, settings)
     rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
@@ -247,12 +240,15 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         st = _resumed(out, setup, rd, seed, log)
     else:
         st = _fresh(setup, rd, seed, max_gaussians, pool_size, log)
-    start, t0 = st.step, time.perf_counter()
-    busy = _loop(out, setup, st, rd, seed, max_gaussians, log)
-    return _finish(out, setup, st, rd, start, busy, time.perf_counter() - t0, log)
+    start, t0, clock = st.step, time.perf_counter(), report.CompileClock()
+    with clock.listening():
+        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock)
+    return _finish(out, setup, st, rd, start, busy, time.perf_counter() - t0, log,
+                   clock.seconds)
 
 
-def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log) -> dict:
+def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log,
+            compile_seconds) -> dict:
     """Final evaluation and outputs (module docstring); returns the result."""
     psnr, ssim = _evaluate(st, rd, setup.backend, out)
     with open(os.path.join(out, "metrics.jsonl"), "a") as f:
@@ -266,6 +262,7 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
                   gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
                   skipped_steps=st.skipped, seconds=seconds,
                   ms_per_step=1e3 * busy / ran if ran else None,
+                  compile_seconds=compile_seconds,
                   strategy=type(setup.strategy).__name__, backend=setup.backend,
                   device=jax.devices()[0].device_kind)
     with open(os.path.join(out, "result.json"), "w") as f:

@@ -58,7 +58,8 @@ def ssim(a, b, data_range: float = 1.0, padding: str = "skimage"):
     mu_a, mu_b, aa, bb, ab = (maps[i * c:(i + 1) * c] for i in range(5))
     c1, c2 = (0.01 * data_range) ** 2, (0.03 * data_range) ** 2
     var_a, var_b, cov = aa - mu_a**2, bb - mu_b**2, ab - mu_a * mu_b
-    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
+    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)
+         / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2)))
     if padding == "skimage":
         s = s[:, RADIUS:-RADIUS, RADIUS:-RADIUS]
     return jnp.mean(s)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import threading
 
+import jax
 import numpy as np
 import tqdm
 
@@ -48,6 +50,49 @@ class Progress:
         self._stop.set()
         self._thread.join()
         self.bar.close()
+
+
+class CompileClock:
+    """Seconds JAX spends compiling (tracing, lowering, compiling or loading compiled code: its
+    "/jax/core/compile/" monitoring events) inside `with clock:` blocks, overlaps counted once.
+    Use it as a context manager around the whole run too: `clock.listening()`."""
+
+    def __init__(self):
+        self._spans, self._on = [], False
+
+    def _listen(self, event, start, end, **_):
+        if self._on and event.startswith("/jax/core/compile/"):
+            self._spans.append((start, end))
+
+    def listening(self):
+        """A context manager that registers the listener (and unregisters it after)."""
+        clock = self
+
+        class _Listening:
+            def __enter__(self):
+                jax.monitoring.register_event_time_span_listener(clock._listen)
+                return clock
+
+            def __exit__(self, *exc):
+                jax.monitoring.unregister_event_time_span_listener(clock._listen)
+
+        return _Listening()
+
+    def __enter__(self):
+        self._on = True
+        return self
+
+    def __exit__(self, *exc):
+        self._on = False
+
+    @property
+    def seconds(self) -> float:
+        total, reach = 0.0, -math.inf
+        for start, end in sorted(self._spans):
+            if end > reach:
+                total += end - max(start, reach)
+                reach = end
+        return total
 
 
 def heldout_metrics(images, targets) -> tuple[float, float]:

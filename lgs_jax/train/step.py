@@ -68,13 +68,19 @@ def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, back
     return value, grads if need2d else (grads, None)
 
 
+def step_keys(key, step):
+    """(key of the training step, key of the refinement) at `step`: from the run's key and the
+    step alone, so a resumed run draws what an uninterrupted one would."""
+    return jax.random.split(jax.random.fold_in(key, step))
+
+
 @functools.partial(jax.jit, static_argnames=("setup", "capacity"))
 def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx, background,
                step, key, *, setup: Setup, capacity: int):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
-    (stacked) and `all_images` (T, H, W, 3). Returns (pool, opt_state, strategy_state,
-    metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs (largest
-    per-view pair count), count (active Gaussians)."""
+    (stacked) and `all_images` (T, H, W, 3); `key` is the run's. Returns (pool, opt_state,
+    strategy_state, metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs
+    (largest per-view pair count), count (active Gaussians)."""
     cams = jax.tree.map(lambda x: x[idx], all_cams)
     targets = all_images[idx]
     (loss, (mse, stats, visible)), (grads, grads2d) = _loss_and_grads(
@@ -85,7 +91,7 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx,
     lr = means_schedule(setup.settings, setup.steps, setup.scene_scale)(step + 1)
     info = StepInfo(grads2d, visible, lr, cams.width, cams.height)
     new_state, new_pool, new_opt = setup.strategy.step(strategy_state, new_pool, new_opt, info,
-                                                       step, key)
+                                                       step, step_keys(key, step)[0])
     ok = (jnp.isfinite(loss) & _finite(grads, pool.active)
           & _finite(new_pool.params, new_pool.active))
     if grads2d is not None:
@@ -100,18 +106,18 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx,
 
 @functools.partial(jax.jit, static_argnames=("strategy", "cap"))
 def _refine(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
-    new = strategy.refine(strategy_state, pool, opt_state, step, key, cap)
+    new = strategy.refine(strategy_state, pool, opt_state, step, step_keys(key, step)[1], cap)
     ok = _finite(new[1].params, new[1].active)
     state, pool, opt_state = _select(ok, new[:3], (strategy_state, pool, opt_state))
     return state, pool, opt_state, dict(new[3], ok=ok)
 
 
 def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int):
-    """`strategy.refine` at `step`, the pool first grown (doubled, at most to `cap` slots) while
-    the refinement needs more new slots than are free, so nothing is cut short below the cap.
-    A refinement that would make an active parameter non-finite is not applied (ok False).
-    Returns (state, pool, opt_state, report): the report's counts as ints, plus `grown_to` (the
-    new pool size, or 0)."""
+    """`strategy.refine` at `step` (`key`: the run's), the pool first grown (doubled, at most
+    to `cap` slots) while the refinement needs more new slots than are free, so nothing is cut
+    short below the cap. A refinement that would make an active parameter non-finite is not
+    applied (ok False). Returns (state, pool, opt_state, report): the report's counts as ints,
+    plus `grown_to` (the new pool size, or 0)."""
     grown_to = 0
     while True:
         state, new_pool, new_opt, report = _refine(strategy_state, pool, opt_state, step, key,
