@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..io.ply import save_ply
 from .. import binning
+from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2
 from . import checkpoint, report
@@ -64,8 +64,8 @@ def _templates(setup: Setup, size: int, scene_scale: float, g=None):
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
     g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
-    size = pool_size or min(cap, next_pow2(g.num))
-    pool, opt_state, sstate = _templates(setup, max(size, g.num), rd.scene_scale, g)
+    size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
+    pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
     capacity = next_pow2(max(int(_pairs(pool, first)), 1) * 2)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
@@ -121,7 +121,7 @@ def _evaluate(st: _State, rd: RunData, backend: str, out: str | None = None):
     return report.heldout_metrics(images, rd.test_images)
 
 
-def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background):
+def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say):
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
     idx = jnp.asarray(views_for_step(st.step, setup.settings.batch, rd.train_images.shape[0],
                                      seed))
@@ -134,6 +134,7 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background)
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
         st.capacity = next_pow2(m["pairs"])
+        say(f"step {st.step + 1}: pair capacity grown to {st.capacity} (one recompile)")
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
@@ -163,7 +164,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
             while st.step < setup.steps:
                 t0 = time.perf_counter()
                 with clock:
-                    m = _one_step(setup, st, rd, seed, key, background)
+                    m = _one_step(setup, st, rd, seed, key, background, say)
                     if setup.strategy.refine_due(st.step):
                         m["count"] = _refine(setup, st, key, cap, say, record)
                 if not m["ok"]:
