@@ -3,6 +3,7 @@ initialisation, the view order; `fit` on a tiny downscaled skull (the loss falls
 Gaussian count changes, resume is bit-identical, a non-finite step is skipped and reported);
 the `fit` CLI (outputs, run-directory rules, lego_train) and the progress bar."""
 
+import csv
 import dataclasses
 import io
 import json
@@ -289,3 +290,26 @@ def test_fit_needs_held_out_views(tmp_path):
                                                                 frames=frames)))
     with pytest.raises(ValueError, match="needs training views and held-out views"):
         train.fit(str(data), 1, str(tmp_path / "out"))
+
+
+def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
+    """benchmarks/train_vs_gsplat.py's own parts on the CPU: ours at 0 steps (no compile of a
+    training step), its CSVs, and the comparison table from a stand-in gsplat result."""
+    from benchmarks import train_vs_gsplat as bench
+
+    if not os.path.isdir(os.path.join(data_dir, "skull")):
+        pytest.skip("skull not found")
+    out = str(tmp_path / "bench")
+    assert bench.main(["--data-root", data_dir, "--scenes", "skull", "--downscale", "32",
+                       "--cap", "300", "--steps", "0", "--no-gsplat", "--inline",
+                       "--out", out]) == 0
+    row = next(csv.DictReader(open(os.path.join(out, "summary.csv"))))
+    assert row["scene"] == "skull" and row["trainer"] == "lgs_jax" and row["gaussians"] == "300"
+    assert float(row["final_psnr"]) > 10
+    ours = json.load(open(os.path.join(out, "skull_ours.json")))
+    theirs = dict(ours, trainer="gsplat", ms_per_step=2.0, peak_mb=100.0,
+                  curve=[dict(c, psnr=c["psnr"] - 0.5) for c in ours["curve"]])
+    ours.update(ms_per_step=5.0, ms_per_step_excl_compile=4.0, peak_mb=150.0)
+    bench.print_table([ours, theirs])
+    assert "PSNR +0.50 dB, SSIM +0.0000, time per step x2.00, peak memory x1.50" in \
+        capsys.readouterr().out
