@@ -285,9 +285,12 @@ def _fit_parser(sub, common) -> None:
                    help="default strategy: reset opacities every 3000 steps (3DGS; gsplat "
                         "1.5.3 never does, through a bug)")
     f.add_argument("--batch", type=_int_at_least(1), default=1, help="views per step")
-    f.add_argument("--eval-every", type=_int_at_least(1), default=500)
-    f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"))
-    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--eval-every", type=_int_at_least(1), default=500,
+                   help="steps between held-out evaluations (default: 500)")
+    f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"),
+                   help="train and evaluate on this window of every image (quick checks)")
+    f.add_argument("--seed", type=int, default=0,
+                   help="seed of the start, the view order and the strategies' draws")
     f.add_argument("--backend", default=None,
                    choices=["reference", "tiles", "pallas", "pallas_vanilla"],
                    help="differentiable backend (default: pallas on GPUs, tiles elsewhere)")

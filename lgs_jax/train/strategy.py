@@ -61,18 +61,26 @@ class Strategy:
     needs_screen_grads = False  # class constant: whether `step` reads info.screen_grads
 
     def init(self, pool: Pool, scene_scale: float):
+        """The strategy's state (a pytree) for a new run on `pool`."""
         return {}
 
     def regularizer(self, params: dict, active):
+        """A term added to the loss (traced; differentiated w.r.t. params)."""
         return jnp.zeros((), params["means"].dtype)
 
     def step(self, state, pool: Pool, opt_state, info: StepInfo, step, key):
+        """Every step, after the optimizer update (traced): (state, pool, opt_state)."""
         return state, pool, opt_state
 
     def refine_due(self, step: int) -> bool:
+        """Whether `refine` runs after 0-based step `step` (on the host: a Python int)."""
         return False
 
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
+        """The densification (traced): (state, pool, opt_state, report), the report a dict of
+        int32 counts holding at least `needed` (new slots it wanted) and `free` (free slots it
+        found): when needed > free and the pool is below `cap`, `fit` grows the pool and calls
+        it again with the same inputs."""
         zero = jnp.int32(0)
         return state, pool, opt_state, dict(needed=zero, free=zero)
 
@@ -99,8 +107,10 @@ class DefaultStrategy(Strategy):
       prune  opacity < prune_opa, or (s > reset_every) max scale > prune_scale3d · scene_scale
              (clones and split children included);
     then grad2d and count are zeroed. scene_scale is 1.1 x the largest camera distance from the
-    cameras' mean centre. gsplat's screen-size rules (refine_scale2d_stop_iter, off by default)
-    are not implemented.
+    cameras' mean centre. Visible: `RenderOutput.visible` (the 1/255 ellipse reaches a tile of
+    the image) where gsplat counts radii > 0. At the cap (`fit`'s max_gaussians; gsplat has
+    none) clones, then splits, take the free slots in order of ḡ, highest first. gsplat's
+    screen-size rules (refine_scale2d_stop_iter, off by default) are not implemented.
     Opacity reset (opacities clamped to 2 · prune_opa at s % reset_every == 0, 0 < s <
     refine_stop_iter) is the 3DGS rule, but gsplat 1.5.3 never runs it: its test `step %
     reset_every == 0 & step > 0` parses as `step % reset_every == (0 & step) > 0`, always false
