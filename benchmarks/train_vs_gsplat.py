@@ -24,7 +24,9 @@ simple_trainer's progress bar does) without evaluations; ours also without compi
 numbers are written), gsplat's after one warm-up render (its CUDA extension loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians),
-summary.csv (final and best PSNR/SSIM, ms/step, peak MB, Gaussians), <scene>_<trainer>.json.
+summary.csv (final and best PSNR/SSIM, ms/step, peak MB, Gaussians), <scene>_<trainer>.json,
+curves_<scene>.png; both CSVs are rewritten after each run. Our run directories (checkpoints of
+the whole pool: large) go to --run-dir, a temporary folder by default.
 --no-gsplat runs ours alone (CPU checks); --inline runs the trainers in this process.
 """
 
@@ -36,6 +38,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -61,7 +64,10 @@ def parse(argv=None) -> argparse.Namespace:
                                             "lego 300000, skull 500000)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default="train_vs_gsplat_out")
+    ap.add_argument("--out", default="train_vs_gsplat_out",
+                    help="CSV, JSON and figures (small files)")
+    ap.add_argument("--run-dir", help="our runs' directories, checkpoints included (large; "
+                                      "default: a temporary folder)")
     ap.add_argument("--no-gsplat", action="store_true")
     ap.add_argument("--no-ours", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
@@ -98,7 +104,7 @@ def run_ours(args, scene: str) -> dict:
     from lgs_jax.train import report
 
     d, cap, strategy, settings = scene_setup(args, scene)
-    out = os.path.join(args.out, f"{scene}_ours_run")
+    out = os.path.join(args.run_dir or tempfile.mkdtemp(prefix="lgs_bench_"), f"{scene}_ours")
     result = train.fit(d, args.steps, out, strategy=strategy, settings=settings,
                        max_gaussians=cap, seed=args.seed, overwrite=True,
                        pool_size=cap if args.strategy == "mcmc" else None)
@@ -377,9 +383,44 @@ def print_table(results: list[dict]) -> None:
         if not (a and b) or a["final_psnr"] is None or b["final_psnr"] is None:
             continue
         ms = a["ms_per_step_excl_compile"] or a["ms_per_step"]
+        memory = (f", peak memory x{a['peak_mb'] / b['peak_mb']:.2f}"
+                  if a["peak_mb"] and b["peak_mb"] else "")
         print(f"{scene} (ours against gsplat's): PSNR {a['final_psnr'] - b['final_psnr']:+.2f} "
               f"dB, SSIM {a['final_ssim'] - b['final_ssim']:+.4f}, time per step "
-              f"x{ms / b['ms_per_step']:.2f}, peak memory x{a['peak_mb'] / b['peak_mb']:.2f}")
+              f"x{ms / b['ms_per_step']:.2f}{memory}")
+
+
+def print_curves(results: list[dict]) -> None:
+    """Held-out PSNR / SSIM against the step, the trainers side by side, per scene."""
+    for scene in dict.fromkeys(r["scene"] for r in results):
+        runs = [r for r in results if r["scene"] == scene and r.get("curve")]
+        print(f"{scene}: held-out PSNR / SSIM / Gaussians by step")
+        print("  step " + "".join(f"{r['trainer']:>28}" for r in runs))
+        by_step = [{c["step"]: c for c in r["curve"]} for r in runs]
+        for step in sorted(set().union(*by_step)):
+            cells = [f"{c['psnr']:7.2f} {c['ssim']:7.4f} {c['gaussians']:10d}" if c else " " * 26
+                     for c in (b.get(step) for b in by_step)]
+            print(f"{step:6d} " + "".join(f"{x:>28}" for x in cells))
+
+
+def plot_curves(out: str, scene: str, runs: list[dict]) -> None:
+    """curves_<scene>.png: held-out PSNR, SSIM and Gaussians against the step, per trainer."""
+    from matplotlib.figure import Figure
+
+    runs = [r for r in runs if r.get("curve")]
+    if not runs:
+        return
+    fig = Figure(figsize=(13, 3.6))
+    axes = fig.subplots(1, 3)
+    for r in runs:
+        steps = [c["step"] for c in r["curve"]]
+        for ax, key in zip(axes, ("psnr", "ssim", "gaussians")):
+            ax.plot(steps, [c[key] for c in r["curve"]], "o-", ms=3, label=r["trainer"])
+    for ax, title in zip(axes, ("held-out PSNR (dB)", "held-out SSIM", "Gaussians")):
+        ax.set(title=f"{scene}: {title}", xlabel="step")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, f"curves_{scene}.png"), dpi=100)
 
 
 def main(argv=None) -> int:
@@ -390,8 +431,13 @@ def main(argv=None) -> int:
         _run(argparse.Namespace(**dict(vars(args), inline=True)), argv, args.scene, args.worker)
         return 0
     trainers = [t for t, skip in (("ours", args.no_ours), ("gsplat", args.no_gsplat)) if not skip]
-    results = [_run(args, argv, scene, t) for scene in args.scenes for t in trainers]
-    write_csvs(args.out, results)
+    results = []
+    for scene in args.scenes:
+        for trainer in trainers:
+            results.append(_run(args, argv, scene, trainer))
+            write_csvs(args.out, results)  # after each run: a later failure keeps these
+        plot_curves(args.out, scene, [r for r in results if r["scene"] == scene])
+    print_curves(results)
     print_table(results)
     return 1 if any(r.get("error") for r in results) else 0
 

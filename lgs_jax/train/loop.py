@@ -1,8 +1,10 @@
 """`fit`: train Gaussians on a capture, with a densification strategy, into a run directory.
 
 Per step s (0-based): the views of `data.views_for_step`, one `step.train_step` (redone with a
-larger pair capacity whenever a view overflows: no pair is dropped), then `step.refine` where the
-strategy asks (the pool doubles when it needs room, up to `max_gaussians`: a recompile, logged).
+larger pair capacity whenever a view overflows: no pair is dropped; the capacity starts at and
+grows to the power of two above twice the pairs needed, so a run recompiles for it about once
+per 4x growth of its pairs), then `step.refine` where the strategy asks (the pool doubles when
+it needs room, up to `max_gaussians`: a recompile; both are logged).
 A step whose loss, gradients or parameters would not be finite is skipped (nothing changes),
 logged and recorded. Outputs in OUT: metrics.jsonl (per step: loss, training-view PSNR, active
 Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SSIM), checkpoints
@@ -133,7 +135,7 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
         if not m["overflow"]:
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
-        st.capacity = next_pow2(m["pairs"])
+        st.capacity = next_pow2(2 * m["pairs"])  # headroom: pairs grow as Gaussians do
         say(f"step {st.step + 1}: pair capacity grown to {st.capacity} (one recompile)")
 
 
