@@ -1,5 +1,6 @@
 """Command line: `python -m lgs_jax render ...`, `python -m lgs_jax info SCENE.ply` and
-`python -m lgs_jax fit --data DIR --steps N --out DIR` (lgs_jax.train).
+`python -m lgs_jax fit --data DIR --out DIR [--strategy default|mcmc] [--steps N] ...`
+(lgs_jax.train).
 
 Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
 options, input paths, --view, --out, an existing fit run), 1 for a failure while working (a

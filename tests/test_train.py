@@ -313,3 +313,20 @@ def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
     bench.print_table([ours, theirs])
     assert "PSNR +0.50 dB, SSIM +0.0000, time per step x2.00, peak memory x1.50" in \
         capsys.readouterr().out
+
+
+def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
+    from lgs_jax.train import checkpoint
+
+    setup = train.Setup(strategy=train.MCMCStrategy())
+    saved = checkpoint.config_of(setup, seed=0)
+    assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
+    other = checkpoint.config_of(dataclasses.replace(setup, steps=5, backend="pallas"), 0)
+    assert checkpoint.config_mismatch(saved, other) is None  # run length and backend may change
+    changed = checkpoint.config_of(
+        dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
+    problem = checkpoint.config_mismatch(saved, changed)
+    assert "strategy_settings.cap_max: 1000000 -> 7" in problem and "seed: 0 -> 1" in problem
+    (tmp_path / "checkpoint.json").write_text(json.dumps(dict(step=3, capacity=8)))
+    with pytest.raises(ValueError, match="older lgs_jax.train"):
+        checkpoint.read_meta(str(tmp_path))

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
-             "curves.png")
+             "curves.png", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
 PARTS = ("pool", "opt", "strategy")
 
 
@@ -77,8 +77,13 @@ def save(out: str, state: tuple, meta: dict) -> None:
 
 
 def read_meta(out: str) -> dict:
+    """checkpoint.json; ValueError for a checkpoint this version cannot resume."""
     with open(os.path.join(out, "checkpoint.json")) as f:
-        return json.load(f)
+        meta = json.load(f)
+    if "config" not in meta or not os.path.exists(os.path.join(out, "checkpoint.npz")):
+        raise ValueError(f"resume: {out} holds a checkpoint of an older lgs_jax.train (no "
+                         "checkpoint.npz); start a new run (--overwrite)")
+    return meta
 
 
 def restore(out: str, templates: tuple) -> tuple:
