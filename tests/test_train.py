@@ -138,6 +138,8 @@ def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
     side = matplotlib.image.imread(str(tmp_path / f"heldout_{skull.names[0][:-4]}.png"))
     assert side.shape[:2] == (22, 66)  # render beside ground truth
     assert os.path.getsize(tmp_path / "curves.png") > 0 and result["skipped_steps"] == 0
+    busy = 1e-3 * result["ms_per_step"] * STEPS  # steps and refinements, compiling included
+    assert 0 < result["compile_seconds"] < busy <= result["seconds"]
 
 
 class _Stop(Exception):

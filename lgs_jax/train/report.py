@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -64,19 +65,14 @@ class CompileClock:
         if self._on and event.startswith("/jax/core/compile/"):
             self._spans.append((start, end))
 
+    @contextlib.contextmanager
     def listening(self):
-        """A context manager that registers the listener (and unregisters it after)."""
-        clock = self
-
-        class _Listening:
-            def __enter__(self):
-                jax.monitoring.register_event_time_span_listener(clock._listen)
-                return clock
-
-            def __exit__(self, *exc):
-                jax.monitoring.unregister_event_time_span_listener(clock._listen)
-
-        return _Listening()
+        """Registers the clock's listener with JAX for the `with` block."""
+        jax.monitoring.register_event_time_span_listener(self._listen)
+        try:
+            yield self
+        finally:
+            jax.monitoring.unregister_event_time_span_listener(self._listen)
 
     def __enter__(self):
         self._on = True
