@@ -55,7 +55,7 @@ def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, back
         def one(cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        screen_offsets=off)
-            return (loss_fn(o.image, target, s.settings.ssim_lambda),
+            return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
 
         losses, mse, stats, visible = jax.vmap(one)(cams, targets, offsets)
