@@ -1,5 +1,6 @@
 """Command line: `python -m lgs_jax render ...`, `python -m lgs_jax info SCENE.ply` and
-`python -m lgs_jax fit --data DIR --steps N --out DIR` (lgs_jax.train).
+`python -m lgs_jax fit --data DIR --out DIR [--strategy default|mcmc] [--steps N] ...`
+(lgs_jax.train).
 
 Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
 options, input paths, --view, --out, an existing fit run), 1 for a failure while working (a
@@ -194,17 +195,23 @@ def _fit(args) -> int:
 
     from . import train
 
-    if not os.path.isdir(args.data):
-        raise UsageError(f"--data: {args.data}: not a directory")
+    if not (os.path.isdir(args.data) or (os.path.isfile(args.data)
+                                         and args.data.endswith(".json"))):
+        raise UsageError(f"--data: {args.data}: not a dataset folder or .json file")
     problem = train.run_dir_problem(args.out, args.resume, args.overwrite)
     if problem:
         raise UsageError(f"--out: {problem}")
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
-                                   eval_every=args.eval_every)
-    crop = tuple(args.crop) if args.crop else None
-    result = train.fit(args.data, args.steps, args.out, n_gaussians=args.gaussians,
-                       resume=args.resume, overwrite=args.overwrite, settings=settings,
-                       seed=args.seed, crop=crop, backend=args.backend)
+                                   eval_every=args.eval_every, init_points=args.init_points)
+    if args.strategy == "mcmc":
+        strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
+    else:
+        strategy = train.DefaultStrategy(opacity_reset=args.opacity_reset)
+    result = train.fit(args.data, args.steps, args.out, strategy=strategy, settings=settings,
+                       max_gaussians=args.max_gaussians, downscale=args.downscale,
+                       crop=tuple(args.crop) if args.crop else None, seed=args.seed,
+                       backend=args.backend, pool_size=args.pool_size, resume=args.resume,
+                       overwrite=args.overwrite)
     print(json.dumps(result, indent=1))
     return 0
 
@@ -247,18 +254,44 @@ def _render_parser(sub, common) -> None:
 
 def _fit_parser(sub, common) -> None:
     """The `fit` subcommand's options."""
-    f = sub.add_parser("fit", parents=[common],
-                       help="train Gaussians on a NeRF-synthetic folder (ids 0,10,..,90 held "
-                            "out); writes scene.ply, metrics.jsonl, held-out renders")
-    f.add_argument("--data", required=True, help="folder with transforms_train.json")
-    f.add_argument("--steps", type=_int_at_least(0), required=True)
+    f = sub.add_parser(
+        "fit", parents=[common], help="train Gaussians on a capture (COLMAP, transforms.json, "
+                                      "NeRF-synthetic) with densification",
+        description="Train Gaussians on a dataset (lgs_jax.load_dataset: every 8th image held "
+                    "out, NeRF-synthetic ids 0,10,..,90) with gsplat's recipe and a densification "
+                    "strategy. Writes into OUT: metrics.jsonl, checkpoints (resume continues "
+                    "bit-identically), scene.ply (INRIA PLY), heldout_*.png (render beside ground "
+                    "truth), curves.png, result.json.")
+    f.add_argument("--data", required=True, help="dataset folder (or transforms json)")
     f.add_argument("--out", required=True, help="run directory (new or empty, unless --resume "
                                                 "or --overwrite)")
-    f.add_argument("--gaussians", type=_int_at_least(1), default=20000)
+    f.add_argument("--steps", type=_int_at_least(0), default=30000,
+                   help="training steps (default: 30000)")
+    f.add_argument("--strategy", choices=["default", "mcmc"], default="default",
+                   help="densification: default (3DGS clone/split/prune, gsplat's "
+                        "DefaultStrategy) or mcmc (3DGS as MCMC, gsplat's MCMCStrategy, with "
+                        "its recipe: init opacity 0.5, scale 0.1, regularisers 0.01)")
+    f.add_argument("--max-gaussians", type=_int_at_least(1), default=1_000_000,
+                   help="cap on the number of Gaussians (the pool's; MCMC's cap_max) "
+                        "(default: 1000000)")
+    f.add_argument("--downscale", type=_int_at_least(1), default=1,
+                   help="integer image downscale at load (default: 1)")
+    f.add_argument("--pool-size", type=_int_at_least(1),
+                   help="initial pool slots (default: the next power of two above the initial "
+                        "count; the pool doubles when it must, recompiling once each time)")
+    f.add_argument("--init-points", type=_int_at_least(1), default=100_000,
+                   help="random initial points for datasets without SfM points (default: "
+                        "100000)")
+    f.add_argument("--opacity-reset", action="store_true",
+                   help="default strategy: reset opacities every 3000 steps (3DGS; gsplat "
+                        "1.5.3 never does, through a bug)")
     f.add_argument("--batch", type=_int_at_least(1), default=1, help="views per step")
-    f.add_argument("--eval-every", type=_int_at_least(1), default=500)
-    f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"))
-    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--eval-every", type=_int_at_least(1), default=500,
+                   help="steps between held-out evaluations (default: 500)")
+    f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"),
+                   help="train and evaluate on this window of every image (quick checks)")
+    f.add_argument("--seed", type=int, default=0,
+                   help="seed of the start, the view order and the strategies' draws")
     f.add_argument("--backend", default=None,
                    choices=["reference", "tiles", "pallas", "pallas_vanilla"],
                    help="differentiable backend (default: pallas on GPUs, tiles elsewhere)")

@@ -12,8 +12,16 @@ ROOT = Path(__file__).resolve().parents[1]
 IPYTHON_IMPORT = "from IPython.display import Image, Markdown, display"
 
 
-@pytest.mark.parametrize("name", ["precision.ipynb"])
+NEEDS_DATA = {"train_real_capture.ipynb": "skull"}  # folders of ../shared/data
+
+
+@pytest.mark.parametrize("name", ["precision.ipynb", "train_real_capture.ipynb"])
 def test_notebook_runs(name, monkeypatch):
+    from tests.conftest import DATA
+
+    if name in NEEDS_DATA and not os.path.isdir(os.path.join(DATA, NEEDS_DATA[name])):
+        pytest.skip(f"{NEEDS_DATA[name]} not found in {DATA}")
+    monkeypatch.setenv("LGS_JAX_DATA", os.path.normpath(DATA))
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

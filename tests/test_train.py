@@ -1,6 +1,10 @@
-"""lgs_jax.train: SSIM against scikit-image, the loss falls on a tiny crop (CPU), checkpoints
-resume, the `fit` CLI writes its outputs and never mixes two runs, the progress bar."""
+"""lgs_jax.train: SSIM (scikit-image's and the 3DGS loss's), the recipe's learning rates,
+initialisation, the view order; `fit` on a tiny downscaled skull (the loss falls and the
+Gaussian count changes, resume is bit-identical, a non-finite step is skipped and reported);
+the `fit` CLI (outputs, run-directory rules, lego_train) and the progress bar."""
 
+import csv
+import dataclasses
 import io
 import json
 import os
@@ -10,11 +14,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.ndimage
 from skimage.metrics import structural_similarity
 
 import lgs_jax
-from lgs_jax import cli
-from lgs_jax import train
+from lgs_jax import cli, train
+from lgs_jax.train import data as train_data, init, report
 
 
 def test_ssim_equals_scikit_image():
@@ -27,69 +32,206 @@ def test_ssim_equals_scikit_image():
     assert abs(float(train.ssim(jnp.asarray(a), jnp.asarray(a))) - 1.0) < 1e-12
 
 
+def test_loss_ssim_is_zero_padded_over_every_pixel():
+    """3DGS's SSIM: conv2d with the 11-tap Gaussian window and zero padding, mean of the map."""
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0, 1, (20, 30, 3))
+    b = np.clip(a + rng.normal(0, 0.2, a.shape), 0, 1)
+    w = np.exp(-0.5 * (np.arange(-5, 6) / 1.5) ** 2)
+    w2 = np.outer(w, w) / w.sum() ** 2
+    blur = lambda x: np.stack([scipy.ndimage.correlate(x[..., c], w2, mode="constant")
+                               for c in range(3)], -1)
+    mu_a, mu_b = blur(a), blur(b)
+    va, vb, cov = blur(a * a) - mu_a**2, blur(b * b) - mu_b**2, blur(a * b) - mu_a * mu_b
+    c1, c2 = 0.01**2, 0.03**2
+    want = np.mean((2 * mu_a * mu_b + c1) * (2 * cov + c2)
+                   / ((mu_a**2 + mu_b**2 + c1) * (va + vb + c2)))
+    got = train.ssim(jnp.asarray(a), jnp.asarray(b), padding="same")
+    assert abs(float(got) - want) < 1e-12
+    loss = train.loss_fn(jnp.asarray(a), jnp.asarray(b))
+    assert abs(float(loss) - (0.8 * np.mean(np.abs(a - b)) + 0.2 * (1 - want))) < 1e-12
+
+
 def test_sh_schedule_adds_one_band_every_period():
     masks = [np.asarray(train.sh_mask(step, 16, 1000)) for step in (0, 999, 1000, 2500, 9000)]
     assert [int(m.sum()) for m in masks] == [1, 1, 4, 9, 16]
 
 
-def _data_dir(data_dir):
+def test_learning_rates_are_the_recipe():
+    """Adam's first update moves each parameter by its group's rate (m̂/√v̂ = ±1); the means'
+    rate at update s is 1.6e-4 · scene_scale · 0.01^(s / steps)."""
+    params = {k: jnp.zeros((1, 3)) for k in train.pool.GROUPS}
+    opt = train.optimizer(train.Settings(), 1000, 2.0)
+    grads = {k: jnp.ones((1, 3)) for k in params}
+    updates, state = opt.update(grads, opt.init(params), params)
+    want = dict(means=1.6e-4 * 2.0, quats=1e-3, log_scales=5e-3, logit_opacities=5e-2,
+                sh_dc=2.5e-3, sh_rest=2.5e-3 / 20)
+    for k, v in want.items():
+        np.testing.assert_allclose(np.asarray(updates[k]), -v, rtol=1e-6)
+    sched = train.optim.means_schedule(train.Settings(), 1000, 2.0)
+    np.testing.assert_allclose(float(sched(500)), 3.2e-4 * 0.1, rtol=1e-6)
+    np.testing.assert_allclose(float(sched(1000)), 3.2e-6, rtol=1e-6)
+
+
+def test_initial_gaussians_follow_gsplat():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 3], [10, 10, 10]], float)
+    g = init.initial_gaussians(pts, np.full((5, 3), 0.75), 0.1, 1.0, seed=0)
+    d0 = np.sqrt(np.mean([1, 4, 9]))  # point 0: neighbours at 1, 2, 3
+    np.testing.assert_allclose(np.exp(np.asarray(g.log_scales)[0]), d0, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(g.sh)[:, 0], 0.25 / 0.28209479177387814, rtol=1e-6)
+    assert not np.asarray(g.sh)[:, 1:].any() and g.sh.shape == (5, 16, 3)
+    np.testing.assert_allclose(1 / (1 + np.exp(-np.asarray(g.logit_opacities))), 0.1, rtol=1e-6)
+    q = np.asarray(g.quats)
+    assert q.min() >= 0 and q.max() < 1
+
+
+def test_views_follow_one_shuffle_per_epoch():
+    order = [int(train_data.views_for_step(s, 1, 5, seed=3)[0]) for s in range(10)]
+    assert sorted(order[:5]) == list(range(5)) and sorted(order[5:]) == list(range(5))
+    assert order[:5] != order[5:]
+    batches = [train_data.views_for_step(s, 2, 5, seed=3).tolist() for s in range(5)]
+    assert sum(batches, []) == order  # batches read the same stream
+
+
+@pytest.fixture(scope="module")
+def skull(data_dir):
+    """The skull at 1/32 size (33x22 pixels), 300 of its SfM points, 2 training and 2 held-out
+    views (any 4 consecutive steps then see each training view twice)."""
+    path = os.path.join(data_dir, "skull")
+    if not os.path.isdir(path):
+        pytest.skip("skull not found")
+    d = lgs_jax.load_dataset(path, downscale=32)
+    keep = np.linspace(0, len(d.points) - 1, 300).astype(int)
+    return dataclasses.replace(d, points=d.points[keep], colors=d.colors[keep],
+                               train=d.train[:2], test=d.test[:2])
+
+
+STEPS = 16
+STRATEGY = train.DefaultStrategy(refine_start_iter=3, refine_every=4, grow_grad2d=1e-4,
+                                 prune_opa=0.02)
+
+
+def _fit(data, out, **kwargs):
+    """One configuration for every fit below, so they share one compiled step."""
+    settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3)
+    return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
+                     max_gaussians=1024, pool_size=1024, backend="reference",
+                     log=kwargs.pop("log", lambda m: None), **kwargs)
+
+
+def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
+    result = _fit(skull, tmp_path, eval_every=2)
+    rows = report.read_metrics(str(tmp_path / "metrics.jsonl"))
+    steps = [r for r in rows if "loss" in r]
+    assert [r["step"] for r in steps] == list(range(1, STEPS + 1))
+    refines = [r for r in rows if "refine_step" in r]
+    assert [r["refine_step"] for r in refines] == [4, 8, 12]
+    assert sum(r["cloned"] + r["split"] + r["pruned"] for r in refines) > 0
+    counts = {r["gaussians"] for r in steps}
+    assert len(counts) > 1 and result["gaussians"] != 300, counts
+    held = [r["heldout_psnr"] for r in rows if "heldout_psnr" in r]
+    assert held[-1] > held[0] + 0.3, held  # from step 2 to the end
+    first, last = (np.mean([r["loss"] for r in part]) for part in (steps[:4], steps[-4:]))
+    assert last < 0.95 * first, (first, last)
+    assert lgs_jax.load_ply(str(tmp_path / "scene.ply")).num == result["gaussians"]
+    import matplotlib.image
+    side = matplotlib.image.imread(str(tmp_path / f"heldout_{skull.names[0][:-4]}.png"))
+    assert side.shape[:2] == (22, 66)  # render beside ground truth
+    assert os.path.getsize(tmp_path / "curves.png") > 0 and result["skipped_steps"] == 0
+    busy = 1e-3 * result["ms_per_step"] * STEPS  # steps and refinements, compiling included
+    assert 0 < result["compile_seconds"] < busy <= result["seconds"]
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_resume_is_bit_identical(skull, tmp_path):
+    """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
+    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state."""
+    _fit(skull, tmp_path / "a")
+
+    def die(message):
+        if message.startswith("step 7:"):
+            raise _Stop
+
+    with pytest.raises(_Stop):
+        _fit(skull, tmp_path / "b", eval_every=7, log=die)
+    assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
+    _fit(skull, tmp_path / "b", resume=True)
+    a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
+    assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    ply = [(tmp_path / r / "scene.ply").read_bytes() for r in "ab"]
+    assert ply[0] == ply[1]
+    rows = report.read_metrics(str(tmp_path / "b" / "metrics.jsonl"))
+    assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
+
+
+def test_a_non_finite_step_is_skipped_and_reported(skull, tmp_path):
+    """A NaN in one training image: every step on that view changes nothing and is reported;
+    the others train, and the parameters written stay finite."""
+    views = [int(train_data.views_for_step(s, 1, 2, seed=0)[0]) for s in range(STEPS)]
+    images = skull.images.copy()
+    images[skull.train[views[4]], 3, 4, 1] = np.nan
+    bad = [s + 1 for s in range(STEPS) if views[s] == views[4]]
+    lines = []
+    result = _fit(dataclasses.replace(skull, images=images), tmp_path, log=lines.append)
+    rows = [r for r in report.read_metrics(str(tmp_path / "metrics.jsonl")) if "loss" in r]
+    assert [r["step"] for r in rows if r.get("skipped")] == bad and 0 < len(bad) < STEPS
+    assert result["skipped_steps"] == len(bad)
+    assert [m for m in lines if "skipped" in m] == [
+        f"step {s}: skipped (loss, gradients or parameters not finite)" for s in bad]
+    g = lgs_jax.load_ply(str(tmp_path / "scene.ply"))
+    assert g.num > 300  # the other view's steps densified
+    assert all(np.isfinite(np.asarray(getattr(g, f))).all()
+               for f in ("means", "quats", "log_scales", "logit_opacities", "sh"))
+
+
+def _lego(data_dir):
     path = os.path.join(data_dir, "lego_train")
     if not os.path.isdir(path):
         pytest.skip("lego_train not found")
     return path
 
 
-def test_loss_falls_on_a_tiny_crop(data_dir):
-    """40 Adam steps (3DGS rates) on one 32x32 crop of one training view: the loss falls by
-    more than 5%, every step finite."""
-    cams, images, _ = train.load_nerf(_data_dir(data_dir))
-    cam = cams[1].cropped(84, 84, 32, 32)
-    target = jnp.asarray(images[1, 84:116, 84:116])
-    g = jax.tree.map(jnp.asarray, train.random_init(512, np.zeros(3), 0.6, sh_bases=1))
-    params = train._split(g)
-    opt = train.optimizer(40, 4.0)
-    state = opt.init(params)
-    bg = jnp.ones(3, jnp.float32)
-
-    @jax.jit
-    def step(params, state):
-        loss, grads = jax.value_and_grad(lambda p: train.loss_fn(
-            lgs_jax.render(train._join(p), cam, background=bg, capacity=8192).image,
-            target))(params)
-        updates, state = opt.update(grads, state, params)
-        return train.optax.apply_updates(params, updates), state, loss
-
-    losses = []
-    for _ in range(40):
-        params, state, loss = step(params, state)
-        losses.append(float(loss))
-    assert np.all(np.isfinite(losses))
-    assert losses[-1] < 0.95 * losses[0], losses
+def test_lego_train_is_prepared_as_nerf_synthetic(data_dir):
+    rd = train_data.prepare(_lego(data_dir), crop=(80, 80, 32, 32))
+    assert rd.nerf_synthetic and rd.test_names == [f"r_{i}" for i in range(0, 100, 10)]
+    assert rd.train_images.shape == (90, 32, 32, 3) and len(rd.points) == 0
+    assert abs(rd.scene_scale - 1.1 * 4.7292) < 1e-3
 
 
-def test_fit_writes_outputs_refuses_mixing_resumes_and_overwrites(data_dir, tmp_path, capsys):
+def test_fit_cli_writes_outputs_and_refuses_mixing(data_dir, tmp_path, capsys):
+    """--steps 0 (no training step: quick): outputs, then the run-directory rules."""
     out = str(tmp_path / "run")
-    args = ["fit", "--data", _data_dir(data_dir), "--steps", "4", "--out", out, "--gaussians",
-            "256", "--eval-every", "2", "--crop", "80", "80", "32", "32", "--backend", "tiles"]
+    args = ["fit", "--data", _lego(data_dir), "--steps", "0", "--out", out, "--init-points",
+            "200", "--crop", "80", "80", "32", "32", "--backend", "reference"]
     assert cli.main(args) == 0
-    for name in ("scene.ply", "optimizer.npz", "checkpoint.json", "metrics.jsonl",
-                 "result.json", "heldout_r_0.png"):
+    result = json.load(open(os.path.join(out, "result.json")))
+    assert '"heldout_psnr"' in capsys.readouterr().out
+    assert result["steps"] == 0 and result["ms_per_step"] is None and result["gaussians"] == 200
+    for name in ("scene.ply", "metrics.jsonl", "result.json", "curves.png", "heldout_r_0.png"):
         assert os.path.getsize(os.path.join(out, name)) > 0, name
-    assert json.load(open(os.path.join(out, "checkpoint.json")))["step"] == 4
-    args[args.index("--steps") + 1] = "6"
     assert cli.main(args) == 2  # an existing run is never silently mixed with a new one
     assert "--resume" in capsys.readouterr().err
-    assert cli.main(args + ["--resume"]) == 0
-    steps = [json.loads(line).get("step") for line in open(os.path.join(out, "metrics.jsonl"))]
-    assert steps.count(5) >= 1 and steps.count(1) == 1  # resumed at 4, did not restart
-    assert lgs_jax.load_ply(os.path.join(out, "scene.ply")).num == 256
-    args[args.index("--steps") + 1] = "0"
-    assert cli.main(args + ["--overwrite"]) == 0  # clears the old run: nothing of it is left
-    result = json.load(open(os.path.join(out, "result.json")))
-    assert result["steps"] == 0 and result["ms_per_step"] is None
-    rows = [json.loads(line) for line in open(os.path.join(out, "metrics.jsonl"))]
+    assert cli.main(args + ["--resume"]) == 2  # no checkpoint to resume from
+    assert cli.main(args + ["--overwrite"]) == 0
+    rows = report.read_metrics(os.path.join(out, "metrics.jsonl"))
     assert [r["step"] for r in rows] == [0] and "heldout_psnr" in rows[0]
-    assert not os.path.exists(os.path.join(out, "checkpoint.json"))
+
+
+def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
+    seen = {}
+    monkeypatch.setattr(train, "fit", lambda *a, **k: seen.update(k) or {})
+    base = ["fit", "--data", str(tmp_path), "--out", str(tmp_path / "o")]
+    assert cli.main(base + ["--strategy", "mcmc", "--max-gaussians", "5000"]) == 0
+    assert seen["strategy"] == train.MCMCStrategy(cap_max=5000)
+    assert seen["max_gaussians"] == 5000 and seen["downscale"] == 1
+    assert cli.main(base + ["--downscale", "4", "--opacity-reset", "--steps", "7"]) == 0
+    assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
+    assert seen["downscale"] == 4
 
 
 def test_run_dir_rules(tmp_path):
@@ -106,7 +248,7 @@ def test_run_dir_rules(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs,match", [(dict(steps=-1), "steps: expected an int >= 0"),
-                                          (dict(n_gaussians=0), "n_gaussians")])
+                                          (dict(max_gaussians=0), "max_gaussians")])
 def test_fit_refuses_bad_counts(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
@@ -123,16 +265,18 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
 
 
 def test_progress_bar_redraws_while_a_step_runs():
-    """Step, loss, rate and ETA; redrawn by the timer without any step finishing."""
+    """Step, loss, PSNR, Gaussians, rate and ETA; redrawn by the timer without any step
+    finishing."""
     stream = io.StringIO()
-    bar = train._Progress(0, 10, file=stream, interval=0.05)
+    bar = report.Progress(0, 10, file=stream, interval=0.05)
     time.sleep(0.5)
     assert stream.getvalue().count("compiling the first step") >= 4
-    bar.step(0.25)
-    bar.step(0.125)
+    bar.step(0.25, 20.0, 100)
+    bar.step(0.125, 21.5, 120)
     bar.close()
     last = stream.getvalue().split("\r")[-1]
     assert "2/10" in last and "loss=0.1250" in last and "<" in last and "step/s" in last
+    assert "psnr=21.50" in last and "gaussians=120" in last
 
 
 def test_fit_needs_held_out_views(tmp_path):
@@ -148,3 +292,43 @@ def test_fit_needs_held_out_views(tmp_path):
                                                                 frames=frames)))
     with pytest.raises(ValueError, match="needs training views and held-out views"):
         train.fit(str(data), 1, str(tmp_path / "out"))
+
+
+def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
+    """benchmarks/train_vs_gsplat.py's own parts on the CPU: ours at 0 steps (no compile of a
+    training step), its CSVs, and the comparison table from a stand-in gsplat result."""
+    from benchmarks import train_vs_gsplat as bench
+
+    if not os.path.isdir(os.path.join(data_dir, "skull")):
+        pytest.skip("skull not found")
+    out = str(tmp_path / "bench")
+    assert bench.main(["--data-root", data_dir, "--scenes", "skull", "--downscale", "32",
+                       "--cap", "300", "--steps", "0", "--no-gsplat", "--inline",
+                       "--out", out]) == 0
+    row = next(csv.DictReader(open(os.path.join(out, "summary.csv"))))
+    assert row["scene"] == "skull" and row["trainer"] == "lgs_jax" and row["gaussians"] == "300"
+    assert float(row["final_psnr"]) > 10
+    ours = json.load(open(os.path.join(out, "skull_ours.json")))
+    theirs = dict(ours, trainer="gsplat", ms_per_step=2.0, peak_mb=100.0,
+                  curve=[dict(c, psnr=c["psnr"] - 0.5) for c in ours["curve"]])
+    ours.update(ms_per_step=5.0, ms_per_step_excl_compile=4.0, peak_mb=150.0)
+    bench.print_table([ours, theirs])
+    assert "PSNR +0.50 dB, SSIM +0.0000, time per step x2.00, peak memory x1.50" in \
+        capsys.readouterr().out
+
+
+def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
+    from lgs_jax.train import checkpoint
+
+    setup = train.Setup(strategy=train.MCMCStrategy())
+    saved = checkpoint.config_of(setup, seed=0)
+    assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
+    other = checkpoint.config_of(dataclasses.replace(setup, steps=5, backend="pallas"), 0)
+    assert checkpoint.config_mismatch(saved, other) is None  # run length and backend may change
+    changed = checkpoint.config_of(
+        dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
+    problem = checkpoint.config_mismatch(saved, changed)
+    assert "strategy_settings.cap_max: 1000000 -> 7" in problem and "seed: 0 -> 1" in problem
+    (tmp_path / "checkpoint.json").write_text(json.dumps(dict(step=3, capacity=8)))
+    with pytest.raises(ValueError, match="older lgs_jax.train"):
+        checkpoint.read_meta(str(tmp_path))

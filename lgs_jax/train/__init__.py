@@ -1,0 +1,27 @@
+"""Training: Gaussians fitted to a capture with a densification strategy, in static shapes.
+
+    python -m lgs_jax fit --data DIR --out RUN [--strategy default|mcmc] [--max-gaussians N]
+        [--downscale K] [--steps N] [--resume | --overwrite]
+
+Modules (each usable alone):
+  `losses`     SSIM (3DGS's zero-padded one for the loss, scikit-image's for checks), the loss.
+  `pool`       the fixed-size pool of Gaussians with an active mask; growth by doubling.
+  `optim`      Adam per group with gsplat simple_trainer's rates; moments that follow Gaussians.
+  `ops`        clone, split, prune, opacity reset, relocation, sampling, noise (gsplat's ops).
+  `strategy`   the `Strategy` interface, `DefaultStrategy` and `MCMCStrategy` (gsplat 1.5.3).
+  `init`       initial Gaussians from SfM points or random ones (gsplat's simple_trainer).
+  `step`       the jitted training step and refinement; renders of the pool.
+  `loop`       `fit`: the loop, outputs, checkpoints (`checkpoint`) and reports (`report`).
+"""
+
+from .checkpoint import run_dir_problem
+from .loop import fit
+from .losses import loss_fn, psnr, ssim
+from .optim import optimizer
+from .pool import Pool, active_gaussians, from_gaussians, render_gaussians, sh_mask
+from .settings import Settings, Setup
+from .strategy import DefaultStrategy, MCMCStrategy, StepInfo, Strategy
+
+__all__ = ["DefaultStrategy", "MCMCStrategy", "Pool", "Settings", "Setup", "StepInfo",
+           "Strategy", "active_gaussians", "fit", "from_gaussians", "loss_fn", "optimizer",
+           "psnr", "render_gaussians", "run_dir_problem", "sh_mask", "ssim"]

@@ -1,0 +1,273 @@
+"""`fit`: train Gaussians on a capture, with a densification strategy, into a run directory.
+
+Per step s (0-based): the views of `data.views_for_step`, one `step.train_step` (redone with a
+larger pair capacity whenever a view overflows: no pair is dropped; the capacity starts at and
+grows to the power of two above twice the pairs needed, so a run recompiles for it about once
+per 4x growth of its pairs), then `step.refine` where the strategy asks (the pool doubles when
+it needs room, up to `max_gaussians`: a recompile; both are logged).
+A step whose loss, gradients or parameters would not be finite is skipped (nothing changes),
+logged and recorded. Outputs in OUT: metrics.jsonl (per step: loss, training-view PSNR, active
+Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SSIM), checkpoints
+(`checkpoint.py`; bit-identical resume), and at the end scene.ply (the active Gaussians, INRIA
+PLY), heldout_<name>.png (render beside ground truth), curves.png, result.json.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import binning
+from ..io.ply import save_ply
+from ..projection import project
+from ..render import next_pow2
+from . import checkpoint, report
+from .data import RunData, prepare, views_for_step
+from .init import start_gaussians
+from .optim import optimizer
+from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
+from .settings import Settings, Setup
+from .step import refine, render_views, train_step
+from .strategy import DefaultStrategy, Strategy
+
+
+@dataclasses.dataclass
+class _State:
+    """Everything a checkpoint restores."""
+
+    pool: Pool
+    opt_state: object
+    strategy_state: object
+    step: int
+    capacity: int  # tile-Gaussian pairs per training view
+    eval_capacity: int
+    skipped: int = 0
+
+
+def _templates(setup: Setup, size: int, scene_scale: float, g=None):
+    """(pool, opt_state, strategy_state) at `size` slots: from Gaussians g, or zeros."""
+    bases = (setup.settings.sh_degree + 1) ** 2
+    if g is None:
+        z = lambda *shape: jnp.zeros((size,) + shape, jnp.float32)
+        params = dict(means=z(3), quats=z(4), log_scales=z(3), logit_opacities=z(),
+                      sh_dc=z(1, 3), sh_rest=z(bases - 1, 3))
+        pool = Pool(params, jnp.zeros(size, bool))
+    else:
+        pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
+    opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
+    return pool, opt.init(pool.params), setup.strategy.init(pool, scene_scale)
+
+
+def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
+    g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
+    size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
+    pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
+    first = jax.tree.map(lambda x: x[0], rd.train_cams)
+    capacity = next_pow2(max(int(_pairs(pool, first)), 1) * 2)
+    log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
+        f"{rd.scene_scale:.3f}")
+    return _State(pool, opt_state, sstate, 0, capacity, capacity)
+
+
+@jax.jit
+def _pairs(pool: Pool, cam):
+    """Tile-Gaussian pairs of the pool in one view."""
+    return binning.count_pairs(project(render_gaussians(pool.params, pool.active), cam),
+                               cam.width, cam.height)
+
+
+def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
+    meta = checkpoint.read_meta(out)
+    problem = checkpoint.config_mismatch(meta["config"], checkpoint.config_of(setup, seed))
+    if problem:
+        raise ValueError(f"resume: {problem}")
+    templates = _templates(setup, meta["pool_size"], rd.scene_scale)
+    pool, opt_state, sstate = checkpoint.restore(out, templates)
+    _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
+    log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
+    return _State(pool, opt_state, sstate, meta["step"], meta["capacity"],
+                  meta["eval_capacity"], meta["skipped"])
+
+
+def _forget_after(path: str, step: int) -> None:
+    """Drop the metrics rows of steps after `step` (a run that stopped after its last
+    checkpoint redoes them), so the resumed log reads as one run."""
+    if not os.path.exists(path):
+        return
+    rows = [r for r in report.read_metrics(path)
+            if r.get("step", 0) <= step and r.get("refine_step", -1) < step]
+    with open(path, "w") as f:
+        f.writelines(json.dumps(r) + "\n" for r in rows)
+
+
+def _save(out: str, setup: Setup, st: _State, seed: int) -> None:
+    meta = dict(step=st.step, capacity=st.capacity, eval_capacity=st.eval_capacity,
+                pool_size=st.pool.size, skipped=st.skipped,
+                config=checkpoint.config_of(setup, seed))
+    checkpoint.save(out, (st.pool, st.opt_state, st.strategy_state), meta)
+    save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
+
+
+def _evaluate(st: _State, rd: RunData, backend: str, out: str | None = None):
+    """Held-out (PSNR, SSIM); renders beside the ground truth written to `out` when given."""
+    images, st.eval_capacity = render_views(st.pool, rd.test_cams, jnp.asarray(rd.background),
+                                            backend, st.eval_capacity)
+    if out:
+        report.save_renders(out, images, rd.test_images, rd.test_names)
+    return report.heldout_metrics(images, rd.test_images)
+
+
+def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say):
+    """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
+    idx = jnp.asarray(views_for_step(st.step, setup.settings.batch, rd.train_images.shape[0],
+                                     seed))
+    while True:
+        new = train_step(st.pool, st.opt_state, st.strategy_state, rd.train_cams,
+                         rd.train_images, idx, background, st.step, key, setup=setup,
+                         capacity=st.capacity)
+        m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
+        if not m["overflow"]:
+            st.pool, st.opt_state, st.strategy_state = new[:3]
+            return m
+        st.capacity = next_pow2(2 * m["pairs"])  # headroom: pairs grow as Gaussians do
+        say(f"step {st.step + 1}: pair capacity grown to {st.capacity} (one recompile)")
+
+
+def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
+    """The strategy's refinement at step st.step, recorded, the pool's growth logged; returns
+    the number of active Gaussians after it."""
+    st.strategy_state, st.pool, st.opt_state, rep = refine(
+        setup.strategy, st.strategy_state, st.pool, st.opt_state, st.step, key, cap)
+    if rep["grown_to"]:
+        say(f"step {st.step}: pool grown to {rep['grown_to']} slots (one recompile)")
+    if not rep["ok"]:
+        say(f"step {st.step}: refinement skipped: it would make parameters non-finite")
+    count = int(jnp.sum(st.pool.active))
+    record(refine_step=st.step, **rep, gaussians=count)
+    return count
+
+
+def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, clock):
+    """Steps st.step .. setup.steps (module docstring); returns the seconds spent in steps
+    (their compilation, timed by `clock`, included)."""
+    progress, s = report.Progress(st.step, setup.steps), setup.settings
+    key, background = jax.random.key(seed), jnp.asarray(rd.background)
+    say = lambda message: progress.write(log, message)
+    busy = 0.0
+    try:
+        with open(os.path.join(out, "metrics.jsonl"), "a", buffering=1) as f:
+            record = lambda **row: f.write(json.dumps(row) + "\n")
+            while st.step < setup.steps:
+                t0 = time.perf_counter()
+                with clock:
+                    m = _one_step(setup, st, rd, seed, key, background, say)
+                    if setup.strategy.refine_due(st.step):
+                        m["count"] = _refine(setup, st, key, cap, say, record)
+                if not m["ok"]:
+                    st.skipped += 1
+                    say(f"step {st.step + 1}: skipped (loss, gradients or parameters not finite)")
+                st.step += 1
+                busy += time.perf_counter() - t0
+                record(step=st.step, loss=m["loss"], psnr=m["psnr"], gaussians=m["count"],
+                       seconds=busy, **({} if m["ok"] else dict(skipped=True)))
+                progress.step(m["loss"], m["psnr"], m["count"])
+                if st.step % s.eval_every == 0 and st.step < setup.steps:
+                    psnr, ssim = _evaluate(st, rd, setup.backend)
+                    record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
+                    say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
+                if st.step % s.checkpoint_every == 0 or st.step == setup.steps:
+                    _save(out, setup, st, seed)
+    finally:
+        progress.close()
+    return busy
+
+
+def _check_args(steps, max_gaussians, settings: Settings) -> None:
+    """Raise `ValueError` naming the argument for counts `fit` cannot use."""
+    for name, v, low in (("steps", steps, 0), ("max_gaussians", max_gaussians, 1),
+                         ("settings.batch", settings.batch, 1),
+                         ("settings.eval_every", settings.eval_every, 1),
+                         ("settings.checkpoint_every", settings.checkpoint_every, 1),
+                         ("settings.sh_every", settings.sh_every, 1),
+                         ("settings.init_points", settings.init_points, 1)):
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
+            raise ValueError(f"{name}: expected an int >= {low}, got {v!r}")
+
+
+def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -> RunData:
+    """Check OUT and load the data (before touching OUT: a bad folder deletes nothing)."""
+    problem = checkpoint.run_dir_problem(out, resume, overwrite)
+    if problem:
+        raise ValueError(f"out: {problem}")
+    rd = prepare(data, downscale, crop)
+    if settings.batch > rd.train_images.shape[0]:
+        raise ValueError(f"settings.batch: {settings.batch} views per step, but the data has "
+                         f"{rd.train_images.shape[0]} training views")
+    if overwrite and os.path.isdir(out):
+        for name in checkpoint.run_files(out):
+            os.remove(os.path.join(out, name))
+    os.makedirs(out, exist_ok=True)
+    return rd
+
+
+def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
+        settings: Settings = Settings(), max_gaussians: int = 1_000_000, downscale: int = 1,
+        crop=None, seed: int = 0, backend: str | None = None, pool_size: int | None = None,
+        resume: bool = False, overwrite: bool = False, log=print) -> dict:
+    """Train on `data` (a dataset folder or a `Dataset`) for `steps` steps into run directory
+    `out`; returns the final metrics (also in OUT/result.json).
+
+    strategy: `DefaultStrategy()` (default) or `MCMCStrategy()`, or your own `Strategy`.
+    max_gaussians: the pool's cap (MCMC's hard cap too); pool_size: initial slots (default the
+    next power of two above the initial count): preallocate the cap to avoid recompiles.
+    downscale: integer image downscale at load; crop = (x0, y0, w, h): train and evaluate on a
+    window of every image. backend: a differentiable backend of `render` (default `pallas` on
+    GPUs, `tiles` elsewhere). `out` must be new or empty unless `resume` (continue from its
+    checkpoint, bit-identically) or `overwrite` (delete its previous run's files first).
+    Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
+    and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
+    time of the steps and refinements, their compilation included, evaluations and checkpoints
+    not; None when no step ran) and compile_seconds (of that, the time spent compiling).
+    """
+    _check_args(steps, max_gaussians, settings)
+    rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
+    backend = backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
+    setup = Setup(settings, strategy or DefaultStrategy(), steps, rd.scene_scale, backend)
+    if resume and os.path.exists(os.path.join(out, "checkpoint.json")):
+        st = _resumed(out, setup, rd, seed, log)
+    else:
+        st = _fresh(setup, rd, seed, max_gaussians, pool_size, log)
+    start, t0, clock = st.step, time.perf_counter(), report.CompileClock()
+    with clock.listening():
+        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock)
+    return _finish(out, setup, st, rd, start, busy, time.perf_counter() - t0, log,
+                   clock.seconds)
+
+
+def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log,
+            compile_seconds) -> dict:
+    """Final evaluation and outputs (module docstring); returns the result."""
+    psnr, ssim = _evaluate(st, rd, setup.backend, out)
+    with open(os.path.join(out, "metrics.jsonl"), "a") as f:
+        f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
+    log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
+    save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
+    report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")),
+                       os.path.join(out, "curves.png"))
+    ran = max(setup.steps - start, 0)
+    result = dict(steps=setup.steps, heldout_psnr=psnr, heldout_ssim=ssim,
+                  gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
+                  skipped_steps=st.skipped, seconds=seconds,
+                  ms_per_step=1e3 * busy / ran if ran else None,
+                  compile_seconds=compile_seconds,
+                  strategy=type(setup.strategy).__name__, backend=setup.backend,
+                  device=jax.devices()[0].device_kind)
+    with open(os.path.join(out, "result.json"), "w") as f:
+        json.dump(result, f, indent=1)
+    return result

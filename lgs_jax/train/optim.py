@@ -1,0 +1,81 @@
+"""The optimizer: Adam per parameter group, and how its moments follow the Gaussians.
+
+`optimizer(settings, steps, scene_scale)` is gsplat's simple_trainer recipe: Adam (β = 0.9,
+0.999, ε = 1e-15) on every group, learning rates means 1.6e-4 · scene_scale decaying
+exponentially to 1% of that over the run (lr_s = lr_0 · 0.01^(s / steps) at update s, torch's
+ExponentialLR with γ = 0.01^(1 / steps)), quats 1e-3, log-scales 5e-3, logit opacities 5e-2,
+SH band 0 2.5e-3, higher bands 2.5e-3 / 20. It is one `optax.scale_by_adam` over the whole
+parameter dict followed by a per-group rate, so the Adam moments `mu` and `nu` are dicts shaped
+like the parameters: `carry_moments` moves their rows with the Gaussians.
+
+Moments under densification (gsplat 1.5.3's strategy ops, `ops.py`): a row that receives a new
+Gaussian has its moments zeroed or copied as gsplat does; Adam's step count is shared and never
+reset (torch keeps the per-parameter `step` too).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from .pool import GROUPS, rows
+
+
+class GroupRateState(NamedTuple):
+    count: jax.Array  # updates applied so far
+
+
+def scale_by_group_rates(rates: dict) -> optax.GradientTransformation:
+    """updates[g] ← −rate_g(count) · updates[g] per parameter group g; a rate is a float or an
+    optax schedule of the update count."""
+    def init(params):
+        del params
+        return GroupRateState(jnp.zeros([], jnp.int32))
+
+    def update(updates, state, params=None):
+        del params
+        lr = {k: r(state.count) if callable(r) else r for k, r in rates.items()}
+        updates = {k: (-lr[k] * u).astype(u.dtype) for k, u in updates.items()}
+        return updates, GroupRateState(optax.safe_increment(state.count))
+
+    return optax.GradientTransformation(init, update)
+
+
+def means_schedule(settings, steps: int, scene_scale: float):
+    """The means' learning rate at update s: lr_means · scene_scale · ratio^(s / steps)."""
+    lr0 = settings.lr_means * scene_scale
+    return optax.exponential_decay(lr0, max(steps, 1), settings.lr_means_decay)
+
+
+def optimizer(settings, steps: int, scene_scale: float) -> optax.GradientTransformation:
+    """Adam per group with the recipe's rates (module docstring)."""
+    rates = dict(means=means_schedule(settings, steps, scene_scale), quats=settings.lr_quats,
+                 log_scales=settings.lr_log_scales,
+                 logit_opacities=settings.lr_logit_opacities, sh_dc=settings.lr_sh_dc,
+                 sh_rest=settings.lr_sh_rest)
+    return optax.chain(optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-15),
+                       scale_by_group_rates(rates))
+
+
+def _is_moments(x) -> bool:
+    return isinstance(x, dict) and set(x) == set(GROUPS)
+
+
+def map_moments(opt_state, fn):
+    """opt_state with every parameter-shaped dict (Adam's mu and nu) mapped group-wise:
+    d[g] ← fn(g, d[g])."""
+    def f(x):
+        return {k: fn(k, v) for k, v in x.items()} if _is_moments(x) else x
+    return jax.tree.map(f, opt_state, is_leaf=_is_moments)
+
+
+def carry_moments(opt_state, src, fresh, groups=GROUPS):
+    """Moments of row i become those of row src[i], or zero where fresh[i], in `groups`."""
+    def f(group, m):
+        if group not in groups:
+            return m
+        return jnp.where(rows(fresh, m), jnp.zeros((), m.dtype), m[src])
+    return map_moments(opt_state, f)

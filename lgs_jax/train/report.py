@@ -1,0 +1,141 @@
+"""What a run shows and writes: the progress bar, metrics, held-out renders, the curves figure."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import threading
+
+import jax
+import numpy as np
+import tqdm
+
+
+class Progress:
+    """A tqdm progress bar on stderr (step, loss, training PSNR, Gaussian count, it/s, ETA),
+    redrawn every `interval` seconds, also while one step runs (the first step compiles, for
+    a minute or more on a CPU)."""
+
+    def __init__(self, start: int, steps: int, file=None, interval: float = 1.0):
+        self.bar = tqdm.tqdm(total=steps, initial=start, unit="step", file=file,
+                             dynamic_ncols=True, mininterval=interval)
+        self.bar.set_postfix_str("compiling the first step", refresh=False)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._tick, args=(interval,), daemon=True)
+        self._thread.start()
+
+    def _tick(self, interval: float) -> None:
+        """Timer thread: redraw (elapsed time, ETA) every `interval` seconds until closed."""
+        while not self._stop.wait(interval):
+            self.bar.refresh()
+
+    def step(self, loss: float, psnr: float | None = None, count: int | None = None) -> None:
+        """One step done with this loss (and training-view PSNR, active Gaussians)."""
+        post = dict(loss=f"{loss:.4f}")
+        if psnr is not None:
+            post["psnr"] = f"{psnr:.2f}"
+        if count is not None:
+            post["gaussians"] = str(count)
+        self.bar.set_postfix(post, refresh=False)
+        self.bar.update(1)
+
+    def write(self, log, message: str) -> None:
+        """`log(message)` with the bar cleared first and redrawn after."""
+        with tqdm.tqdm.external_write_mode():
+            log(message)
+
+    def close(self) -> None:
+        """Stop the timer and close the bar (its last state stays on screen)."""
+        self._stop.set()
+        self._thread.join()
+        self.bar.close()
+
+
+class CompileClock:
+    """Seconds JAX spends compiling (tracing, lowering, compiling or loading compiled code: its
+    "/jax/core/compile/" monitoring events) inside `with clock:` blocks, overlaps counted once.
+    Use it as a context manager around the whole run too: `clock.listening()`."""
+
+    def __init__(self):
+        self._spans, self._on = [], False
+
+    def _listen(self, event, start, end, **_):
+        if self._on and event.startswith("/jax/core/compile/"):
+            self._spans.append((start, end))
+
+    @contextlib.contextmanager
+    def listening(self):
+        """Registers the clock's listener with JAX for the `with` block."""
+        jax.monitoring.register_event_time_span_listener(self._listen)
+        try:
+            yield self
+        finally:
+            jax.monitoring.unregister_event_time_span_listener(self._listen)
+
+    def __enter__(self):
+        self._on = True
+        return self
+
+    def __exit__(self, *exc):
+        self._on = False
+
+    @property
+    def seconds(self) -> float:
+        total, reach = 0.0, -math.inf
+        for start, end in sorted(self._spans):
+            if end > reach:
+                total += end - max(start, reach)
+                reach = end
+        return total
+
+
+def heldout_metrics(images, targets) -> tuple[float, float]:
+    """Mean PSNR and SSIM over views with scikit-image's defaults (data range 1; SSIM with its
+    7x7 uniform window, per channel)."""
+    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+    psnrs = [peak_signal_noise_ratio(t, i, data_range=1.0) for i, t in zip(images, targets)]
+    ssims = [structural_similarity(t, i, channel_axis=-1, data_range=1.0)
+             for i, t in zip(images, targets)]
+    return float(np.mean(psnrs)), float(np.mean(ssims))
+
+
+def save_renders(out: str, images, targets, names) -> None:
+    """heldout_<name>.png: each render (left) beside its ground truth (right)."""
+    import matplotlib.image
+
+    for image, target, name in zip(images, targets, names):
+        matplotlib.image.imsave(os.path.join(out, f"heldout_{name}.png"),
+                                np.concatenate([image, np.clip(target, 0, 1)], 1))
+
+
+def read_metrics(path: str) -> list[dict]:
+    with open(path) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def plot_curves(rows: list[dict], path: str) -> None:
+    """A 2x2 figure of the run: loss, PSNR (training views and held-out), held-out SSIM, and
+    the number of Gaussians, against the step."""
+    from matplotlib.figure import Figure  # no pyplot: leaves the caller's backend alone
+
+    def series(key):
+        pts = [(r["step"], r[key]) for r in rows if "step" in r and r.get(key) is not None]
+        return ([p[0] for p in pts], [p[1] for p in pts])
+
+    fig = Figure(figsize=(10, 7))
+    ax = fig.subplots(2, 2)
+    ax[0, 0].plot(*series("loss"), lw=0.5)
+    ax[0, 0].set(title="loss", xlabel="step", yscale="log")
+    ax[0, 1].plot(*series("psnr"), lw=0.5, alpha=0.5, label="training view")
+    ax[0, 1].plot(*series("heldout_psnr"), "o-", label="held-out")
+    ax[0, 1].set(title="PSNR (dB)", xlabel="step")
+    ax[0, 1].legend()
+    ax[1, 0].plot(*series("heldout_ssim"), "o-")
+    ax[1, 0].set(title="held-out SSIM", xlabel="step")
+    ax[1, 1].plot(*series("gaussians"))
+    ax[1, 1].set(title="Gaussians", xlabel="step")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)

@@ -1,0 +1,51 @@
+"""The training recipe (`Settings`) and the static description of one run (`Setup`)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .strategy import DefaultStrategy, Strategy
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """gsplat simple_trainer's recipe (3DGS's rates), and how `fit` runs.
+
+    Learning rates per group (Adam, `optim.optimizer`): means lr_means · scene_scale decaying to
+    lr_means_decay of that over the run; the others constant. ssim_lambda: weight of 1 − SSIM in
+    the loss; ssim_padding: "same" (3DGS, the default) or "valid" (gsplat's simple_trainer),
+    `losses.ssim`. sh_every: one more SH band every sh_every steps up to sh_degree. batch: views per
+    step. eval_every / checkpoint_every: steps between held-out evaluations / checkpoints.
+    init_points, init_extent: the random start of datasets without SfM points (`init.py`):
+    that many points in a cube of half-width init_extent · scene_scale; None: 3.0 (gsplat) for
+    captures, 0.25 for NeRF-synthetic scenes (white background; 3DGS's ±1.3 cube on Lego).
+    """
+
+    lr_means: float = 1.6e-4
+    lr_means_decay: float = 0.01
+    lr_quats: float = 1e-3
+    lr_log_scales: float = 5e-3
+    lr_logit_opacities: float = 5e-2
+    lr_sh_dc: float = 2.5e-3
+    lr_sh_rest: float = 2.5e-3 / 20
+    ssim_lambda: float = 0.2
+    ssim_padding: str = "same"
+    sh_every: int = 1000
+    sh_degree: int = 3
+    batch: int = 1
+    eval_every: int = 500
+    checkpoint_every: int = 1000
+    init_points: int = 100_000
+    init_extent: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Setup:
+    """What the jitted functions of one run depend on statically (hashable): the recipe, the
+    strategy, the run length (the means' schedule), the scene scale, the backend."""
+
+    settings: Settings = Settings()
+    strategy: Strategy = DefaultStrategy()
+    steps: int = 30_000
+    scene_scale: float = 1.0
+    backend: str = "tiles"

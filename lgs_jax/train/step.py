@@ -1,0 +1,147 @@
+"""The jitted pieces of a run: one training step, one refinement (with pool growth), renders.
+
+`train_step` (one jit per Setup, pair capacity and pool size): render the batch of views from
+the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean over views of
+(1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's regulariser; gradients w.r.t. the parameters (and,
+for strategies that ask, w.r.t. zero screen offsets of the projected means: ∂loss/∂mean2d);
+one Adam update; then the strategy's per-step update. A step whose loss, gradients or new
+parameters (active slots) are not finite changes nothing: it returns its inputs with ok False
+(`fit` reports it). A view whose tile pairs overflow the capacity is reported (overflow,
+pairs): `fit` grows the capacity and runs the same step again, so no pair is ever dropped.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from ..render import next_pow2, render, render_growing
+from .losses import loss_fn, psnr
+from .optim import means_schedule, optimizer
+from .pool import Pool, grow, render_gaussians, sh_mask
+from .settings import Setup
+from .strategy import StepInfo
+
+
+def _finite(tree, active) -> jax.Array:
+    """All per-Gaussian leaves finite on the active rows (inactive rows are never read)."""
+    ok = jnp.bool_(True)
+    for x in jax.tree.leaves(tree):
+        fin = jnp.isfinite(x)
+        if x.ndim >= 1 and x.shape[0] == active.shape[0]:
+            fin = fin | jnp.reshape(~active, active.shape + (1,) * (x.ndim - 1))
+        ok = ok & jnp.all(fin)
+    return ok
+
+
+def _select(flag, new, old):
+    return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
+
+
+def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, background, step):
+    """((loss, (mse, stats, visible)), (param grads, screen grads or None))."""
+    s = setup
+    num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
+    bands = sh_mask(step, num_bases, s.settings.sh_every)
+    need2d = s.strategy.needs_screen_grads
+
+    def loss_of(params, offsets):
+        g = render_gaussians(params, pool.active, bands)
+
+        def one(cam, target, off):
+            o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
+                       screen_offsets=off)
+            return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
+                    jnp.mean((o.image - target) ** 2), o.stats, o.visible)
+
+        losses, mse, stats, visible = jax.vmap(one)(cams, targets, offsets)
+        total = jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
+        return total, (jnp.mean(mse), stats, visible)
+
+    offsets = jnp.zeros((targets.shape[0], pool.size, 2), jnp.float32) if need2d else None
+    value, grads = jax.value_and_grad(loss_of, argnums=(0, 1) if need2d else 0,
+                                      has_aux=True)(pool.params, offsets)
+    return value, grads if need2d else (grads, None)
+
+
+def step_keys(key, step):
+    """(key of the training step, key of the refinement) at `step`: from the run's key and the
+    step alone, so a resumed run draws what an uninterrupted one would."""
+    return jax.random.split(jax.random.fold_in(key, step))
+
+
+@functools.partial(jax.jit, static_argnames=("setup", "capacity"))
+def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx, background,
+               step, key, *, setup: Setup, capacity: int):
+    """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
+    (stacked) and `all_images` (T, H, W, 3); `key` is the run's. Returns (pool, opt_state,
+    strategy_state, metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs
+    (largest per-view pair count), count (active Gaussians)."""
+    cams = jax.tree.map(lambda x: x[idx], all_cams)
+    targets = all_images[idx]
+    (loss, (mse, stats, visible)), (grads, grads2d) = _loss_and_grads(
+        setup, capacity, pool, cams, targets, background, step)
+    opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
+    updates, new_opt = opt.update(grads, opt_state, pool.params)
+    new_pool = Pool(optax.apply_updates(pool.params, updates), pool.active)
+    lr = means_schedule(setup.settings, setup.steps, setup.scene_scale)(step + 1)
+    info = StepInfo(grads2d, visible, lr, cams.width, cams.height)
+    new_state, new_pool, new_opt = setup.strategy.step(strategy_state, new_pool, new_opt, info,
+                                                       step, step_keys(key, step)[0])
+    ok = (jnp.isfinite(loss) & _finite(grads, pool.active)
+          & _finite(new_pool.params, new_pool.active))
+    if grads2d is not None:
+        ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
+    pool, opt_state, strategy_state = _select(ok, (new_pool, new_opt, new_state),
+                                              (pool, opt_state, strategy_state))
+    metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
+                   pairs=jnp.max(stats.pairs_required),
+                   count=jnp.sum(pool.active, dtype=jnp.int32))
+    return pool, opt_state, strategy_state, metrics
+
+
+@functools.partial(jax.jit, static_argnames=("strategy", "cap"))
+def _refine(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
+    new = strategy.refine(strategy_state, pool, opt_state, step, step_keys(key, step)[1], cap)
+    ok = _finite(new[1].params, new[1].active)
+    state, pool, opt_state = _select(ok, new[:3], (strategy_state, pool, opt_state))
+    return state, pool, opt_state, dict(new[3], ok=ok)
+
+
+def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int):
+    """`strategy.refine` at `step` (`key`: the run's), the pool first grown (doubled, at most
+    to `cap` slots) while the refinement needs more new slots than are free, so nothing is cut
+    short below the cap. A refinement that would make an active parameter non-finite is not
+    applied (ok False). Returns (state, pool, opt_state, report): the report's counts as ints,
+    plus `grown_to` (the new pool size, or 0)."""
+    grown_to = 0
+    while True:
+        state, new_pool, new_opt, report = _refine(strategy_state, pool, opt_state, step, key,
+                                                   strategy=strategy, cap=cap)
+        report = {k: int(v) for k, v in jax.device_get(report).items()}
+        short = report["needed"] - report["free"]
+        if short <= 0 or pool.size >= cap:
+            return state, new_pool, new_opt, dict(report, grown_to=grown_to)
+        grown_to = min(cap, max(2 * pool.size, next_pow2(pool.size + short)))
+        pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)
+
+
+@functools.partial(jax.jit, static_argnames=("backend", "capacity"))
+def _render_pool(pool: Pool, cam, background, *, backend: str, capacity: int):
+    return render(render_gaussians(pool.params, pool.active), cam, background=background,
+                  backend=backend, capacity=capacity)
+
+
+def render_views(pool: Pool, cams, background, backend: str, capacity: int):
+    """([image (H, W, 3) numpy, clipped to [0, 1]] per camera, capacity): every active
+    Gaussian with all its SH bands (gsplat evaluates at full degree), capacity grown as needed."""
+    images = []
+    fn = functools.partial(_render_pool, backend=backend)
+    for cam in cams:
+        out, capacity = render_growing(fn, pool, cam, background, capacity=capacity)
+        images.append(np.clip(np.asarray(out.image), 0.0, 1.0))
+    return images, capacity
