@@ -14,6 +14,7 @@ from lgs_jax.projection import EPS2D, Projected
 
 N = 32  # Gaussians per test scene (fixed: no recompiles)
 W, H = 40, 24  # image size: not a multiple of 16, so edge tiles are partial
+CAPACITY = 256  # pair buffer of every test render: >= N x the 3x2 tiles of a W x H image
 
 KINDS = ("normal", "needle", "huge_far", "tiny", "behind", "faint", "opaque", "layers", "invalid")
 
@@ -35,7 +36,7 @@ def render(g, cam, backend, config, bg=BACKGROUND):
     """Render a test scene with a fixed capacity (one compile per shape) and a coloured
     background (so background-weighting errors show)."""
     return lgs_jax.render(g, cam, background=np.asarray(bg, g.means.dtype), backend=backend,
-                          config=config, capacity=4096)
+                          config=config, capacity=CAPACITY)
 
 
 def random_quats(rng, n):
@@ -152,7 +153,7 @@ def backward_kernel_and_walk(seed: int, config, dtype):
     g = cast(scene(seed), dtype)
     cam = camera(dtype=dtype)
     p = project(g, cam)
-    bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
+    bins = binning.bin_gaussians(p, cam.width, cam.height, CAPACITY)
     args = (p, bins, cam.width, cam.height, config)
     plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
     state, stop_at, _, saved = pallas._forward(p, bins, cam.width, cam.height, plan)

@@ -12,6 +12,7 @@ ROOT = Path(__file__).resolve().parents[1]
 IPYTHON_IMPORT = "from IPython.display import Image, Markdown, display"
 
 
+@pytest.mark.slow  # renders the default scene at 1280x720 in five configurations
 @pytest.mark.parametrize("name", ["precision.ipynb"])
 def test_notebook_runs(name, monkeypatch):
     matplotlib.use("Agg")
