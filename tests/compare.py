@@ -1,6 +1,9 @@
 """Comparisons and tolerances the tests share: the contract's notion of "equal up to float
 rounding" for images, gradients and the `fast` blending bound.
 
+The contract's constants, written out (ALPHA_CAP, STOP_INCLUSIVE), so that the oracle and the
+bounds do not take them from the config under test.
+
 Tolerances (use these names, not new literals, so that one reason has one number):
   F64_ATOL         two backends' float64 images, alpha and depth: same contract, different order
                    of float64 operations.
@@ -21,6 +24,8 @@ import numpy as np
 
 from benchmarks.common import psnr  # noqa: F401 - one PSNR for tests and benchmarks
 
+ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}  # conventions.md: the cap on α per convention
+STOP_INCLUSIVE = {"3dgs": False, "gsplat": True}  # whether T·(1 − α) == 1e-4 already stops
 F64_ATOL = 1e-9
 F32_ATOL = 1e-4
 F32_FLIP_SHARE = 0.01

@@ -3,6 +3,7 @@
 evaluated form, on adversarial conics placed on the 1/255 ellipse edge and on projected scenes,
 and tight on a real scene."""
 
+import functools
 import os
 
 import jax
@@ -26,17 +27,15 @@ M = 16
 CAPACITY = 256  # >= M Gaussians x the 4x3 tiles of a W x H image
 
 
-def _check_masks(p, config, capacity=CAPACITY):
-    """Every tile pixel where the evaluated float alpha test passes lies in a set strip.
-
-    Evaluates all `capacity` pair slots (a fixed shape: no recompiles), then keeps the real ones.
-    """
+@functools.partial(jax.jit, static_argnames=("config", "capacity"))
+def _masks_and_hits(p, config, capacity):
+    """(pairs required, strip mask of every pair slot, whether each of its 8 strips holds a
+    pixel whose evaluated float alpha test passes), jitted with the projected Gaussians as
+    arguments: one compile per (config, capacity, dtype), whatever the values."""
     tiles_x, _ = layout.tile_grid(W, H)
     bins = binning.bin_gaussians(p, W, H, capacity)
-    n = int(bins.pairs_required)
-    assert n <= capacity
     pg = pairs.gather(p, bins.gauss)
-    masks = np.asarray(pairs.strip_masks(pg, bins, tiles_x, config))[:n]
+    masks = pairs.strip_masks(pg, bins, tiles_x, config)
     vecs = pairs.hoisted_vectors(pg, bins, tiles_x, config) if config.hoist else None
 
     def strip_hits(k):
@@ -49,7 +48,18 @@ def _check_masks(p, config, capacity=CAPACITY):
         _, hit = tiles.evaluate(p, g, v, basis, px, py, config)
         return jnp.any(hit[0] & inside, axis=-1)  # (8,)
 
-    hits = np.asarray(jax.jit(jax.vmap(strip_hits))(jnp.arange(capacity)))[:n]
+    return bins.pairs_required, masks, jax.vmap(strip_hits)(jnp.arange(capacity))
+
+
+def _check_masks(p, config, capacity=CAPACITY):
+    """Every tile pixel where the evaluated float alpha test passes lies in a set strip.
+
+    Evaluates all `capacity` pair slots (a fixed shape: no recompiles), then keeps the real ones.
+    """
+    n, masks, hits = _masks_and_hits(p, config, capacity)
+    n = int(n)
+    assert n <= capacity
+    masks, hits = np.asarray(masks)[:n], np.asarray(hits)[:n]
     bits = (masks[:, None] >> np.arange(STRIPS)) & 1
     missed = hits & (bits == 0)
     assert not missed.any(), f"{missed.sum()} strips with passing pixels have a clear mask bit"

@@ -42,6 +42,7 @@ def test_lego_matches_gsplat_renders_at_200(lego, backend):
     assert min(scores) >= 70.0, scores
 
 
+@pytest.mark.slow  # ten 400x400 views of 60k Gaussians
 def test_lego_matches_ground_truth_at_400_like_gsplat(lego):
     g, cam_path, root = lego
     cams = lgs_jax.load_cameras(cam_path, width=400, height=400)

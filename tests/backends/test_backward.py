@@ -62,8 +62,9 @@ def test_reference_gradients_equal_autodiff_through_brute_float64(convention, se
     assert_close_to_scale(bgr, bgb, 1e-8)
 
 
-@pytest.mark.parametrize("backend,config", [("reference", C()), ("tiles", C(blend="fast"))],
-                         ids=["reference", "tiles_fast"])
+@pytest.mark.parametrize("backend,config", [
+    pytest.param("reference", C(), id="reference", marks=SLOW),
+    pytest.param("tiles", C(blend="fast"), id="tiles_fast")])
 def test_gradients_match_central_differences(backend, config):
     """Well-separated, moderately opaque Gaussians (no depth ties or threshold within reach of
     the step), float64, six entries of every parameter group. (`fast` blending has no
@@ -90,6 +91,7 @@ def test_gradients_match_central_differences(backend, config):
             assert abs(fd - got) <= 1e-5 * max(1.0, abs(fd)), (name, idx, fd, got)
 
 
+@pytest.mark.slow  # the fast backends' float32 gradients are in the default set
 def test_float32_gradients_are_close_to_float64():
     """Relative L2 error per parameter group, float32 vs float64 (tolerance 1e-3)."""
     g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
@@ -103,7 +105,8 @@ def test_float32_gradients_are_close_to_float64():
         assert rel < 1e-3, (name, rel)
 
 
-@pytest.mark.parametrize("backend", [pytest.param("reference", marks=SLOW), "tiles", "pallas"])
+@pytest.mark.parametrize("backend", ["tiles", pytest.param("reference", marks=SLOW),
+                                     pytest.param("pallas", marks=SLOW)])
 def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
     g = scenes.cast(scenes.scene(2), np.float32)
     bg = jnp.asarray(scenes.BACKGROUND, np.float32)
@@ -160,8 +163,8 @@ TILES = {"local_gs": C(), "no_cull": C(warp_cull=False), "difference": C(hoist=F
          "global": C(local_coords=False), "center": C(origin="center"), "gsplat": C("gsplat")}
 
 
-@pytest.mark.parametrize("name", [n if n in ("local_gs", "gsplat") else
-                                  pytest.param(n, marks=SLOW) for n in TILES])
+@pytest.mark.parametrize("name", [n if n == "local_gs" else pytest.param(n, marks=SLOW)
+                                  for n in TILES])
 @given(seed=st.integers(0, 2**32 - 1))
 def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
     """The tiles backward (its own hoisted arithmetic and strip masks) against the reference
@@ -198,8 +201,8 @@ PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
           "vanilla_other": ("pallas_vanilla", C(kernel=OTHER))}
 
 
-@pytest.mark.parametrize("name", [n if n in ("local_gs", "vanilla") else
-                                  pytest.param(n, marks=SLOW) for n in PALLAS])
+@pytest.mark.parametrize("name", [n if n == "local_gs" else pytest.param(n, marks=SLOW)
+                                  for n in PALLAS])
 @settings(max_examples=3)  # interpret mode: the kernels run serially, one program at a time
 @given(seed=st.integers(0, 2**32 - 1))
 def test_pallas_gradients_equal_reference_gradients_float64(name, seed):

@@ -13,7 +13,7 @@ from hypothesis import given, strategies as st
 import lgs_jax
 from lgs_jax.projection import project
 from tests import scenes
-from tests.compare import (F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_float32_close,
+from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_float32_close,
                            assert_render_close, assert_within_fast_bound)
 
 C = lgs_jax.RasterConfig
@@ -44,7 +44,8 @@ def all_exact_configs():
 
 # ------------------------------------------------------------------ against `reference`
 
-@pytest.mark.parametrize("name", EXACT)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in (
+    "+hoisting", "local_corner", "difference_culled") else n for n in EXACT])  # baseline: both off
 @given(seed=st.integers(0, 2**32 - 1))
 def test_tiles_exact_equals_reference_float64(name, seed):
     g = scenes.scene(seed)
@@ -78,7 +79,7 @@ def test_fast_blending_stays_within_its_bound(convention, seed):
     bg = np.array([0.2, 0.5, 0.9])
     exact = scenes.render(g, cam, "tiles", C(convention))
     fast = scenes.render(g, cam, "tiles", C(convention, blend="fast"))
-    assert_within_fast_bound(fast, exact, project(g, cam).rgb, bg, C(convention).alpha_cap)
+    assert_within_fast_bound(fast, exact, project(g, cam).rgb, bg, ALPHA_CAP[convention])
 
 
 @pytest.mark.slow
