@@ -2,7 +2,7 @@
 
     python -m benchmarks.ablation [--scene SPEC ...] [--data DIR] [--repeat N] [--csv FILE]
         [--no-error]
-    python -m benchmarks.ablation --preset cpu --csv bench_cpu.csv
+    python -m benchmarks.ablation --preset cpu --csv bench_results/cpu-YYYY-MM/bench.csv
 
 Scene SPECs: benchmarks.common (e.g. `guitar@640x360`, `default@640x360`,
 `synthetic:100000@640x360`). Every row (`common.TILES_ROWS`) is compiled first (compile time
