@@ -45,7 +45,7 @@ def run_case(case: Case, rows, repeat: int, with_error: bool):
     truth = None
     if with_error:
         g64 = jax.tree.map(lambda x: np.asarray(x, np.float64), g)
-        truth = np.asarray(render(g64, cam, capacity=cap).image)
+        truth = np.asarray(render(g64, cam, backend="reference", capacity=cap).image)
     fns, outs, compile_s = {"prep": _prep(cap)}, {}, {}
     for name in rows:
         backend, config = ROWS[name]

@@ -98,7 +98,7 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     truth = None
     if w * h <= f64_max_pixels:
         g64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), g)
-        truth = np.asarray(render(g64, cam, capacity=cap).image)
+        truth = np.asarray(render(g64, cam, backend="reference", capacity=cap).image)
     rows = []
     for name in images:
         row = dict(scene=case.name, width=w, height=h, gaussians=case.scene.num, row=name,

@@ -53,6 +53,11 @@ ROWS = {
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
+    # block-size variants of the Mosaic GPU kernels (KernelConfig)
+    "localgs:px128": ("pallas", C("gsplat", tuning=lgs_jax.KernelConfig(
+        mosaic_forward_pixels=128, mosaic_backward_pixels=128))),
+    "localgs:px256": ("pallas", C("gsplat", tuning=lgs_jax.KernelConfig(
+        mosaic_forward_pixels=256, mosaic_backward_pixels=256))),
 }
 
 

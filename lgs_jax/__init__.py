@@ -11,13 +11,14 @@ from .io.cameras import load_cameras
 from .io.dataset import Dataset, load_dataset
 from .io.views import DatasetError
 from .io.ply import PlyError, load_ply, save_ply
-from .render import BACKENDS, CapacityError, RenderOutput, RenderStats, render, render_growing
+from .render import (BACKENDS, CapacityError, RenderOutput, RenderStats, default_backend, render,
+                     render_growing)
 from .scene import Camera, Gaussians, stack_cameras
 
 __all__ = [
     "BACKENDS", "Camera", "CapacityError", "Dataset", "DatasetError", "Gaussians",
-    "KernelConfig", "PlyError", "RasterConfig", "RenderOutput", "RenderStats", "default_camera",
-    "default_scene", "load_cameras", "load_dataset", "load_ply", "render", "render_growing",
-    "save_ply", "stack_cameras",
+    "KernelConfig", "PlyError", "RasterConfig", "RenderOutput", "RenderStats", "default_backend",
+    "default_camera", "default_scene", "load_cameras", "load_dataset", "load_ply", "render",
+    "render_growing", "save_ply", "stack_cameras",
 ]
 __version__ = "0.1.0"

@@ -17,7 +17,6 @@ import time
 
 import numpy as np
 
-DEFAULT_BACKEND = "tiles"  # the fastest exact backend available (exact blending by default)
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
 EXIT_FAILURE, EXIT_USAGE = 1, 2
 
@@ -233,9 +232,10 @@ def _render_parser(sub, common) -> None:
                    help="image width in pixels (default: the camera's, 1280 for the default scene)")
     r.add_argument("--height", type=_int_at_least(1),
                    help="image height in pixels (default: the camera's, 720 for the default scene)")
-    r.add_argument("--backend", default=DEFAULT_BACKEND, choices=BACKENDS,
-                   help=f"rasterizer (default: {DEFAULT_BACKEND}, the fastest exact one on a "
-                        "CPU; pallas and pallas_vanilla run interpreted without a GPU)")
+    r.add_argument("--backend", default=None, choices=BACKENDS,
+                   help="rasterizer (default: the fastest exact one for the platform, pallas on "
+                        "a GPU, tiles elsewhere; pallas and pallas_vanilla run interpreted "
+                        "without a GPU)")
     r.add_argument("--convention", default="3dgs", choices=["3dgs", "gsplat"],
                    help="compositing rule (default: 3dgs)")
     r.add_argument("--background", type=_finite_float, nargs=3, default=[0.0, 0.0, 0.0],

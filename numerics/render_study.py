@@ -63,7 +63,7 @@ def main(argv=None) -> int:
         for res in args.res:
             w, h = (int(v) for v in res.split("x"))
             cam = base.scaled(w, h)
-            truth = np.asarray(lgs_jax.render(g64, cam).image)
+            truth = np.asarray(lgs_jax.render(g64, cam, backend="reference").image)
             clipped_truth = np.clip(truth, 0, 1)
             maps = {}
             images, times = _timed_forms(g, cam, args.repeat, args.backend)

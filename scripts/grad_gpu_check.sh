@@ -6,7 +6,7 @@
 set -uo pipefail
 . "$(dirname "$0")/gpu_env.sh"
 timeout "${TEST_TIMEOUT:-240}" python3 -m pytest -q -p no:cacheprovider -n 4 \
-  tests/backends/test_backward.py tests/backends/test_pallas.py -m 'slow or not slow' ${TEST_K:+-k "$TEST_K"} 2>&1 | tee "$out/grad_gpu_tests.log" | tail -4
+  tests/backends/test_gradients.py tests/backends/test_backward.py tests/backends/test_pallas.py -m 'slow or not slow' ${TEST_K:+-k "$TEST_K"} 2>&1 | tee "$out/grad_gpu_tests.log" | tail -4
 echo "tests exit: ${PIPESTATUS[0]}"
 d=carry/data
 timeout "${BENCH_TIMEOUT:-300}" python3 -m benchmarks.render_vs_gsplat --grad --repeat 20 \

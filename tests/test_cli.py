@@ -117,7 +117,7 @@ def test_render_help_lists_backends_outputs_and_defaults(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for backend in ("brute", "reference", "tiles", "pallas", "pallas_vanilla"):
         assert backend in text
-    for phrase in ("default: tiles", "default: out.png", ".png/.jpg", "exit code 2",
+    for phrase in ("default: the fastest exact one", "default: out.png", ".png/.jpg", "exit code 2",
                    "crop its centre", "compilation separately"):
         assert phrase in text, phrase
 

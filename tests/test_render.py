@@ -203,3 +203,13 @@ def test_non_finite_background_raises(scene32, background):
 def test_background_list_is_accepted(scene32):
     out = lgs_jax.render(scene32, scenes.camera(), background=[0.1, 0.2, 0.3])
     assert out.image.dtype == np.float32
+
+
+def test_default_backend_is_the_fastest_exact_one_for_the_platform(scene32):
+    """No backend given: `pallas` on a GPU, `tiles` elsewhere (BENCHMARKS.md), reported in
+    stats.backend; an explicit choice stays."""
+    want = "pallas" if jax.default_backend() == "gpu" else "tiles"
+    assert lgs_jax.default_backend() == want
+    assert lgs_jax.render(scene32, scenes.camera(), capacity=scenes.CAPACITY).stats.backend == want
+    out = lgs_jax.render(scene32, scenes.camera(), backend="reference", capacity=scenes.CAPACITY)
+    assert out.stats.backend == "reference"

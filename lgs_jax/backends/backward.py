@@ -151,22 +151,50 @@ def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_
                 difference_alpha(mean2d, conic, opacity, pixels, config), 6)
 
 
-def per_gaussian_sum(rows, gauss, n: int):
-    """Σ of pair rows per Gaussian id (n, C), deterministically: a stable sort by id, a segmented
-    inclusive scan (fixed association), and one store per segment end (distinct ids)."""
-    order = jnp.argsort(gauss, stable=True)
-    ids, vals = gauss[order], rows[order]
-    starts = jnp.concatenate([jnp.ones((1,), bool), ids[1:] != ids[:-1]])
+SUM_CHUNK = 16  # pair rows summed sequentially per chunk in `per_gaussian_sum`
 
+
+def _segmented_scan(starts, vals):
+    """Inclusive scan of vals restarting where `starts` is set (fixed association)."""
     def combine(left, right):
         (fl, vl), (fr, vr) = left, right
         return fl | fr, jnp.where(fr[..., None], vr, vl + vr)
 
-    _, sums = lax.associative_scan(combine, (starts, vals))
+    return lax.associative_scan(combine, (starts, vals))[1]
+
+
+def per_gaussian_sum(rows, gauss, n: int):
+    """Σ of pair rows per Gaussian id (n, C), deterministically (no scatter-add, a fixed
+    association): a stable sort by id, then a segmented sum in two levels. Within chunks of
+    SUM_CHUNK consecutive sorted rows, left to right (one fused pass over the rows); across
+    chunks, a segmented scan of the chunks' last partial sums (1/SUM_CHUNK of the rows), whose
+    carry is added to the rows of the segment still open at a chunk's start. One store per
+    segment end (distinct ids). A segmented scan over all rows costs log2(rows) passes over
+    them; this costs one, plus that scan over the chunk tails."""
+    cap, cols = rows.shape
+    order = jnp.argsort(gauss, stable=True)
+    ids, vals = gauss[order], rows[order]
+    pad = -cap % SUM_CHUNK  # padding rows: id n (dropped at the end), zero
+    ids = jnp.concatenate([ids, jnp.full((pad,), n, ids.dtype)])
+    vals = jnp.concatenate([vals, jnp.zeros((pad, cols), vals.dtype)])
+    ids2, vals3 = ids.reshape(-1, SUM_CHUNK), vals.reshape(-1, SUM_CHUNK, cols)
+    acc, within = vals3[:, 0], [vals3[:, 0]]
+    for i in range(1, SUM_CHUNK):  # sequential within each chunk
+        acc = jnp.where((ids2[:, i] == ids2[:, i - 1])[:, None], acc + vals3[:, i], vals3[:, i])
+        within.append(acc)
+    within = jnp.stack(within, 1)
+    tail_ids = ids2[:, -1]
+    tail_sums = _segmented_scan(jnp.concatenate([jnp.ones((1,), bool),
+                                                 tail_ids[1:] != tail_ids[:-1]]), within[:, -1])
+    open_at_start = tail_ids[:-1] == ids2[1:, 0]  # chunk k continues chunk k − 1's segment
+    carry = jnp.concatenate([jnp.zeros((1, cols), vals.dtype),
+                             jnp.where(open_at_start[:, None], tail_sums[:-1], 0)])
+    in_open = (ids2 == ids2[:, :1])[..., None]
+    sums = (within + jnp.where(in_open, carry[:, None, :], 0)).reshape(-1, cols)
     ends = jnp.concatenate([ids[1:] != ids[:-1], jnp.ones((1,), bool)])
     target = jnp.where(ends, ids, n)
-    return jnp.zeros((n, rows.shape[1]), rows.dtype).at[target].set(sums, mode="drop",
-                                                                     unique_indices=True)
+    return jnp.zeros((n, cols), rows.dtype).at[target].set(sums, mode="drop",
+                                                          unique_indices=True)
 
 
 def differentiable(forward, gradients, forward_for_gradients=None):

@@ -114,7 +114,7 @@ def test_global_coordinates_show_float32_cancellation():
                           rng.uniform(-4.5, -3.0, (n, 3)) + np.log(z)[:, None],
                           rng.uniform(0, 4, n), rng.normal(0, 0.5, (n, 1, 3)))
     cam = scenes.camera(width, height, dtype=np.float64)
-    truth = np.asarray(lgs_jax.render(g, cam, capacity=4096).image)
+    truth = np.asarray(lgs_jax.render(g, cam, backend="reference", capacity=4096).image)
     g32 = scenes.cast(g, np.float32)
     err = {name: np.quantile(np.abs(np.asarray(lgs_jax.render(
         g32, cam, backend="tiles", config=PRECISION[name], capacity=4096).image) - truth), 0.99)

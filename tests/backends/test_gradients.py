@@ -1,0 +1,221 @@
+"""Gradients of `render` (the custom_vjps of `reference`, `tiles` and the Pallas backends: the
+backward walk of lgs_jax.backends.backward and the Pallas backward kernels) against autodiff
+through `brute` (float64), each other, central finite differences, float32, determinism, vmap and
+jit. The Pallas backward kernel's own unit test against the tiles walk is in
+tests/backends/test_pallas.py. Default set: one representative per backend and switch; the
+products are marked slow."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import lgs_jax
+from lgs_jax.projection import project
+from tests import scenes
+from tests.compare import GRAD_F64_REL, assert_close_to_scale
+
+C = lgs_jax.RasterConfig
+SLOW = pytest.mark.slow
+FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")
+W, H = scenes.W, scenes.H
+
+
+def _weights(dtype, seed=0):
+    rng = np.random.default_rng(seed)
+    return (rng.normal(size=(H, W, 3)).astype(dtype), rng.normal(size=(H, W)).astype(dtype),
+            rng.normal(size=(H, W)).astype(dtype))
+
+
+def _loss(g, cam, bg, backend, config, weights):
+    """A scalar of image, alpha and depth (all three outputs carry gradient)."""
+    out = lgs_jax.render(g, cam, background=bg, backend=backend, config=config,
+                         capacity=None if backend == "brute" else scenes.CAPACITY)
+    wi, wa, wd = weights
+    return jnp.sum(out.image * wi) + jnp.sum(out.alpha * wa) + 0.1 * jnp.sum(out.depth * wd)
+
+
+def _grads(g, cam, backend, config, dtype=np.float64):
+    bg = jnp.asarray(scenes.BACKGROUND, dtype)
+    return jax.grad(_loss, argnums=(0, 2))(g, cam, bg, backend, config, _weights(dtype))
+
+
+@pytest.mark.parametrize("convention", ["3dgs", pytest.param("gsplat", marks=SLOW)])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_reference_gradients_equal_autodiff_through_brute_float64(convention, seed):
+    """Every adversarial kind (needles, huge, opaque with logit +inf, layers, faint, NaN / inf /
+    zero-quaternion rows, behind the camera): equal gradients, and no NaN or inf anywhere (for
+    invalid rows too: they get exactly zero)."""
+    g = scenes.scene(seed)
+    cam = scenes.camera(dtype=np.float64)
+    (gr, bgr), (gb, bgb) = (_grads(g, cam, b, C(convention)) for b in ("reference", "brute"))
+    invalid = np.asarray(project(g, cam).invalid)
+    for name in FIELDS:
+        want, got = np.asarray(getattr(gb, name)), np.asarray(getattr(gr, name))
+        assert np.all(np.isfinite(got)), name
+        assert np.all(got[invalid] == 0), name
+        assert_close_to_scale(got, want, 1e-8, name)
+        # No gradient lost or invented: the same Gaussians receive gradient.
+        moved = lambda x: np.any(x.reshape(x.shape[0], -1) != 0, axis=1)
+        np.testing.assert_array_equal(moved(got), moved(want), err_msg=name)
+    assert_close_to_scale(bgr, bgb, 1e-8)
+
+
+@pytest.mark.parametrize("backend,config", [
+    pytest.param("reference", C(), id="reference", marks=SLOW),
+    pytest.param("tiles", C(blend="fast"), id="tiles_fast")])
+def test_gradients_match_central_differences(backend, config):
+    """Well-separated, moderately opaque Gaussians (no depth ties or threshold within reach of
+    the step), float64, six entries of every parameter group. (`fast` blending has no
+    reference backend to compare with: this is its check.)"""
+    g = scenes.scene(11, kinds=("normal",))
+    cam = scenes.camera(dtype=np.float64)
+    bg = jnp.asarray(scenes.BACKGROUND)
+    weights = _weights(np.float64)
+    loss = lambda g: _loss(g, cam, bg, backend, config, weights)
+    f, grads = jax.jit(loss), jax.grad(loss)(g)
+    rng = np.random.default_rng(0)
+    eps = 1e-6
+    for name in FIELDS:
+        x = np.asarray(getattr(g, name))
+        for flat in rng.choice(x.size, 6, replace=False):
+            idx = np.unravel_index(flat, x.shape)
+            plus, minus = x.copy(), x.copy()
+            plus[idx] += eps
+            minus[idx] -= eps
+            shifted = lambda v: lgs_jax.Gaussians(**{**{n: getattr(g, n) for n in FIELDS},
+                                                     name: v})
+            fd = float(f(shifted(plus)) - f(shifted(minus))) / (2 * eps)
+            got = float(np.asarray(getattr(grads, name))[idx])
+            assert abs(fd - got) <= 1e-5 * max(1.0, abs(fd)), (name, idx, fd, got)
+
+
+@pytest.mark.slow  # the fast backends' float32 gradients are in the default set
+def test_float32_gradients_are_close_to_float64():
+    """Relative L2 error per parameter group, float32 vs float64 (tolerance 1e-3)."""
+    g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
+    cam64, cam32 = scenes.camera(dtype=np.float64), scenes.camera()
+    g32 = scenes.cast(g64, np.float32)
+    (a, _), (b, _) = _grads(g64, cam64, "reference", C()), _grads(g32, cam32, "reference", C(),
+                                                                  np.float32)
+    for name in FIELDS:
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
+        rel = np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30)
+        assert rel < 1e-3, (name, rel)
+
+
+@pytest.mark.parametrize("backend", ["tiles", pytest.param("reference", marks=SLOW),
+                                     pytest.param("pallas", marks=SLOW)])
+def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
+    g = scenes.cast(scenes.scene(2), np.float32)
+    bg = jnp.asarray(scenes.BACKGROUND, np.float32)
+    weights = _weights(np.float32)
+    step = jax.jit(jax.grad(lambda g, c: _loss(g, c, bg, backend, C(), weights)))
+    cams = [scenes.camera(yaw=y) for y in (0.0, 0.15)]
+    first, again = step(g, cams[0]), step(g, cams[0])
+    for name in FIELDS:
+        np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
+    batched = jax.jit(jax.vmap(step, in_axes=(None, 0)))(g, lgs_jax.stack_cameras(cams))
+    # Bitwise on CPUs for this scene. On GPUs XLA fuses the batched projection differently
+    # (1-ulp differences), which can flip one pixel's alpha test and move a gradient by that
+    # pixel's contribution (measured 3e-4 of the scale on this scene): BENCHMARKS.md §5.
+    rel = 0 if jax.default_backend() == "cpu" else 1e-3
+    for i, cam in enumerate(cams):
+        single = step(g, cam)
+        for name in FIELDS:
+            want = np.asarray(getattr(single, name))
+            np.testing.assert_allclose(getattr(batched, name)[i], want, rtol=0,
+                                       atol=rel * np.abs(want).max(), err_msg=name)
+
+
+def test_screen_space_gradients_and_visibility_for_densification():
+    """∂L/∂mean2d through `screen_offsets` (zeros): equal to autodiff through brute, zero for
+    Gaussians not visible, and `visible` marks exactly the Gaussians with tile pairs."""
+    g = scenes.scene(4)
+    cam = scenes.camera(dtype=np.float64)
+    bg = jnp.asarray(scenes.BACKGROUND)
+    weights = _weights(np.float64)
+    zeros = jnp.zeros((g.num, 2))
+
+    def loss(offsets, backend):
+        out = lgs_jax.render(g, cam, background=bg, backend=backend, screen_offsets=offsets,
+                             capacity=None if backend == "brute" else scenes.CAPACITY)
+        return jnp.sum(out.image * weights[0])
+
+    got = np.asarray(jax.grad(loss)(zeros, "reference"))
+    want = np.asarray(jax.grad(loss)(zeros, "brute"))
+    assert_close_to_scale(got, want, 1e-8)
+    out = lgs_jax.render(g, cam, background=bg, backend="reference", capacity=scenes.CAPACITY)
+    visible = np.asarray(out.visible)
+    assert visible.shape == (g.num,) and visible.sum() > 0
+    assert np.all(got[~visible] == 0)
+    # visible == has at least one tile pair
+    from lgs_jax import binning
+    from lgs_jax.projection import project
+
+    _, _, nx, ny, _ = binning.tile_rects(project(g, cam), cam.width, cam.height)
+    np.testing.assert_array_equal(visible, np.asarray(nx * ny) > 0)
+    assert int(np.sum(np.asarray(nx * ny))) == int(out.stats.pairs_required)
+
+
+TILES = {"local_gs": C(), "no_cull": C(warp_cull=False), "difference": C(hoist=False),
+         "global": C(local_coords=False), "center": C(origin="center"), "gsplat": C("gsplat")}
+
+
+@pytest.mark.parametrize("name", [n if n == "local_gs" else pytest.param(n, marks=SLOW)
+                                  for n in TILES])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
+    """The tiles backward (its own hoisted arithmetic and strip masks) against the reference
+    backward: equal to rounding (1e-9 of scale) on every adversarial kind."""
+    g = scenes.scene(seed)
+    cam = scenes.camera(dtype=np.float64)
+    config = TILES[name]
+    (gt, bgt), (gr, bgr) = (_grads(g, cam, b, c) for b, c in
+                            (("tiles", config), ("reference", C(config.convention))))
+    for field in FIELDS:
+        want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gt, field))
+        assert np.all(np.isfinite(got)), field
+        assert_close_to_scale(got, want, GRAD_F64_REL, field)
+    assert_close_to_scale(bgt, bgr, GRAD_F64_REL)
+
+
+@pytest.mark.parametrize("backend", ["tiles", pytest.param("pallas", marks=SLOW)])
+def test_fast_backends_float32_gradients_are_close_to_float64(backend):
+    g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
+    (a, _) = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())
+    (b, _) = _grads(scenes.cast(g64, np.float32), scenes.camera(), backend, C(), np.float32)
+    for name in FIELDS:
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
+        assert np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30) < 1e-3, name
+
+
+# `auto` differentiates through Mosaic GPU on the GPU and through Triton in interpret mode
+# (KernelConfig); the `other` rows run the implementation auto does not pick here.
+OTHER = "triton" if jax.default_backend() == "gpu" else "mosaic"
+PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
+          "global": ("pallas", C(local_coords=False)), "gsplat": ("pallas", C("gsplat")),
+          "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat")),
+          "other": ("pallas", C(kernel=OTHER)),
+          "vanilla_other": ("pallas_vanilla", C(kernel=OTHER))}
+
+
+@pytest.mark.parametrize("name", [n if n == "local_gs" else pytest.param(n, marks=SLOW)
+                                  for n in PALLAS])
+@settings(max_examples=3)  # interpret mode: the kernels run serially, one program at a time
+@given(seed=st.integers(0, 2**32 - 1))
+def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
+    """The Pallas backward (kernel in interpret mode on CPU) through `render`, against the
+    reference backward, on every adversarial kind: equal to rounding, nothing lost."""
+    g = scenes.scene(seed)
+    cam = scenes.camera(dtype=np.float64)
+    backend, config = PALLAS[name]
+    (gp, bgp), (gr, bgr) = (_grads(g, cam, b, c) for b, c in
+                            ((backend, config), ("reference", C(config.convention))))
+    invalid = np.asarray(project(g, cam).invalid)
+    for field in FIELDS:
+        want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gp, field))
+        assert np.all(np.isfinite(got)) and np.all(got[invalid] == 0), field
+        assert_close_to_scale(got, want, GRAD_F64_REL, field)
+    assert_close_to_scale(bgp, bgr, GRAD_F64_REL)
