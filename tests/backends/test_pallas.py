@@ -246,13 +246,13 @@ BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "loc
 
 def _backward_cases():
     """Default: float64, the Triton kernel with hoisting on and off, both conventions and both
-    blending modes, and the Mosaic GPU kernel at both block sizes; slow: every other switch and
-    kernel, and float32."""
+    blending modes, and the Mosaic GPU kernel (half-tile blocks); slow: every other switch,
+    whole-tile Mosaic GPU blocks, and float32."""
     default = ("local_gs", "difference", "gsplat", "fast")
     triton = [(n, "triton", None) for n in default]
     triton_slow = [(n, "triton", None) for n in BACKWARD if n not in default]
-    mosaic = [("local_gs", "mosaic", 128), ("fast", "mosaic", 256)]
-    mosaic_slow = [(n, "mosaic", 256) for n in ("local_gs", "difference", "gsplat")]
+    mosaic = [("local_gs", "mosaic", 128)]
+    mosaic_slow = [(n, "mosaic", 256) for n in ("local_gs", "difference", "gsplat", "fast")]
     every = triton + triton_slow + mosaic + mosaic_slow
     return ([(*case, np.float64) for case in triton + mosaic]
             + [pytest.param(*case, np.float64, marks=SLOW) for case in triton_slow + mosaic_slow]
@@ -291,12 +291,12 @@ M = C(kernel="mosaic")
 
 
 LOWER = {  # id -> (backend, config, mosaic_chunk, pixels per block, dtype); "auto" is Mosaic GPU
-    "localgs": ("pallas", C(), 0, 256, F32),
     "localgs-fast-staged": ("pallas", C(kernel="mosaic", blend="fast"), 64, 256, F32),
     "localgs-staged-f64": ("pallas", M, 64, 256, F64),
     "vanilla-half": ("pallas_vanilla", M, 0, 128, F32),
 }
 LOWER_SLOW = {
+    "localgs": ("pallas", C(), 0, 256, F32),
     "localgs-baseline": ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0, 256, F32),
     "localgs-staged-half": ("pallas", M, 64, 128, F32),
     **{f"localgs-{name}": ("pallas", c, 0, 256, F32) for name, c in LOCALGS.items()
