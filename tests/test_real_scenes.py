@@ -55,6 +55,7 @@ def test_lego_matches_ground_truth_at_400_like_gsplat(lego):
     assert np.mean(scores) >= 35.5  # gsplat itself: 36.47 dB on these views
 
 
+@pytest.mark.slow  # 90k Gaussians; opaque (logit +inf) Gaussians are a kind of tests/scenes.py
 def test_guitar_renders_finite_with_opaque_gaussians(data_dir):
     g = lgs_jax.load_ply(os.path.join(data_dir, "guitar", "guitar.ply"))
     cam = lgs_jax.load_cameras(os.path.join(data_dir, "guitar", "orbit_cameras.json"),
