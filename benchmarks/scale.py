@@ -31,10 +31,7 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
-import statistics
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
@@ -45,24 +42,10 @@ from lgs_jax import binning, pairs
 from lgs_jax.backends import REGISTRY, kernel_steps
 from lgs_jax.layout import tile_grid
 from lgs_jax.projection import project
-from lgs_jax.synthetic import densified, random_scene, synthetic_camera
+
+from .common import SCENES, add_data_argument, load_scene, median_ms, psnr
 
 C = lgs_jax.RasterConfig
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# name -> (base scene, densify factor, width, height); base "synthetic:N" or a data folder
-SCENES = {
-    "guitar_720p": ("guitar", 1, 1280, 720),
-    "guitar_4k": ("guitar", 1, 3840, 2160),
-    "lego_800": ("lego_sh3", 1, 800, 800),
-    "guitar_x16_1080p": ("guitar", 16, 1920, 1080),
-    "lego_x16_1080p": ("lego_sh3", 16, 1920, 1080),
-    "guitar_x64_1080p": ("guitar", 64, 1920, 1080),
-    "guitar_x110_4k": ("guitar", 110, 3840, 2160),
-    "synthetic4M_1080p": ("synthetic:4000000", 1, 1920, 1080),
-    "synthetic10M_4k": ("synthetic:10000000", 1, 3840, 2160),
-}
-FILES = {"guitar": ("guitar/guitar.ply", "guitar/orbit_cameras.json"),
-         "lego_sh3": ("lego_sh3/lego_sh3.ply", "lego_sh3/lego_cameras.json")}
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
 ROWS = {
     "localgs": ("pallas", C("gsplat")),
@@ -76,36 +59,6 @@ ROWS = {
     "localgs:px256": ("pallas", C("gsplat", tuning=lgs_jax.KernelConfig(
         mosaic_forward_pixels=256, mosaic_backward_pixels=256))),
 }
-
-
-def load_scene(name: str, data: str):
-    """(Gaussians, Camera) of a `SCENES` entry."""
-    base, k, w, h = SCENES[name]
-    if base.startswith("synthetic:"):
-        return random_scene(int(base.split(":")[1])), synthetic_camera(w, h)
-    ply, cams = FILES[base]
-    g = lgs_jax.load_ply(os.path.join(data, ply))
-    cam = lgs_jax.load_cameras(os.path.join(data, cams), width=w, height=h)[0]
-    return (densified(g, k, seed=0) if k > 1 else g), cam
-
-
-def median_ms(fns: dict, repeat: int) -> dict:
-    """{name: median ms} over `repeat` rounds, each calling every fn once, in turn (each fn
-    blocks until its work is done), after one untimed warm-up call each."""
-    for f in fns.values():
-        f()
-    times = {name: [] for name in fns}
-    for _ in range(repeat):
-        for name, f in fns.items():
-            t0 = time.perf_counter()
-            f()
-            times[name].append(time.perf_counter() - t0)
-    return {name: 1e3 * statistics.median(t) for name, t in times.items()}
-
-
-def psnr(a, b) -> float:
-    mse = float(np.mean(np.square(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
-    return float("inf") if mse == 0 else -10 * np.log10(mse)
 
 
 def _compiled_mib(f, *args) -> float:
@@ -323,7 +276,7 @@ def _format(r) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.scale", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
+    add_data_argument(ap)
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--rows", default="localgs,localgs:fast,vanilla")
     ap.add_argument("--grad", action="store_true")

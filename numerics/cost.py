@@ -7,21 +7,21 @@ per Gaussian, split as a renderer splits it: `setup` runs once per Gaussian (dif
 hoisted forms: the 6-vector V of Eq. 8 relative to the tile origin; principal_axes: the 2x2
 eigendecomposition in float64, then λ and e₁ rounded to float32), `evaluate` once per
 (Gaussian, pixel). Reported: median ns per Gaussian for each part and per exponent for the
-evaluation, each form timed in the same interleaved rounds. The evaluation arithmetic is that of
-`numerics.forms.log_alpha` (tests/test_numerics_forms.py checks they agree).
+evaluation, each form timed in the same interleaved rounds (benchmarks.common.median_ms). The
+evaluation arithmetic is that of `numerics.forms.log_alpha` (tests/numerics/test_forms.py checks
+they agree).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
-import statistics
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks.common import median_ms
 from lgs_jax import hoist
 
 from . import forms
@@ -86,28 +86,21 @@ def scene(n, seed=0):
 
 
 def measure(n=16384, repeat=20):
-    """Rows (form, setup_ns_per_gaussian, eval_ns_per_exponent, device)."""
+    """Rows (form, setup_ns_per_gaussian, eval_ns_per_exponent, device): each form's setup and
+    evaluation timed in the same interleaved rounds (benchmarks.common.median_ms)."""
     data = scene(n)
     setups = {f: jax.jit(lambda m, q, o, c, f=f: setup(f, m, q, o, c)) for f in forms.FORMS}
     evals = {f: jax.jit(lambda s, p, f=f: evaluate(f, s, p)) for f in forms.FORMS}
     states = {f: jax.block_until_ready(setups[f](*data[f])) for f in forms.FORMS}
     pixels = {f: tile_pixels(f) for f in forms.FORMS}
+    fns = {}
     for f in forms.FORMS:
-        jax.block_until_ready(evals[f](states[f], pixels[f]))
-    t_setup = {f: [] for f in forms.FORMS}
-    t_eval = {f: [] for f in forms.FORMS}
-    for _ in range(repeat):
-        for f in forms.FORMS:
-            t0 = time.perf_counter()
-            jax.block_until_ready(setups[f](*data[f]))
-            t1 = time.perf_counter()
-            jax.block_until_ready(evals[f](states[f], pixels[f]))
-            t2 = time.perf_counter()
-            t_setup[f].append(t1 - t0)
-            t_eval[f].append(t2 - t1)
+        fns["setup", f] = lambda f=f: jax.block_until_ready(setups[f](*data[f]))
+        fns["eval", f] = lambda f=f: jax.block_until_ready(evals[f](states[f], pixels[f]))
+    ms = median_ms(fns, repeat)
     dev = jax.devices()[0]
-    return [dict(form=f, gaussians=n, setup_ns_per_gaussian=1e9 * statistics.median(t_setup[f]) / n,
-                 eval_ns_per_exponent=1e9 * statistics.median(t_eval[f]) / (n * 256),
+    return [dict(form=f, gaussians=n, setup_ns_per_gaussian=1e6 * ms["setup", f] / n,
+                 eval_ns_per_exponent=1e6 * ms["eval", f] / (n * 256),
                  device=f"{dev.platform} ({dev.device_kind})", jax=jax.__version__)
             for f in forms.FORMS]
 

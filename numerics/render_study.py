@@ -5,12 +5,13 @@
 
 For each scene and resolution (the view's camera rescaled), renders the float64 `reference` image,
 then the float32 image of `--backend` (`tiles`, or `pallas` on a GPU) in each exponent form
-(difference: hoist off; global; local_corner; local_center; all exact blending), and writes DIR/render_summary.csv (PSNR, SSIM from
-scikit-image, max abs error, share of pixels off by more than 1/255, and the form's forward time:
-median over `--repeat` interleaved rounds of the jitted render, compile excluded), per scene and
-resolution a PNG of where the global and local_corner errors sit, and DIR/tradeoff.png (time
-against PSNR, one panel per scene and size). Full frames, not crops: a crop re-bases pixel
-coordinates and would hide the global expansion's error. Meant for the GPU.
+(difference: hoist off; global; local_corner; local_center; all exact blending), and writes
+DIR/render_summary.csv (PSNR, SSIM from scikit-image, max abs error, share of pixels off by more
+than 1/255, and the form's forward time: median over `--repeat` interleaved rounds of the jitted
+render, compile excluded), per scene and resolution a PNG of where the global and local_corner
+errors sit, and DIR/tradeoff.png (time against PSNR, one panel per scene and size). Full frames,
+not crops: a crop re-bases pixel coordinates and would hide the global expansion's error. Meant
+for the GPU.
 """
 
 from __future__ import annotations
@@ -18,11 +19,11 @@ from __future__ import annotations
 import argparse
 import csv
 import os
-import statistics
-import time
 
 import jax
 import numpy as np
+
+from benchmarks.common import median_ms, psnr
 
 FORMS = {
     "difference": dict(hoist=False),
@@ -62,19 +63,18 @@ def main(argv=None) -> int:
         for res in args.res:
             w, h = (int(v) for v in res.split("x"))
             cam = base.scaled(w, h)
-            truth = np.asarray(lgs_jax.render(g64, cam).image)
+            truth = np.asarray(lgs_jax.render(g64, cam, backend="reference").image)
             clipped_truth = np.clip(truth, 0, 1)
             maps = {}
             images, times = _timed_forms(g, cam, args.repeat, args.backend)
             for form in FORMS:
                 img = images[form]
                 err = np.abs(img - truth).max(-1)
-                mse = float(np.mean((img - truth) ** 2))
                 ssim = structural_similarity(np.clip(img, 0, 1), clipped_truth, channel_axis=-1,
                                              data_range=1.0)
                 rows.append(dict(scene=name, resolution=w, height=h, form=form,
                                  backend=args.backend,
-                                 psnr_db=float("inf") if mse == 0 else float(-10 * np.log10(mse)),
+                                 psnr_db=psnr(img, truth),
                                  ssim=float(ssim), max_abs_err=float(err.max()),
                                  share_over_1_255=float(np.mean(err > 1 / 255)),
                                  time_ms=times[form]))
@@ -102,7 +102,7 @@ def _timed_forms(g, cam, repeat, backend):
     """Each form's float32 image (float64 numpy) and median forward time in ms, same run.
 
     Every form is a jitted `render` at one capacity; rounds call each form once in turn, so that
-    drift in the machine's speed affects all forms alike.
+    drift in the machine's speed affects all forms alike (benchmarks.common.median_ms).
     """
     import lgs_jax
 
@@ -113,13 +113,9 @@ def _timed_forms(g, cam, repeat, backend):
         for form, kw in FORMS.items()}
     images = {form: np.asarray(jax.block_until_ready(f(g, cam)), np.float64)
               for form, f in fns.items()}
-    times = {form: [] for form in FORMS}
-    for _ in range(repeat):
-        for form, f in fns.items():
-            t0 = time.perf_counter()
-            jax.block_until_ready(f(g, cam))
-            times[form].append(1e3 * (time.perf_counter() - t0))
-    return images, {form: statistics.median(t) for form, t in times.items()}
+    times = median_ms({form: lambda f=f: jax.block_until_ready(f(g, cam))
+                       for form, f in fns.items()}, repeat, warmup=False)
+    return images, times
 
 
 def tradeoff_plot(rows, path):

@@ -3,8 +3,8 @@
     python paper_figs/make_figs.py
 
 - pallas_vs_gsplat.png: rasterization-kernel and end-to-end times per scene and camera (H100,
-  bench_results/gpu_bench_h100.csv): the Table III analog (Local-GS vs vanilla kernel) with
-  gsplat beside them.
+  bench_results/h100-2026-11/triton/gpu_bench.csv): the Table III analog (Local-GS vs vanilla
+  kernel) with gsplat beside them.
 - precision_tradeoff.png: run time against PSNR vs float64 per exponent form (H100 Pallas kernel,
   numerics/results/render/render_summary_pallas.csv): the Table V analog.
 """
@@ -23,7 +23,8 @@ ROOT = os.path.dirname(HERE)
 
 
 def pallas_vs_gsplat():
-    rows = list(csv.DictReader(open(os.path.join(ROOT, "bench_results", "gpu_bench_h100.csv"))))
+    path = os.path.join(ROOT, "bench_results", "h100-2026-11", "triton", "gpu_bench.csv")
+    rows = list(csv.DictReader(open(path)))
     cases = list(dict.fromkeys((r["scene"], r["width"], r["height"]) for r in rows))
     kinds = ["pallas", "pallas:fast", "pallas_vanilla", "gsplat"]
     fig, axs = plt.subplots(1, 2, figsize=(13, 4))

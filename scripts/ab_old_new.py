@@ -7,7 +7,8 @@ after a restructuring (issue 14's "each kernel's time ratio within 0.95–1.05")
 Per scene, each row runs the rasterization stage alone (`rasterize` from projected and binned
 inputs, each package's own projection and binning) forward, or forward + backward (the
 gradient of Σ colour·w with respect to the projected Gaussians), with the old and the new
-package; all rows of a scene alternate within each round. Prints new/old median time ratios.
+package; all rows of a scene alternate within each round (benchmarks.common.median_ms). Prints new/old
+median time ratios.
 """
 
 from __future__ import annotations
@@ -15,15 +16,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
-import statistics
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path[:0] = [ROOT, os.path.join(ROOT, "carry")]
+from benchmarks.common import median_ms  # noqa: E402
 ROWS = {  # name -> (backend, RasterConfig kwargs, differentiate)
     "localgs fwd": ("pallas", {}, False),
     "localgs-triton fwd": ("pallas", dict(kernel="triton"), False),
@@ -73,7 +74,6 @@ def main() -> int:
     ap.add_argument("--data", default=os.path.join(ROOT, "carry", "data"))
     ap.add_argument("--repeat", type=int, default=30)
     args = ap.parse_args()
-    sys.path[:0] = [ROOT, os.path.join(ROOT, "carry")]
     import lgs_jax
     from lgs_jax.synthetic import random_scene, synthetic_camera
 
@@ -91,14 +91,9 @@ def main() -> int:
             for pkg in ("lgs_jax_old", "lgs_jax"):
                 fns[row, pkg], outs[row, pkg] = _stage(pkg, backend, kwargs, grad, g, cam,
                                                        weights)
-        times = {k: [] for k in fns}
-        for _ in range(args.repeat):
-            for k, f in fns.items():
-                t0 = time.perf_counter()
-                f()
-                times[k].append(time.perf_counter() - t0)
+        times = median_ms(fns, args.repeat, warmup=False)  # _stage ran each once
         for row in ROWS:
-            old, new = (1e3 * statistics.median(times[row, p]) for p in ("lgs_jax_old", "lgs_jax"))
+            old, new = (times[row, p] for p in ("lgs_jax_old", "lgs_jax"))
             same = all(np.array_equal(np.asarray(a), np.asarray(b)) for a, b in zip(
                 jax.tree.leaves(outs[row, "lgs_jax_old"]), jax.tree.leaves(outs[row, "lgs_jax"])))
             print(f"{scene:>22s} {row:<24s} old {old:8.3f} ms new {new:8.3f} ms "

@@ -5,13 +5,12 @@
 # carry/wheels); logs and CSV to $OUT.
 set -uo pipefail
 . "$(dirname "$0")/gpu_env.sh"
-timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 tests/test_pallas.py \
-  -k "mosaic or fast or kernel_equals" 2>&1 | tee "$out/mosaic_gpu_tests.log" | tail -4
+timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 tests/backends/test_pallas.py \
+  -m 'slow or not slow' -k "mosaic or fast or kernel_equals" 2>&1 | tee "$out/mosaic_gpu_tests.log" | tail -4
 echo "tests exit: ${PIPESTATUS[0]}"
 d=carry/data
-g="guitar=$d/guitar/guitar.ply:$d/guitar/orbit_cameras.json"
-l="lego_sh3=$d/lego_sh3/lego_sh3.ply:$d/lego_sh3/lego_cameras.json"
-timeout "${BENCH_TIMEOUT:-330}" python3 -m lgs_jax.gpu_bench --repeat 20 --csv "$out/mosaic_bench.csv" \
+timeout "${BENCH_TIMEOUT:-330}" python3 -m benchmarks.render_vs_gsplat --repeat 20 --csv "$out/mosaic_bench.csv" \
   --rows "${ROWS:-pallas:triton,pallas:mosaic,pallas:mosaic:fast,pallas_vanilla:triton,pallas_vanilla:mosaic}" \
-  --scene "$g@1280x720" --scene "$g@3840x2160" --scene "$l@800x800" --scene "$l@3200x3200" \
+  --data "$d" --scene guitar@1280x720 --scene guitar@3840x2160 --scene lego_sh3@800x800 \
+  --scene lego_sh3@3200x3200 \
   --scene "synthetic:1000000@1280x720" 2>&1 | grep -v "Warning\|to_torch" | tee "$out/mosaic_bench.log"

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
@@ -28,7 +26,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 import lgs_jax  # noqa: E402
-from benchmarks.scale import load_scene  # noqa: E402
+from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
 from lgs_jax.backends import backward, kernel_steps, pallas  # noqa: E402
 from lgs_jax.layout import tile_grid  # noqa: E402
@@ -36,15 +34,8 @@ from lgs_jax.projection import depth_order, project  # noqa: E402
 
 
 def _time(fns: dict, repeat: int) -> dict:
-    for f in fns.values():
-        jax.block_until_ready(f())
-    times = {k: [] for k in fns}
-    for _ in range(repeat):
-        for k, f in fns.items():
-            t0 = time.perf_counter()
-            jax.block_until_ready(f())
-            times[k].append(time.perf_counter() - t0)
-    return {k: 1e3 * statistics.median(v) for k, v in times.items()}
+    """benchmarks.common.median_ms of callables returning JAX arrays."""
+    return median_ms({k: lambda f=f: jax.block_until_ready(f()) for k, f in fns.items()}, repeat)
 
 
 def profile(g, cam, repeat: int):
@@ -105,7 +96,7 @@ def profile(g, cam, repeat: int):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
+    add_data_argument(ap)
     ap.add_argument("--scenes", default="guitar_x16_1080p,guitar_x110_4k")
     ap.add_argument("--repeat", type=int, default=10)
     args = ap.parse_args()

@@ -3,6 +3,8 @@ hypothesis run compiles each function once)."""
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +16,7 @@ from lgs_jax.projection import EPS2D, Projected
 
 N = 32  # Gaussians per test scene (fixed: no recompiles)
 W, H = 40, 24  # image size: not a multiple of 16, so edge tiles are partial
+CAPACITY = 256  # pair buffer of every test render: >= N x the 3x2 tiles of a W x H image
 
 KINDS = ("normal", "needle", "huge_far", "tiny", "behind", "faint", "opaque", "layers", "invalid")
 
@@ -35,7 +38,7 @@ def render(g, cam, backend, config, bg=BACKGROUND):
     """Render a test scene with a fixed capacity (one compile per shape) and a coloured
     background (so background-weighting errors show)."""
     return lgs_jax.render(g, cam, background=np.asarray(bg, g.means.dtype), backend=backend,
-                          config=config, capacity=4096)
+                          config=config, capacity=CAPACITY)
 
 
 def random_quats(rng, n):
@@ -141,26 +144,43 @@ def projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, ed
                      invalid=jnp.asarray(~valid))
 
 
+@functools.partial(jax.jit, static_argnames="config")
+def _kernel_forward(g, cam, config):
+    """The Local-GS kernel's forward on a test scene, with what its backward needs."""
+    from lgs_jax import binning
+    from lgs_jax.backends import pallas
+    from lgs_jax.projection import project
+
+    p = project(g, cam)
+    bins = binning.bin_gaussians(p, cam.width, cam.height, CAPACITY)
+    plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
+    state, stop_at, _, saved = pallas._forward(p, bins, cam.width, cam.height, plan)
+    return p, bins, state, stop_at, saved
+
+
+@functools.partial(jax.jit, static_argnames="config")
+def _kernel_and_walk_rows(p, bins, cam, state, stop_at, saved, cot, config):
+    """The backward kernel's pair rows and the plain-jnp walk's, from the same residuals."""
+    from lgs_jax.backends import pallas, tiles
+
+    plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
+    got = pallas._gradients(p, bins, cam.width, cam.height, plan, state.trans, stop_at, saved, cot)
+    masks, records, _ = saved
+    want = tiles._gradients(p, bins, cam.width, cam.height, config, state.trans, stop_at,
+                            (masks, records[:, :7] if config.hoist else None), cot)
+    return got, want
+
+
 def backward_kernel_and_walk(seed: int, config, dtype):
     """The Local-GS backward kernel's pair rows (`pallas._gradients`) and those of its plain-jnp
     counterpart (`tiles._gradients`) on one test scene, from the same residuals (the kernel's
-    forward: final T, stop pairs, masks, records) and random cotangents; numpy arrays."""
-    from lgs_jax import binning
-    from lgs_jax.backends import pallas, tiles
-    from lgs_jax.projection import project
-
+    forward: final T, stop pairs, masks, records) and random cotangents; numpy arrays. Both
+    stages are jitted with the scene as an argument: one compile per (config, dtype)."""
     g = cast(scene(seed), dtype)
     cam = camera(dtype=dtype)
-    p = project(g, cam)
-    bins = binning.bin_gaussians(p, cam.width, cam.height, 4096)
-    args = (p, bins, cam.width, cam.height, config)
-    plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
-    state, stop_at, _, saved = pallas._forward(p, bins, cam.width, cam.height, plan)
+    p, bins, state, stop_at, saved = _kernel_forward(g, cam, config)
     rng = np.random.default_rng(seed % 2**16)
     cot = tuple(rng.normal(size=x.shape).astype(dtype)
                 for x in (state.color, state.trans, state.depth))
-    got = pallas._gradients(p, bins, cam.width, cam.height, plan, state.trans, stop_at, saved, cot)
-    masks, records, _ = saved
-    want = tiles._gradients(*args, state.trans, stop_at,
-                            (masks, records[:, :7] if config.hoist else None), cot)
+    got, want = _kernel_and_walk_rows(p, bins, cam, state, stop_at, saved, cot, config)
     return np.asarray(got), np.asarray(want)

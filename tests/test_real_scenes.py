@@ -42,6 +42,7 @@ def test_lego_matches_gsplat_renders_at_200(lego, backend):
     assert min(scores) >= 70.0, scores
 
 
+@pytest.mark.slow  # ten 400x400 views of 60k Gaussians
 def test_lego_matches_ground_truth_at_400_like_gsplat(lego):
     g, cam_path, root = lego
     cams = lgs_jax.load_cameras(cam_path, width=400, height=400)
@@ -54,6 +55,7 @@ def test_lego_matches_ground_truth_at_400_like_gsplat(lego):
     assert np.mean(scores) >= 35.5  # gsplat itself: 36.47 dB on these views
 
 
+@pytest.mark.slow  # 90k Gaussians; opaque (logit +inf) Gaussians are a kind of tests/scenes.py
 def test_guitar_renders_finite_with_opaque_gaussians(data_dir):
     g = lgs_jax.load_ply(os.path.join(data_dir, "guitar", "guitar.ply"))
     cam = lgs_jax.load_cameras(os.path.join(data_dir, "guitar", "orbit_cameras.json"),

@@ -21,7 +21,7 @@ difference form when `hoist` is off; the chunk is then blended in order (Algorit
   fast:  the paper's warp-coherent blending (w = α·T; C += f·w; T −= w, Sec. III-D): no
          per-pixel stop; a strip stops when all 32 pixels have T < 1e-4 (checked per chunk).
 
-Bound on `fast` (derived here, tested in tests/test_tiles.py). Until the exact pixel's stop at
+Bound on `fast` (derived here, tested in tests/backends/test_tiles.py). Until the exact pixel's stop at
 Gaussian k*, both modes blend the same Gaussians. The exact pixel then keeps T_e = T_{k*}, with
 T_{k*}·(1 − α_{k*}) < 1e-4, so T_e < 1e-4 / (1 − cap). The fast pixel additionally blends weights
 w_j (j >= k*) with Σ w_j <= T_e, moving colour from background to those Gaussians:
@@ -213,7 +213,7 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
         pg = pairs.gather(p, bins.gauss)
     if config.warp_cull:
         # Materialise the masks once: fused into their (8, capacity) consumers, XLA would
-        # recompute the tight box for every strip bit (measured 4x slower on CPU).
+        # recompute the tight box for every strip bit (BENCHMARKS.md §2).
         masks = lax.optimization_barrier(pairs.strip_masks(pg, bins, tiles_x, config))
     if config.hoist:
         pair_v = pairs.hoisted_vectors(pg, bins, tiles_x, config)

@@ -1,7 +1,9 @@
-"""Gradients of `render` (the custom_vjps of `reference`, `tiles` and the Pallas backends) against
-autodiff through `brute` (float64), each other, central finite differences, float32,
-determinism, vmap and jit. The Pallas backward kernel's own unit test against the tiles walk is
-in tests/test_pallas.py."""
+"""Gradients of `render` (the custom_vjps of `reference`, `tiles` and the Pallas backends: the
+backward walk of lgs_jax.backends.backward and the Pallas backward kernels) against autodiff
+through `brute` (float64), each other, central finite differences, float32, determinism, vmap and
+jit. The Pallas backward kernel's own unit test against the tiles walk is in
+tests/backends/test_pallas.py. Default set: one representative per backend and switch; the
+products are marked slow."""
 
 import jax
 import jax.numpy as jnp
@@ -12,8 +14,10 @@ from hypothesis import given, settings, strategies as st
 import lgs_jax
 from lgs_jax.projection import project
 from tests import scenes
+from tests.compare import GRAD_F64_REL, assert_close_to_scale
 
 C = lgs_jax.RasterConfig
+SLOW = pytest.mark.slow
 FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")
 W, H = scenes.W, scenes.H
 
@@ -27,7 +31,7 @@ def _weights(dtype, seed=0):
 def _loss(g, cam, bg, backend, config, weights):
     """A scalar of image, alpha and depth (all three outputs carry gradient)."""
     out = lgs_jax.render(g, cam, background=bg, backend=backend, config=config,
-                         capacity=None if backend == "brute" else 4096)
+                         capacity=None if backend == "brute" else scenes.CAPACITY)
     wi, wa, wd = weights
     return jnp.sum(out.image * wi) + jnp.sum(out.alpha * wa) + 0.1 * jnp.sum(out.depth * wd)
 
@@ -37,7 +41,7 @@ def _grads(g, cam, backend, config, dtype=np.float64):
     return jax.grad(_loss, argnums=(0, 2))(g, cam, bg, backend, config, _weights(dtype))
 
 
-@pytest.mark.parametrize("convention", ["3dgs", "gsplat"])
+@pytest.mark.parametrize("convention", ["3dgs", pytest.param("gsplat", marks=SLOW)])
 @given(seed=st.integers(0, 2**32 - 1))
 def test_reference_gradients_equal_autodiff_through_brute_float64(convention, seed):
     """Every adversarial kind (needles, huge, opaque with logit +inf, layers, faint, NaN / inf /
@@ -51,16 +55,16 @@ def test_reference_gradients_equal_autodiff_through_brute_float64(convention, se
         want, got = np.asarray(getattr(gb, name)), np.asarray(getattr(gr, name))
         assert np.all(np.isfinite(got)), name
         assert np.all(got[invalid] == 0), name
-        scale = max(np.abs(want).max(), 1.0)
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * scale, err_msg=name)
+        assert_close_to_scale(got, want, 1e-8, name)
         # No gradient lost or invented: the same Gaussians receive gradient.
         moved = lambda x: np.any(x.reshape(x.shape[0], -1) != 0, axis=1)
         np.testing.assert_array_equal(moved(got), moved(want), err_msg=name)
-    np.testing.assert_allclose(bgr, bgb, rtol=0, atol=1e-8 * max(np.abs(bgb).max(), 1.0))
+    assert_close_to_scale(bgr, bgb, 1e-8)
 
 
-@pytest.mark.parametrize("backend,config", [("reference", C()), ("tiles", C(blend="fast"))],
-                         ids=["reference", "tiles_fast"])
+@pytest.mark.parametrize("backend,config", [
+    pytest.param("reference", C(), id="reference", marks=SLOW),
+    pytest.param("tiles", C(blend="fast"), id="tiles_fast")])
 def test_gradients_match_central_differences(backend, config):
     """Well-separated, moderately opaque Gaussians (no depth ties or threshold within reach of
     the step), float64, six entries of every parameter group. (`fast` blending has no
@@ -87,6 +91,7 @@ def test_gradients_match_central_differences(backend, config):
             assert abs(fd - got) <= 1e-5 * max(1.0, abs(fd)), (name, idx, fd, got)
 
 
+@pytest.mark.slow  # the fast backends' float32 gradients are in the default set
 def test_float32_gradients_are_close_to_float64():
     """Relative L2 error per parameter group, float32 vs float64 (tolerance 1e-3)."""
     g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
@@ -100,7 +105,8 @@ def test_float32_gradients_are_close_to_float64():
         assert rel < 1e-3, (name, rel)
 
 
-@pytest.mark.parametrize("backend", ["reference", "tiles", "pallas"])
+@pytest.mark.parametrize("backend", ["tiles", pytest.param("reference", marks=SLOW),
+                                     pytest.param("pallas", marks=SLOW)])
 def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
     g = scenes.cast(scenes.scene(2), np.float32)
     bg = jnp.asarray(scenes.BACKGROUND, np.float32)
@@ -134,13 +140,13 @@ def test_screen_space_gradients_and_visibility_for_densification():
 
     def loss(offsets, backend):
         out = lgs_jax.render(g, cam, background=bg, backend=backend, screen_offsets=offsets,
-                             capacity=None if backend == "brute" else 4096)
+                             capacity=None if backend == "brute" else scenes.CAPACITY)
         return jnp.sum(out.image * weights[0])
 
     got = np.asarray(jax.grad(loss)(zeros, "reference"))
     want = np.asarray(jax.grad(loss)(zeros, "brute"))
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-8 * max(np.abs(want).max(), 1.0))
-    out = lgs_jax.render(g, cam, background=bg, backend="reference", capacity=4096)
+    assert_close_to_scale(got, want, 1e-8)
+    out = lgs_jax.render(g, cam, background=bg, backend="reference", capacity=scenes.CAPACITY)
     visible = np.asarray(out.visible)
     assert visible.shape == (g.num,) and visible.sum() > 0
     assert np.all(got[~visible] == 0)
@@ -157,7 +163,8 @@ TILES = {"local_gs": C(), "no_cull": C(warp_cull=False), "difference": C(hoist=F
          "global": C(local_coords=False), "center": C(origin="center"), "gsplat": C("gsplat")}
 
 
-@pytest.mark.parametrize("name", TILES)
+@pytest.mark.parametrize("name", [n if n == "local_gs" else pytest.param(n, marks=SLOW)
+                                  for n in TILES])
 @given(seed=st.integers(0, 2**32 - 1))
 def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
     """The tiles backward (its own hoisted arithmetic and strip masks) against the reference
@@ -170,12 +177,11 @@ def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
     for field in FIELDS:
         want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gt, field))
         assert np.all(np.isfinite(got)), field
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * max(np.abs(want).max(), 1.0),
-                                   err_msg=field)
-    np.testing.assert_allclose(bgt, bgr, rtol=0, atol=1e-9 * max(np.abs(bgr).max(), 1.0))
+        assert_close_to_scale(got, want, GRAD_F64_REL, field)
+    assert_close_to_scale(bgt, bgr, GRAD_F64_REL)
 
 
-@pytest.mark.parametrize("backend", ["tiles", "pallas"])
+@pytest.mark.parametrize("backend", ["tiles", pytest.param("pallas", marks=SLOW)])
 def test_fast_backends_float32_gradients_are_close_to_float64(backend):
     g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
     (a, _) = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())
@@ -195,7 +201,8 @@ PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
           "vanilla_other": ("pallas_vanilla", C(kernel=OTHER))}
 
 
-@pytest.mark.parametrize("name", PALLAS)
+@pytest.mark.parametrize("name", [n if n == "local_gs" else pytest.param(n, marks=SLOW)
+                                  for n in PALLAS])
 @settings(max_examples=3)  # interpret mode: the kernels run serially, one program at a time
 @given(seed=st.integers(0, 2**32 - 1))
 def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
@@ -210,6 +217,5 @@ def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
     for field in FIELDS:
         want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gp, field))
         assert np.all(np.isfinite(got)) and np.all(got[invalid] == 0), field
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * max(np.abs(want).max(), 1.0),
-                                   err_msg=field)
-    np.testing.assert_allclose(bgp, bgr, rtol=0, atol=1e-9 * max(np.abs(bgr).max(), 1.0))
+        assert_close_to_scale(got, want, GRAD_F64_REL, field)
+    assert_close_to_scale(bgp, bgr, GRAD_F64_REL)

@@ -1,10 +1,12 @@
 """`pallas` / `pallas_vanilla` backends against `reference` and `tiles`.
 
 Without a GPU the kernels run in Pallas interpret mode (what CI exercises); on a GPU the same
-tests run the compiled kernels (scripts/pallas_gpu_check.sh). `test_kernels_lower_for_the_gpu`
-lowers every kernel variant, forward and backward, through the Triton or Mosaic GPU lowering on
-any machine (the GPU description is faked), so a primitive a lowering lacks fails here, not first
-on the GPU.
+tests run the compiled kernels (scripts/mosaic_gpu_check.sh, scripts/grad_gpu_check.sh). The
+default set runs one representative per kernel and per switch; the products (every switch x
+kernel x dtype, more examples) are marked slow (`python -m pytest -m slow`).
+`test_kernels_lower_for_the_gpu` lowers every kernel variant, forward and backward, through the
+Triton or Mosaic GPU lowering on any machine (the GPU description is faked), so a primitive a
+lowering lacks fails here, not first on the GPU.
 """
 
 import dataclasses
@@ -19,11 +21,13 @@ import lgs_jax
 from lgs_jax.backends import pallas, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
-from tests.compare import assert_render_close
-from tests.test_tiles import F32_ATOL
+from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, GRAD_F64_REL,
+                           assert_close_to_scale, assert_float32_close, assert_render_close,
+                           assert_within_fast_bound)
 
 C = lgs_jax.RasterConfig
 K = lgs_jax.KernelConfig
+SLOW = pytest.mark.slow
 ON_GPU = jax.default_backend() == "gpu"
 AUTO = "mosaic" if ON_GPU else "triton"  # what kernel="auto" runs here (KernelConfig)
 KERNEL = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
@@ -38,7 +42,8 @@ LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
 }
 
 
-@pytest.mark.parametrize("name", LOCALGS)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in ("no_cull", "difference")
+                                  else n for n in LOCALGS])  # "baseline": both off
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 def test_localgs_kernel_equals_reference_float64(name, seed):
@@ -50,31 +55,32 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
     assert out.stats.kernel == f"localgs-{AUTO}"
     assert out.stats.interpreted == (not ON_GPU)
     for field in ("image", "alpha", "depth"):
-        assert_render_close(getattr(out, field), getattr(ref, field), atol=1e-9, what=field)
+        assert_render_close(getattr(out, field), getattr(ref, field), atol=F64_ATOL, what=field)
 
 
-@pytest.mark.parametrize("name", ["local_gs", "difference", "local_center", "gsplat"])
+@pytest.mark.parametrize("name", ["local_gs"] + [pytest.param(n, marks=SLOW) for n in (
+    "difference", "local_center", "gsplat")])
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 def test_localgs_kernel_equals_reference_float32(name, seed):
-    """Same tolerance as the tiles backend (tests/test_tiles.py): hoisted and difference forms
-    round differently; threshold flips on at most 1% of pixels."""
+    """Same tolerance as the tiles backend (tests/compare.py, F32_ATOL): hoisted and difference
+    forms round differently; threshold flips on at most 1% of pixels."""
     g = scenes.cast(scenes.scene(seed), np.float32)
     cam = scenes.camera()
     config = LOCALGS[name]
     ref = scenes.render(g, cam, "reference", C(config.convention))
     out = scenes.render(g, cam, "pallas", config)
     assert out.image.dtype == np.float32
-    assert_render_close(out.image, ref.image, atol=F32_ATOL, max_flip_share=0.01, flip_atol=2.0)
-    assert_render_close(out.alpha, ref.alpha, atol=F32_ATOL, max_flip_share=0.01, flip_atol=1.0)
+    assert_float32_close(out, ref)
     tiles = scenes.render(g, cam, "tiles", config)
-    assert_render_close(out.image, tiles.image, atol=F32_ATOL, max_flip_share=0.01,
+    assert_render_close(out.image, tiles.image, atol=F32_ATOL, max_flip_share=F32_FLIP_SHARE,
                         flip_atol=2.0)
     assert int(out.stats.strip_pairs) == int(tiles.stats.strip_pairs)
 
 
-@pytest.mark.parametrize("convention,dtype", list(itertools.product(["3dgs", "gsplat"],
-                                                                    [np.float32, np.float64])))
+@pytest.mark.parametrize("convention,dtype", [
+    ("3dgs", np.float32), ("gsplat", np.float64),
+    pytest.param("3dgs", np.float64, marks=SLOW), pytest.param("gsplat", np.float32, marks=SLOW)])
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 def test_vanilla_kernel_equals_reference(convention, dtype, seed):
@@ -89,7 +95,7 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
         # kernel's exp and multiply-adds round differently from XLA's (H100, measured: depth
         # 5.8e-6 of scale, image 3.9e-6); interpret mode matches to 1e-6.
         scale = max(1.0, float(np.abs(np.asarray(getattr(ref, field))).max()))
-        atol = 1e-9 if dtype == np.float64 else 1e-5 * scale
+        atol = F64_ATOL if dtype == np.float64 else 1e-5 * scale
         assert_render_close(getattr(out, field), getattr(ref, field), atol=atol,
                             max_flip_share=0.0 if dtype == np.float64 else 0.005,
                             flip_atol=2.0, what=field)
@@ -99,10 +105,12 @@ MOSAIC = {**{n: ("pallas", c) for n, c in LOCALGS.items()},
           "vanilla": ("pallas_vanilla", C()), "vanilla_gsplat": ("pallas_vanilla", C("gsplat"))}
 
 
-@pytest.mark.parametrize("name", MOSAIC)
+@pytest.mark.parametrize("name,dtype", [("local_gs", np.float32), ("vanilla", np.float64)] + [
+    pytest.param(n, d, marks=SLOW) for n, d in itertools.product(MOSAIC, (np.float32, np.float64))
+    if (n, d) not in (("local_gs", np.float32), ("vanilla", np.float64))])
 @settings(max_examples=3)  # interpret mode: one program at a time
-@given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
-def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
+@given(seed=st.integers(0, 2**32 - 1))
+def test_mosaic_kernels_equal_triton_kernels(name, dtype, seed):
     """The Mosaic GPU forward kernels (a warpgroup per tile or half tile) run the Triton kernels'
     arithmetic in the same order with exact blending: the same image, alpha, depth and stop
     pairs, bit for bit in interpret mode; on the GPU, float64 to 1e-9 and float32 within the
@@ -117,20 +125,23 @@ def test_mosaic_kernels_equal_triton_kernels(name, seed, dtype):
     for field in ("image", "alpha", "depth"):
         got, want = getattr(outs["mosaic"], field), getattr(outs["triton"], field)
         if not ON_GPU or dtype == np.float64:
-            np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 if ON_GPU else 0,
+            np.testing.assert_allclose(got, want, rtol=0, atol=F64_ATOL if ON_GPU else 0,
                                        err_msg=field)
         else:  # the GPU's float32 exp and multiply-add contraction differ between the compilers
             # Global coordinates: the hoisted sum's cancellation (numerics/) amplifies those ulps
             # into flipped alpha tests (H100: 2.6% of depth pixels, by up to 4.6e-4).
-            share = 0.05 if name == "global" else 0.01
+            share = 0.05 if name == "global" else F32_FLIP_SHARE
             assert_render_close(got, want, atol=F32_ATOL, max_flip_share=share, flip_atol=2.0,
                                 what=field)
 
 
-@pytest.mark.parametrize("chunk,pixels", [(8, 256), (16, 128)])
-@settings(max_examples=3)
+@pytest.mark.parametrize("backend,chunk,pixels", [
+    ("pallas", 8, 256), pytest.param("pallas", 16, 128, marks=SLOW),
+    pytest.param("pallas_vanilla", 8, 256, marks=SLOW),
+    pytest.param("pallas_vanilla", 16, 128, marks=SLOW)])
+@settings(max_examples=2)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_mosaic_layouts_equal(chunk, pixels, seed):
+def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
     """The Mosaic GPU forward kernels in each layout (`KernelConfig.mosaic_forward_pixels`:
     half-tile or whole-tile warpgroup blocks; Local-GS float32 records staged through shared
     memory, with chunks small enough that every tile list of the test scenes spans several:
@@ -147,15 +158,13 @@ def test_mosaic_layouts_equal(chunk, pixels, seed):
     for layout in ((0, 128), (chunk, pixels)):
         config = C(kernel="mosaic", tuning=K(mosaic_chunk=layout[0], mosaic_unroll_localgs=8,
                                              mosaic_forward_pixels=layout[1]))
-        for backend in ("pallas", "pallas_vanilla"):
-            outs[layout, backend] = scenes.render(g, cam, backend, config)
-            background = scenes.render(empty, cam, backend, config).image
-            np.testing.assert_array_equal(background, np.broadcast_to(
-                np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
-    for backend, field in itertools.product(("pallas", "pallas_vanilla"),
-                                            ("image", "alpha", "depth")):
-        np.testing.assert_array_equal(getattr(outs[(chunk, pixels), backend], field),
-                                      getattr(outs[(0, 128), backend], field))
+        outs[layout] = scenes.render(g, cam, backend, config)
+        background = scenes.render(empty, cam, backend, config).image
+        np.testing.assert_array_equal(background, np.broadcast_to(
+            np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
+    for field in ("image", "alpha", "depth"):
+        np.testing.assert_array_equal(getattr(outs[chunk, pixels], field),
+                                      getattr(outs[0, 128], field))
 
 
 def test_plan_resolves_implementation_and_block_size():
@@ -175,8 +184,9 @@ def test_plan_resolves_implementation_and_block_size():
     assert (pallas.plan(interp, False, 1).forward, pallas.plan(interp, True, 1).backward) == (
         "triton", "triton")
     assert pallas.plan(interp, True, 1).kernel_name == "vanilla-triton"
-    n = K().mosaic_whole_tile_from
-    assert [pallas.plan(gpu, False, t).forward_pixels for t in (1, n - 1, n)] == [128, 128, 256]
+    # BENCHMARKS.md §6: whole tiles from 8192 tiles on (3840x2160: 32,400 tiles), half below.
+    assert [pallas.plan(gpu, False, t).forward_pixels for t in (1, 8191, 8192, 32400)] == [
+        128, 128, 256, 256]
     fixed = C(tuning=K(mosaic_backward_pixels=256))
     assert pallas.plan(fixed, False, 1).backward_pixels == 256
     with pytest.raises(ValueError, match="tuning.mosaic_chunk"):
@@ -185,9 +195,10 @@ def test_plan_resolves_implementation_and_block_size():
         K(mosaic_forward_pixels=64)
 
 
-@pytest.mark.parametrize("convention,kernel", list(itertools.product(["3dgs", "gsplat"],
-                                                                     ["triton", "mosaic"])))
-@settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
+@pytest.mark.parametrize("convention,kernel", [
+    ("gsplat", "triton"), ("3dgs", "mosaic"),
+    pytest.param("3dgs", "triton", marks=SLOW), pytest.param("gsplat", "mosaic", marks=SLOW)])
+@settings(max_examples=5)  # interpret mode on CPU: ~0.7 s per example (Mosaic GPU: more)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_fast_blending_kernel_stays_within_its_bound(convention, kernel, seed):
     """|fast − exact| <= 1e-4/(1 − cap)·max|rgb − background| (lgs_jax.backends.tiles); the
@@ -198,11 +209,7 @@ def test_fast_blending_kernel_stays_within_its_bound(convention, kernel, seed):
     bg = np.array(scenes.BACKGROUND)
     exact = scenes.render(g, cam, "reference", C(convention))
     fast = scenes.render(g, cam, "pallas", C(convention, blend="fast", kernel=kernel))
-    bound = 1e-4 / (1 - C(convention).alpha_cap)
-    rgb = np.asarray(project(g, cam).rgb)
-    colour_range = np.abs(rgb[:, None, :] - bg).max() if len(rgb) else 0.0
-    assert_render_close(fast.image, exact.image, atol=bound * colour_range + 1e-9)
-    assert_render_close(fast.alpha, exact.alpha, atol=bound + 1e-9)
+    assert_within_fast_bound(fast, exact, project(g, cam).rgb, bg, ALPHA_CAP[convention])
 
 
 def test_pallas_under_jit_and_vmap_reports_overflow_and_matches_single_views():
@@ -210,7 +217,7 @@ def test_pallas_under_jit_and_vmap_reports_overflow_and_matches_single_views():
     cams = lgs_jax.stack_cameras([scenes.camera(yaw=y) for y in (0.0, 0.2)])
     # The scene is an argument of both programs (a closed-over constant would be folded at
     # compile time and round differently).
-    one = jax.jit(lambda g, c: lgs_jax.render(g, c, backend="pallas", capacity=4096))
+    one = jax.jit(lambda g, c: lgs_jax.render(g, c, backend="pallas", capacity=scenes.CAPACITY))
     out = jax.jit(jax.vmap(one, in_axes=(None, 0)))(g, cams)
     # Bit-identical on CPU; XLA:GPU fuses the batched projection differently (1 ulp on a few
     # pixels, as for the tiles backend: BENCHMARKS.md).
@@ -237,12 +244,24 @@ BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "loc
             "fast": C(blend="fast"), "fast_gsplat": C("gsplat", blend="fast")}
 
 
-@pytest.mark.parametrize("name,kernel,pixels", [(n, "triton", None) for n in BACKWARD]
-                         + [(n, "mosaic", 256) for n in ("local_gs", "difference", "fast",
-                                                         "gsplat")]
-                         + [("local_gs", "mosaic", 128)])
+def _backward_cases():
+    """Default: float64, the Triton kernel with hoisting on and off, both conventions and both
+    blending modes, and the Mosaic GPU kernel (half-tile blocks); slow: every other switch,
+    whole-tile Mosaic GPU blocks, and float32."""
+    default = ("local_gs", "difference", "gsplat", "fast")
+    triton = [(n, "triton", None) for n in default]
+    triton_slow = [(n, "triton", None) for n in BACKWARD if n not in default]
+    mosaic = [("local_gs", "mosaic", 128)]
+    mosaic_slow = [(n, "mosaic", 256) for n in ("local_gs", "difference", "gsplat", "fast")]
+    every = triton + triton_slow + mosaic + mosaic_slow
+    return ([(*case, np.float64) for case in triton + mosaic]
+            + [pytest.param(*case, np.float64, marks=SLOW) for case in triton_slow + mosaic_slow]
+            + [pytest.param(*case, np.float32, marks=SLOW) for case in every])
+
+
+@pytest.mark.parametrize("name,kernel,pixels,dtype", _backward_cases())
 @settings(max_examples=4)  # interpret mode: the kernels run serially, one program at a time
-@given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float64, np.float32]))
+@given(seed=st.integers(0, 2**32 - 1))
 def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels):
     """The backward kernel (Triton: a program per tile; Mosaic GPU: a warpgroup per tile or
     half tile, `pixels` per block, forward and backward) against its plain-jnp counterpart
@@ -256,9 +275,10 @@ def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels
     assert np.all(np.isfinite(got))
     # float32 on the GPU: the two compilers' rounding (FMA contraction, exp) meets the walk's
     # division by 1 − α (α up to 0.99): seed 5038 ("fast", Mosaic) differs by 1.9e-4 of max |∂|,
-    # where the float32 walk itself is 1.5e-4 off the float64 walk (scripts/backward_error.py).
-    tol = 1e-9 if dtype == np.float64 else 1e-4 if jax.default_backend() == "cpu" else 1e-3
-    np.testing.assert_allclose(got, want, rtol=0, atol=tol * max(np.abs(want).max(), 1.0))
+    # where the float32 walk itself is 1.5e-4 off the float64 walk (BENCHMARKS.md §6).
+    f32_tol = 1e-4 if jax.default_backend() == "cpu" else 1e-3
+    tol = GRAD_F64_REL if dtype == np.float64 else f32_tol
+    assert_close_to_scale(got, want, tol)
     # Same Gaussians get gradient (float64: no rounding to zero by chance).
     if dtype == np.float64:
         np.testing.assert_array_equal(np.any(got != 0, 1), np.any(want != 0, 1))
@@ -270,20 +290,30 @@ F32, F64 = np.float32, np.float64
 M = C(kernel="mosaic")
 
 
+LOWER = {  # id -> (backend, config, mosaic_chunk, pixels per block, dtype); "auto" is Mosaic GPU
+    "localgs-fast-staged": ("pallas", C(kernel="mosaic", blend="fast"), 64, 256, F32),
+    "localgs-staged-f64": ("pallas", M, 64, 256, F64),
+    "vanilla-half": ("pallas_vanilla", M, 0, 128, F32),
+}
+LOWER_SLOW = {
+    "localgs": ("pallas", C(), 0, 256, F32),
+    "localgs-baseline": ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0, 256, F32),
+    "localgs-staged-half": ("pallas", M, 64, 128, F32),
+    **{f"localgs-{name}": ("pallas", c, 0, 256, F32) for name, c in LOCALGS.items()
+       if name != "local_gs"},
+    "localgs-fast": ("pallas", C(blend="fast"), 0, 256, F32),
+    "localgs-mosaic": ("pallas", M, 0, 256, F32),
+    "localgs-mosaic-fast": ("pallas", C(kernel="mosaic", blend="fast"), 0, 256, F32),
+    "vanilla": ("pallas_vanilla", C(), 0, 256, F32),
+    "vanilla-mosaic": ("pallas_vanilla", M, 0, 256, F32),
+    "localgs-staged": ("pallas", M, 64, 256, F32),
+    "localgs-half": ("pallas", M, 0, 128, F32),
+}
+
+
 @pytest.mark.parametrize("backend,config,chunk,pixels,dtype",
-                         [("pallas", c, 0, 256, F32) for c in LOCALGS.values()]
-                         + [("pallas", C(blend="fast"), 0, 256, F32),
-                            ("pallas_vanilla", C(), 0, 256, F32)]
-                         + [("pallas", M, 0, 256, F32),
-                            ("pallas", C(kernel="mosaic", blend="fast"), 0, 256, F32),
-                            ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0, 256,
-                             F32),
-                            ("pallas_vanilla", M, 0, 256, F32),
-                            ("pallas", M, 64, 256, F32),
-                            ("pallas", C(kernel="mosaic", blend="fast"), 64, 256, F32),
-                            ("pallas", M, 64, 256, F64),
-                            ("pallas", M, 0, 128, F32), ("pallas", M, 64, 128, F32),
-                            ("pallas_vanilla", M, 0, 128, F32)], ids=str)
+                         [pytest.param(*v, id=k) for k, v in LOWER.items()]
+                         + [pytest.param(*v, id=k, marks=SLOW) for k, v in LOWER_SLOW.items()])
 def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkeypatch):
     """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering
     (to Triton IR, for an H100) or the Mosaic GPU lowering (records read from global memory,
@@ -299,7 +329,7 @@ def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkey
         mosaic_backward_pixels=pixels))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend=backend, config=config,
-                                        capacity=4096).image
+                                        capacity=scenes.CAPACITY).image
     # The rendering forward, and the differentiated one with the backward kernel.
     grad = jax.value_and_grad(lambda g, c: jax.numpy.sum(image(g, c) ** 2))
     lower = lambda f: jax.jit(f).trace(g, scenes.camera(dtype=dtype)).lower(

@@ -15,7 +15,7 @@ import lgs_jax
 from lgs_jax import train
 from lgs_jax.io import colmap, undistort
 from lgs_jax.io.views import Lens
-from tests import colmap_format as cf
+from tests.io import colmap_format as cf
 
 
 # --- an independent transcription of the lens model (views.Lens's docstring) ---------------------

@@ -1,11 +1,12 @@
 """GPU benchmark of the Pallas kernels against gsplat 1.5.3, same process, scenes and cameras.
 
-    XLA_PYTHON_CLIENT_PREALLOCATE=false python -m lgs_jax.gpu_bench --preset issue5 \\
-        [--data DIR] [--repeat 30] [--csv FILE] [--grad]
+    XLA_PYTHON_CLIENT_PREALLOCATE=false python -m benchmarks.render_vs_gsplat --preset issue5 \\
+        [--scene SPEC ...] [--data DIR] [--repeat 30] [--csv FILE] [--grad]
 
-Rows per scene and camera: `pallas` (Local-GS, exact and fast blending), `pallas_vanilla`,
-`tiles` (XLA; fewer rounds: it is slow on GPUs) and `gsplat` (`rasterization(...,
-packed=False, rasterize_mode="classic")`, when gsplat imports). Per row: the rasterization stage
+Scene SPECs: benchmarks.common. Rows (`common.PALLAS_ROWS`, `--rows`) per scene and camera:
+`pallas` (Local-GS, exact and fast blending), `pallas_vanilla`, `tiles` (XLA; fewer rounds: it
+is slow on GPUs) and `gsplat` (`rasterization(..., packed=False, rasterize_mode="classic")`,
+when gsplat imports). Per row: the rasterization stage
 (`raster_ms`: our kernel call with its mask and row packing, from projected and binned inputs;
 gsplat's `rasterize_to_pixels` from its own intersections), the end-to-end forward
 (`e2e_ms`: one jitted `render` from device-resident parameters / one `rasterization` call), the
@@ -16,28 +17,26 @@ the error against gsplat's image (max abs, PSNR) and, where it fits (`--f64-max-
 the float64 reference. `--grad` times forward + backward instead (the differentiable backend
 against gsplat's `rasterization` + `backward()`). Times are medians of `--repeat` calls after
 warm-up, each ended by `block_until_ready` / `torch.cuda.synchronize`; rows alternate within
-each round.
+each round (`common.median_ms`).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
-import os
-import statistics
 import sys
-import time
 import types
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import binning, render
-from .backends import REGISTRY, pallas
-from .bench import parse_scene
-from .config import RasterConfig
-from .projection import project
+from lgs_jax import binning, render
+from lgs_jax.backends import REGISTRY, pallas
+from lgs_jax.config import RasterConfig
+from lgs_jax.projection import project
+
+from .common import GRAD_ROWS, PALLAS_ROWS, add_data_argument, median_ms, parse_scene, psnr
 
 C = RasterConfig
 
@@ -48,40 +47,15 @@ def _row(backend, config):
     return backend, config, lambda p, b, w, h: rasterize(p, b, w, h, config)
 
 
-OURS = {  # row -> (backend, config, rasterize stage); "auto" rows run KernelConfig's auto_*
-    "pallas": _row("pallas", C()),
-    "pallas:fast": _row("pallas", C(blend="fast")),
-    "pallas:no_cull": _row("pallas", C(warp_cull=False)),
-    "pallas:triton": _row("pallas", C(kernel="triton")),
-    "pallas:mosaic": _row("pallas", C(kernel="mosaic")),
-    "pallas:mosaic:fast": _row("pallas", C(kernel="mosaic", blend="fast")),
-    "pallas_vanilla": _row("pallas_vanilla", C()),
-    "pallas_vanilla:triton": _row("pallas_vanilla", C(kernel="triton")),
-    "pallas_vanilla:mosaic": _row("pallas_vanilla", C(kernel="mosaic")),
-    "tiles": _row("tiles", C()),
-}
-
-
-def _preset(data):
-    g, l = f"{data}/guitar", f"{data}/lego_sh3"
-    guitar = f"guitar={g}/guitar.ply:{g}/orbit_cameras.json"
-    lego = f"lego_sh3={l}/lego_sh3.ply:{l}/lego_cameras.json"
-    return [f"{guitar}@1280x720", f"{guitar}@3840x2160", f"{lego}@800x800", f"{lego}@3200x3200",
-            "synthetic:1000000@1280x720", "synthetic:3000000@1280x720"]
+OURS = {name: _row(*row) for name, row in PALLAS_ROWS.items()}
+PRESETS = {"issue5": ["guitar@1280x720", "guitar@3840x2160", "lego_sh3@800x800",
+                      "lego_sh3@3200x3200", "synthetic:1000000@1280x720",
+                      "synthetic:3000000@1280x720"]}
 
 
 def _median_ms(fns, repeat, sync):
-    """{name: median ms} over `repeat` rounds, each round calling every fn once, in turn (after
-    one untimed warm-up round)."""
-    for f in fns.values():
-        sync(f())
-    times = {name: [] for name in fns}
-    for _ in range(repeat):
-        for name, f in fns.items():
-            t0 = time.perf_counter()
-            sync(f())
-            times[name].append(time.perf_counter() - t0)
-    return {name: 1e3 * statistics.median(t) for name, t in times.items()}
+    """common.median_ms of callables whose results `sync` blocks on."""
+    return median_ms({name: lambda f=f: sync(f()) for name, f in fns.items()}, repeat)
 
 
 def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
@@ -128,20 +102,15 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     rows = []
     for name in images:
         row = dict(scene=case.name, width=w, height=h, gaussians=case.scene.num, row=name,
-                   raster_ms=times[f"raster:{name}"], e2e_ms=times[f"e2e:{name}"], project_ms=stages["project"],
-                   emit_ms=stages["emit"], sort_ms=stages["sort"],
+                   raster_ms=times[f"raster:{name}"], e2e_ms=times[f"e2e:{name}"],
+                   project_ms=stages["project"], emit_ms=stages["emit"], sort_ms=stages["sort"],
                    pairs=int(first.stats.pairs_required), peak_mb=memory[name] / 2**20
                    if memory[name] else "")
         if truth is not None:
             err = np.abs(images[name].astype(np.float64) - truth)
-            row.update(max_err_f64=float(err.max()), psnr_f64=_psnr(err))
+            row.update(max_err_f64=float(err.max()), psnr_f64=psnr(images[name], truth))
         rows.append(row)
     return rows, images
-
-
-def _psnr(err):
-    mse = float(np.mean(np.square(err)))
-    return float("inf") if mse == 0 else -10 * np.log10(mse)
 
 
 def _torch_peak_mb(f):
@@ -241,16 +210,6 @@ def _gsplat(case, repeat):
     return row, image[0].float().cpu().numpy()
 
 
-GRAD_ROWS = {"pallas": ("pallas", C()), "pallas:fast": ("pallas", C(blend="fast")),
-             "pallas:triton": ("pallas", C(kernel="triton")),
-             "pallas:mosaic": ("pallas", C(kernel="mosaic")),
-             "pallas:mosaic:fast": ("pallas", C(kernel="mosaic", blend="fast")),
-             "pallas_vanilla": ("pallas_vanilla", C()),
-             "pallas_vanilla:triton": ("pallas_vanilla", C(kernel="triton")),
-             "pallas_vanilla:mosaic": ("pallas_vanilla", C(kernel="mosaic")),
-             "tiles": ("tiles", C()), "reference": ("reference", C())}
-
-
 def _grad_rows(case, repeat, slow_repeat, names=tuple(GRAD_ROWS)):
     """Forward + backward of sum(image · W) w.r.t. all parameters: each differentiable backend
     (jitted value_and_grad; `tiles` and `reference` for `slow_repeat` rounds) and gsplat
@@ -322,11 +281,12 @@ def _grad_rows(case, repeat, slow_repeat, names=tuple(GRAD_ROWS)):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m lgs_jax.gpu_bench", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.render_vs_gsplat", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", action="append", default=[], help="scene SPEC (lgs_jax.bench)")
-    ap.add_argument("--preset", choices=["issue5"])
-    ap.add_argument("--data", default=os.path.join("..", "shared", "data"))
+    ap.add_argument("--scene", action="append", default=[],
+                    help="scene SPEC (benchmarks.common; repeatable)")
+    ap.add_argument("--preset", choices=sorted(PRESETS))
+    add_data_argument(ap)
     ap.add_argument("--repeat", type=int, default=30)
     ap.add_argument("--slow-repeat", type=int, default=3, help="rounds for the tiles row")
     ap.add_argument("--f64-max-pixels", type=int, default=1280 * 720)
@@ -340,13 +300,13 @@ def main(argv=None) -> int:
     ap.add_argument("--csv")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # the float64 reference; renders stay float32
-    specs = args.scene + (_preset(args.data) if args.preset else [])
+    specs = args.scene + (PRESETS[args.preset] if args.preset else [])
     dev = jax.devices()[0]
     print(f"device {dev.device_kind}; JAX {jax.__version__}; Pallas kernels interpreted: "
           f"{pallas.interpreted(C())}", flush=True)
     rows = []
     for spec in specs:
-        case = parse_scene(spec)
+        case = parse_scene(spec, args.data)
         if args.grad:
             grad = _grad_rows(case, args.repeat, args.slow_repeat, args.grad_rows.split(","))
             for r in grad:
@@ -360,7 +320,7 @@ def main(argv=None) -> int:
             row, image = peer
             for r in ours:
                 err = np.abs(images[r["row"]].astype(np.float64) - image)
-                r.update(max_err_gsplat=float(err.max()), psnr_gsplat=_psnr(err),
+                r.update(max_err_gsplat=float(err.max()), psnr_gsplat=psnr(images[r["row"]], image),
                          e2e_vs_gsplat=r["e2e_ms"] / row["e2e_ms"])
             ours.append(row)
         vanilla = next((r for r in ours if r["row"] == "pallas_vanilla"), ours[0])

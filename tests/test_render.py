@@ -20,7 +20,7 @@ def scene32():
 def test_jit_and_vmap_over_cameras_match_single_renders(scene32):
     cams = [scenes.camera(yaw=y) for y in (-0.2, 0.0, 0.3)]
     batch = lgs_jax.stack_cameras(cams)
-    cap = 1024
+    cap = scenes.CAPACITY
     # The scene is an argument, not a closed-over constant: XLA would constant-fold its
     # projection with different rounding than the eager render.
     f = jax.jit(jax.vmap(lambda g, c: lgs_jax.render(g, c, capacity=cap), in_axes=(None, 0)))
@@ -33,7 +33,7 @@ def test_jit_and_vmap_over_cameras_match_single_renders(scene32):
 
 
 def test_new_camera_pose_does_not_recompile(scene32):
-    f = jax.jit(lambda c: lgs_jax.render(scene32, c, capacity=1024).image)
+    f = jax.jit(lambda c: lgs_jax.render(scene32, c, capacity=scenes.CAPACITY).image)
     f(scenes.camera(yaw=0.1))
     size = f._cache_size()
     f(scenes.camera(yaw=-0.3))
@@ -186,7 +186,7 @@ def test_viewmat_within_float32_rounding_and_traced_cameras_pass(scene32):
     lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=view))
     bad = np.eye(4, dtype=np.float32) * 2  # not checked when traced (values unknown)
     jax.jit(lambda v: lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=v),
-                                     capacity=1024).image)(bad)
+                                     capacity=scenes.CAPACITY).image)(bad)
 
 
 def test_viewmat_as_list_raises(scene32):
@@ -210,6 +210,6 @@ def test_default_backend_is_the_fastest_exact_one_for_the_platform(scene32):
     stats.backend; an explicit choice stays."""
     want = "pallas" if jax.default_backend() == "gpu" else "tiles"
     assert lgs_jax.default_backend() == want
-    assert lgs_jax.render(scene32, scenes.camera(), capacity=4096).stats.backend == want
-    out = lgs_jax.render(scene32, scenes.camera(), backend="reference", capacity=4096)
+    assert lgs_jax.render(scene32, scenes.camera(), capacity=scenes.CAPACITY).stats.backend == want
+    out = lgs_jax.render(scene32, scenes.camera(), backend="reference", capacity=scenes.CAPACITY)
     assert out.stats.backend == "reference"
