@@ -43,7 +43,7 @@ from lgs_jax.backends import REGISTRY, kernel_steps
 from lgs_jax.layout import tile_grid
 from lgs_jax.projection import project
 
-from .common import SCENES, add_data_argument, load_scene, median_ms, psnr
+from .common import SCENES, add_data_argument, compiled_mib, load_scene, median_ms, psnr
 
 C = lgs_jax.RasterConfig
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
@@ -59,11 +59,6 @@ ROWS = {
     "localgs:px256": ("pallas", C("gsplat", tuning=lgs_jax.KernelConfig(
         mosaic_forward_pixels=256, mosaic_backward_pixels=256))),
 }
-
-
-def _compiled_mib(f, *args) -> float:
-    mem = f.lower(*args).compile().memory_analysis()
-    return (mem.temp_size_in_bytes + mem.output_size_in_bytes) / 2**20
 
 
 def ours_forward(g, cam, rows):
@@ -96,7 +91,7 @@ def ours_forward(g, cam, rows):
             g, c, backend=b, config=cf, capacity=cap).image)
         raster = jax.jit(lambda p, b, r=rasterize, cf=config: r(p, b, w, h, cf).color)
         images[name] = np.asarray(e2e(g, cam))
-        memory[name] = _compiled_mib(e2e, g, cam)
+        memory[name] = compiled_mib(e2e, g, cam)
         fns[f"{name}:raster"] = lambda r=raster: jax.block_until_ready(r(p, bins))
         fns[f"{name}:e2e"] = lambda f=e2e: jax.block_until_ready(f(g, cam))
     return fns, images, memory, int(bins.pairs_required)
@@ -208,7 +203,7 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
         first, again = f(g)[1], f(g)[1]
         same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
                                                                  jax.tree.leaves(again)))
-        extra[name] = dict(memory_mib=_compiled_mib(f, g), bitwise_repeatable=same)
+        extra[name] = dict(memory_mib=compiled_mib(f, g), bitwise_repeatable=same)
         fns[name] = lambda f=f: jax.block_until_ready(f(g))
     if with_gsplat:
         step = gsplat_grad_step(g, cam, weights)
