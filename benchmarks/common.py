@@ -197,3 +197,25 @@ GRAD_ROWS = {name: PALLAS_ROWS[name] for name in (
     "pallas_vanilla", "pallas_vanilla:triton", "pallas_vanilla:mosaic", "tiles")}
 GRAD_ROWS["reference"] = ("reference", C())
 """name -> (backend, config): the forward + backward rows of the GPU benchmark."""
+
+
+def pipeline_stages(g, cam, capacity: int):
+    """The XLA stages shared by every tiled backend, as jitted callables for timing: (projected
+    Gaussians, sorted bins, {"project", "emit", "sort": zero-argument callables returning the
+    stage's arrays}) for scene `g` through `cam` with a pair buffer of `capacity`."""
+    import jax
+
+    from lgs_jax import binning
+    from lgs_jax.layout import tile_grid
+    from lgs_jax.projection import project
+
+    w, h = cam.width, cam.height
+    n_tiles = int(np.prod(tile_grid(w, h)))
+    proj = jax.jit(project)
+    emit = jax.jit(lambda p: binning.emit_pairs(p, w, h, capacity))
+    sort = jax.jit(lambda t, i: binning.sort_pairs(t, i, n_tiles))
+    p = proj(g, cam)
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, capacity))(p)
+    tile, gauss, _, _ = emit(p)
+    return p, bins, {"project": lambda: proj(g, cam), "emit": lambda: emit(p),
+                     "sort": lambda: sort(tile, gauss)}

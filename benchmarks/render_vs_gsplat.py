@@ -31,12 +31,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lgs_jax import binning, render
+from lgs_jax import render
 from lgs_jax.backends import REGISTRY, pallas
 from lgs_jax.config import RasterConfig
-from lgs_jax.projection import project
 
-from .common import GRAD_ROWS, PALLAS_ROWS, add_data_argument, median_ms, parse_scene, psnr
+from .common import (GRAD_ROWS, PALLAS_ROWS, add_data_argument, median_ms, parse_scene,
+                     pipeline_stages, psnr)
 
 C = RasterConfig
 
@@ -64,15 +64,7 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     w, h = cam.width, cam.height
     first = render(g, cam, backend="pallas")
     cap = int(first.stats.capacity)
-    n_tiles = int(np.prod(binning.tile_grid(w, h)))
-    proj = jax.jit(project)
-    emit = jax.jit(lambda p: binning.emit_pairs(p, w, h, cap))
-    sort = jax.jit(lambda t, g: binning.sort_pairs(t, g, n_tiles))
-    p = proj(g, cam)
-    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
-    t, gi, _, _ = emit(p)
-    stage_fns = {"project": lambda: proj(g, cam), "emit": lambda: emit(p),
-                 "sort": lambda: sort(t, gi)}
+    p, bins, stage_fns = pipeline_stages(g, cam, cap)
     stages = _median_ms(stage_fns, repeat, jax.block_until_ready)
     images, memory, fns, slow_fns = {}, {}, {}, {}
     for name in names:

@@ -38,12 +38,12 @@ import jax.numpy as jnp
 import numpy as np
 
 import lgs_jax
-from lgs_jax import binning, pairs
+from lgs_jax import pairs
 from lgs_jax.backends import REGISTRY, kernel_steps
 from lgs_jax.layout import tile_grid
-from lgs_jax.projection import project
 
-from .common import SCENES, add_data_argument, compiled_mib, load_scene, median_ms, psnr
+from .common import (SCENES, add_data_argument, compiled_mib, load_scene, median_ms,
+                     pipeline_stages, psnr)
 
 C = lgs_jax.RasterConfig
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
@@ -65,24 +65,17 @@ def ours_forward(g, cam, rows):
     """Timed callables (stages, then raster and e2e per row), images and memory."""
     w, h = cam.width, cam.height
     cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
-    n_tiles = int(np.prod(tile_grid(w, h)))
-    proj = jax.jit(project)
-    emit = jax.jit(lambda p: binning.emit_pairs(p, w, h, cap))
-    sort = jax.jit(lambda t, i: binning.sort_pairs(t, i, n_tiles))
-    p = proj(g, cam)
-    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
-    t, gi, _, _ = emit(p)
+    p, bins, stages = pipeline_stages(g, cam, cap)
     tiles_x = tile_grid(w, h)[0]
+
     def pair_prep(p, b):
         pg = pairs.gather(p, b.gauss)
         masks = pairs.strip_masks(pg, b, tiles_x, C())
         return kernel_steps.pair_records(pg, b, tiles_x, C(), masks)
 
     prep = jax.jit(pair_prep)
-    fns = {"ours:project": lambda: jax.block_until_ready(proj(g, cam)),
-           "ours:emit": lambda: jax.block_until_ready(emit(p)),
-           "ours:sort": lambda: jax.block_until_ready(sort(t, gi)),
-           "ours:pair_prep": lambda: jax.block_until_ready(prep(p, bins))}
+    fns = {f"ours:{k}": lambda f=f: jax.block_until_ready(f()) for k, f in stages.items()}
+    fns["ours:pair_prep"] = lambda: jax.block_until_ready(prep(p, bins))
     images, memory = {}, {}
     for name in rows:
         backend, config = ROWS[name]
