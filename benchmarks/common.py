@@ -219,3 +219,15 @@ def pipeline_stages(g, cam, capacity: int):
     tile, gauss, _, _ = emit(p)
     return p, bins, {"project": lambda: proj(g, cam), "emit": lambda: emit(p),
                      "sort": lambda: sort(tile, gauss)}
+
+
+def torch_peak_mib(f) -> float:
+    """Peak CUDA memory (MiB) torch allocates during one call of f, above what it held before."""
+    import torch
+
+    torch.cuda.synchronize()
+    torch.cuda.reset_peak_memory_stats()
+    base = torch.cuda.memory_allocated()
+    f()
+    torch.cuda.synchronize()
+    return (torch.cuda.max_memory_allocated() - base) / 2**20

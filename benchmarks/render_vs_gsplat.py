@@ -36,7 +36,7 @@ from lgs_jax.backends import REGISTRY, pallas
 from lgs_jax.config import RasterConfig
 
 from .common import (GRAD_ROWS, PALLAS_ROWS, add_data_argument, median_ms, parse_scene,
-                     pipeline_stages, psnr)
+                     pipeline_stages, psnr, torch_peak_mib)
 
 C = RasterConfig
 
@@ -103,18 +103,6 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
             row.update(max_err_f64=float(err.max()), psnr_f64=psnr(images[name], truth))
         rows.append(row)
     return rows, images
-
-
-def _torch_peak_mb(f):
-    """Peak CUDA memory (MiB) torch allocates during one call of f, above what it held before."""
-    import torch
-
-    torch.cuda.synchronize()
-    torch.cuda.reset_peak_memory_stats()
-    base = torch.cuda.memory_allocated()
-    f()
-    torch.cuda.synchronize()
-    return (torch.cuda.max_memory_allocated() - base) / 2**20
 
 
 def _gsplat_peer(case):
@@ -192,7 +180,7 @@ def _gsplat(case, repeat):
         return rasterize_to_pixels(m2d, conics, colors, op, w, h, 16, offs, flatten_ids)
 
     image = full()
-    peak = _torch_peak_mb(full)
+    peak = torch_peak_mib(full)
     times = _median_ms({"e2e": full, "project": proj, "isect": isect, "offsets": offsets,
                         "raster": raster}, repeat, sync)
     row = dict(scene=case.name, width=w, height=h, gaussians=g.num, row="gsplat",
@@ -257,7 +245,7 @@ def _grad_rows(case, repeat, slow_repeat, names=tuple(GRAD_ROWS)):
         gsplat_step()
         fns["gsplat"], fwd["gsplat"] = gsplat_step, gsplat_fwd
         rows["gsplat"] = dict(scene=case.name, width=w, height=h, row="grad:gsplat",
-                              peak_mb=_torch_peak_mb(gsplat_step))
+                              peak_mb=torch_peak_mib(gsplat_step))
     slow = {"tiles", "reference"}
     for part, key in ((fns, "fwd_bwd_ms"), (fwd, "fwd_ms")):
         times = _median_ms({k: v for k, v in part.items() if k not in slow}, repeat, lambda _: 0)

@@ -43,7 +43,7 @@ from lgs_jax.backends import REGISTRY, kernel_steps
 from lgs_jax.layout import tile_grid
 
 from .common import (SCENES, add_data_argument, compiled_mib, load_scene, median_ms,
-                     pipeline_stages, psnr)
+                     pipeline_stages, psnr, torch_peak_mib)
 
 C = lgs_jax.RasterConfig
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
@@ -141,18 +141,6 @@ def gsplat_peer(g, cam):
     fns = {"gsplat:project": proj, "gsplat:emit": isect, "gsplat:sort": offsets,
            "gsplat:raster": raster, "gsplat:e2e": e2e}
     return fns, image, torch_peak_mib(e2e), int(isect_ids.shape[0])
-
-
-def torch_peak_mib(f) -> float:
-    """Peak CUDA memory (MiB) torch allocates during one call of f, above what it held before."""
-    import torch
-
-    torch.cuda.synchronize()
-    torch.cuda.reset_peak_memory_stats()
-    base = torch.cuda.memory_allocated()
-    f()
-    torch.cuda.synchronize()
-    return (torch.cuda.max_memory_allocated() - base) / 2**20
 
 
 def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):

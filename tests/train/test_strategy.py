@@ -148,6 +148,15 @@ def test_relocation_formula_equals_gsplats_kernel(n):
         np.testing.assert_allclose(np.asarray(new_s), 1.0, rtol=1e-5)
 
 
+def _assert_relocated(new, slots, want_o, factor):
+    """Slots hold gsplat's relocated opacity and scales (the test pool's are 0.1, 0.2, 0.3)."""
+    for slot in slots:
+        o = 1 / (1 + np.exp(-float(_p(new, "logit_opacities")[slot])))
+        assert abs(o - want_o) < 1e-6
+        np.testing.assert_allclose(np.exp(_p(new, "log_scales")[slot]),
+                                   factor * np.array([0.1, 0.2, 0.3]), rtol=1e-5)
+
+
 def test_relocate_moves_dead_onto_the_alive_one():
     """One alive Gaussian (slot 1): both dead slots (0, 3) copy it; it is shared 3 ways."""
     pool = _pool(opacities=[0.004, 0.6, 0.5, 0.005, 0.5, 0.5, 0.5, 0.5])
@@ -157,11 +166,8 @@ def test_relocate_moves_dead_onto_the_alive_one():
     new, new_opt, moved = ops.relocate(pool, opt, dead, jax.random.key(0), 0.005)
     assert np.asarray(moved).tolist() == [1, 0, 0, 1, 0, 0, 0, 0]
     want_o, factor = _gsplat_relocation(0.6, 3)
+    _assert_relocated(new, (0, 1, 3), want_o, factor)
     for slot in (0, 1, 3):
-        o = 1 / (1 + np.exp(-float(_p(new, "logit_opacities")[slot])))
-        assert abs(o - want_o) < 1e-6
-        np.testing.assert_allclose(np.exp(_p(new, "log_scales")[slot]),
-                                   factor * np.array([0.1, 0.2, 0.3]), rtol=1e-5)
         np.testing.assert_array_equal(_p(new, "means")[slot], _p(pool, "means")[1])
     np.testing.assert_array_equal(_p(new, "means")[2], _p(pool, "means")[2])  # inactive
     # gsplat zeroes the sampled source's moments; the dead slots keep theirs
@@ -188,11 +194,8 @@ def test_sample_add_copies_sampled_sources_into_free_slots():
     new, new_opt, added = ops.sample_add(pool, opt, 2, jax.random.key(1), 0.005)
     assert np.asarray(new.active).tolist() == [1, 1, 1, 0, 0, 0, 0, 0]
     want_o, factor = _gsplat_relocation(0.7, 3)
+    _assert_relocated(new, (0, 1, 2), want_o, factor)
     for slot in (0, 1, 2):
-        o = 1 / (1 + np.exp(-float(_p(new, "logit_opacities")[slot])))
-        assert abs(o - want_o) < 1e-6
-        np.testing.assert_allclose(np.exp(_p(new, "log_scales")[slot]),
-                                   factor * np.array([0.1, 0.2, 0.3]), rtol=1e-5)
         np.testing.assert_array_equal(_p(new, "sh_dc")[slot], _p(pool, "sh_dc")[0])
     # the new slots start with zero moments; the source keeps its own (gsplat)
     assert _mu(new_opt, "means").tolist() == [1000, 0, 0, 1003, 1004, 1005, 1006, 1007]
