@@ -35,9 +35,9 @@ BACKENDS = tuple(REGISTRY)
 
 def default_backend() -> str:
     """The backend `render` uses when none is given: the fastest exact one for JAX's default
-    platform, as measured (BENCHMARKS.md): `pallas` on a GPU, `tiles` elsewhere (CPU, 640x360
-    guitar frame: 0.2 s against the reference backend's 1.1 s). Gradients take the render's
-    backend; `lgs_jax.train` picks its own default for training steps."""
+    platform, as measured (BENCHMARKS.md §2 and §7): `pallas` on a GPU, `tiles` elsewhere.
+    Gradients take the render's backend; `lgs_jax.train` picks its own default for training
+    steps."""
     return "pallas" if jax.default_backend() == "gpu" else "tiles"
 
 
