@@ -6,3 +6,6 @@ python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upg
   --target /tmp/site carry/wheels/*.whl
 export PYTHONPATH="/tmp/site:$PWD" LGS_JAX_DATA="$PWD/carry/data" PYTHONUNBUFFERED=1
 export XLA_PYTHON_CLIENT_PREALLOCATE=false HYPOTHESIS_PROFILE="${HYPOTHESIS_PROFILE:-dev}"
+# gsplat's CUDA extension builds once per machine (about 75 s); keep it in the git-ignored build/
+# folder so that later calls on the same warm machine reuse it.
+export TORCH_EXTENSIONS_DIR="$PWD/build/torch_extensions"
