@@ -155,8 +155,11 @@ def _sample(key, pool: Pool, eligible, takers):
     o = jax.nn.sigmoid(pool.params["logit_opacities"])
     eligible = eligible & (o > 0)
     ok = jnp.any(eligible)
-    logits = jnp.where(eligible, jnp.log(jnp.where(eligible, o, 1.0)), -jnp.inf)
-    draws = jax.random.categorical(key, logits, shape=(pool.size,))
+    weights = jnp.where(eligible, o, 0.0)
+    # Inverse CDF over the float32 running sum of the weights, as torch.multinomial (gsplat)
+    # draws: O(N log N). (jax.random.categorical with shape (N,) draws N x N Gumbel variables.)
+    # A zero weight is an empty interval of the running sum, so it is never drawn.
+    draws = jax.random.choice(key, pool.size, (pool.size,), p=jnp.where(ok, weights, 1.0))
     takers = takers & ok
     sources = jnp.where(takers, draws, jnp.arange(pool.size))
     counts = jnp.zeros(pool.size, jnp.int32).at[sources].add(takers.astype(jnp.int32))

@@ -187,6 +187,16 @@ def test_relocate_samples_only_alive_gaussians_by_opacity():
     assert set(src) <= {3, 9} and (src == 3).sum() > 2 * (src == 9).sum()
 
 
+def test_sampling_is_linear_in_the_pool():
+    """Relocation draws a source per slot in O(N) memory: at 2^16 slots an N x N draw (as
+    jax.random.categorical(shape=(N,)) makes) would need 17 GB of temporaries."""
+    pool = _pool(2**15, 2**16)
+    dead = jnp.arange(pool.size) % 3 == 0
+    f = jax.jit(lambda p, o, d, k: ops.relocate(p, o, d, k, 0.005))
+    compiled = f.lower(pool, _opt_state(pool), dead, jax.random.key(0)).compile()
+    assert compiled.memory_analysis().temp_size_in_bytes < 2**28
+
+
 def test_sample_add_copies_sampled_sources_into_free_slots():
     pool = _pool(opacities=[0.7] + [0.5] * 7)
     pool = P.Pool(pool.params, jnp.arange(8) == 0)  # one active Gaussian

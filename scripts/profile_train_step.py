@@ -1,0 +1,153 @@
+"""Where a training step's time goes (issue 18/20): the pieces of `train.step.train_step`
+timed one by one on a real capture, beside gsplat's forward+backward of the same Gaussians.
+
+    python scripts/profile_train_step.py [--data carry/data/skull] [--gaussians 262144]
+        [--pool 500000] [--downscale 1] [--repeat 20] [--no-gsplat]
+
+The pool: the capture's start (SfM points, MCMC's initial opacity and scales) densified to
+--gaussians active rows (each point copied k times, means jittered by N(0, 1)·its largest
+scale, log-scales lowered by ln(k)/3, as benchmarks.scale densifies) in --pool slots, SH
+degree 3 with small random higher bands. Rows (median ms of --repeat alternating rounds, one
+training view, the capacity `fit` would pick):
+  render        forward image only
+  render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
+  loss+bwd      the training loss (L1 + SSIM + MCMC regulariser) and its gradients
+  ssim+bwd      the loss's image part alone (gradient w.r.t. the image)
+  adam          the optimizer update of the whole pool
+  noise         MCMC's per-step noise on the means
+  train_step    `train_step` whole (device time: blocked, no host read)
+  train_loop    `train_step` + the host read of its metrics, as `fit` runs it
+  refine        MCMC's refinement (every 100 steps in a run)
+  gsplat        gsplat's rasterization + backward of Σ image·w (same Gaussians, same view)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def densified_pool(rd, setup, n: int, size: int, seed: int = 0):
+    """(pool, opt_state, strategy_state) with n active Gaussians in `size` slots."""
+    import jax.numpy as jnp
+
+    from lgs_jax.scene import Gaussians
+    from lgs_jax.train import init
+    from lgs_jax.train.loop import _templates
+
+    g0 = init.start_gaussians(rd, setup.settings, setup.strategy, seed, 10**9, log=lambda s: 0)
+    rng = np.random.default_rng(seed)
+    k = max(1, -(-n // g0.num))
+    idx = np.arange(n) % g0.num
+    ls = np.asarray(g0.log_scales)[idx]
+    jitter = rng.standard_normal((n, 3)) * np.exp(ls.max(axis=1, keepdims=True))
+    sh = np.asarray(g0.sh)[idx].copy()
+    sh[:, 1:] = 0.05 * rng.standard_normal(sh[:, 1:].shape)
+    g = Gaussians(means=jnp.asarray(np.asarray(g0.means)[idx] + jitter, jnp.float32),
+                  quats=jnp.asarray(np.asarray(g0.quats)[idx]),
+                  log_scales=jnp.asarray(ls - np.log(k) / 3, jnp.float32),
+                  logit_opacities=jnp.asarray(np.asarray(g0.logit_opacities)[idx]),
+                  sh=jnp.asarray(sh, jnp.float32))
+    return g, _templates(setup, size, rd.scene_scale, g)
+
+
+def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool):
+    """{row name: zero-argument blocking callable} (module docstring)."""
+    import functools
+
+    import jax
+    import jax.numpy as jnp
+
+    from lgs_jax import render
+    from lgs_jax.train import losses, ops, step as st
+    from lgs_jax.train.optim import optimizer
+    from lgs_jax.train.pool import render_gaussians
+
+    cam = jax.tree.map(lambda x: x[0], rd.train_cams)
+    target = jnp.asarray(rd.train_images[0])
+    bg = jnp.asarray(rd.background)
+    w = jax.random.uniform(jax.random.key(1), (cam.height, cam.width, 3))
+    draw = lambda p: render(render_gaussians(p, pool.active), cam, background=bg,
+                            backend=setup.backend, capacity=capacity).image
+    fwd = jax.jit(draw)
+    bwd = jax.jit(jax.grad(lambda p: jnp.sum(draw(p) * w)))
+    lossg = jax.jit(lambda p: st._loss_and_grads(setup, capacity, st.Pool(p, pool.active),
+                                                  jax.tree.map(lambda x: x[None], cam),
+                                                  target[None], bg, jnp.int32(6000)))
+    ssimg = jax.jit(jax.grad(lambda im: losses.loss_fn(im, target, 0.2, "same")))
+    opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
+    adam = jax.jit(lambda g_, s_, p_: opt.update(g_, s_, p_))
+    noise = jax.jit(lambda p_, k_: ops.inject_noise(p_, k_, 1e-4 * 5e5))
+    grads = jax.tree.map(jnp.ones_like, pool.params)
+    idx = jnp.array([0])
+    key = jax.random.key(0)
+    step_fn = functools.partial(st.train_step, setup=setup, capacity=capacity)
+    call = lambda: step_fn(pool, opt_state, sstate, rd.train_cams, rd.train_images,
+                           idx, bg, jnp.int32(6000), key)
+    fns = {
+        "render": lambda: jax.block_until_ready(fwd(pool.params)),
+        "render+bwd": lambda: jax.block_until_ready(bwd(pool.params)),
+        "loss+bwd": lambda: jax.block_until_ready(lossg(pool.params)),
+        "ssim+bwd": lambda: jax.block_until_ready(ssimg(fwd(pool.params))),
+        "adam": lambda: jax.block_until_ready(adam(grads, opt_state, pool.params)),
+        "noise": lambda: jax.block_until_ready(noise(pool, key)),
+        "train_step": lambda: jax.block_until_ready(call()),
+        "train_loop": lambda: {k: v.item() for k, v in jax.device_get(call()[3]).items()},
+        "refine": lambda: jax.block_until_ready(st._refine(
+            sstate, pool, opt_state, 6100, key, strategy=setup.strategy, cap=pool.size)),
+    }
+    if with_gsplat:
+        from benchmarks.scale import gsplat_grad_step
+
+        gs = gsplat_grad_step(g, cam, w)
+        if gs is not None:
+            fns["gsplat"] = gs
+    return fns
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", default=os.path.join(
+        os.environ.get("LGS_JAX_DATA", "../shared/data"), "skull"))
+    ap.add_argument("--gaussians", type=int, default=262_144)
+    ap.add_argument("--pool", type=int, default=500_000)
+    ap.add_argument("--downscale", type=int, default=1)
+    ap.add_argument("--repeat", type=int, default=20)
+    ap.add_argument("--backend", default=None)
+    ap.add_argument("--no-gsplat", action="store_true")
+    args = ap.parse_args(argv)
+
+    import jax
+    import jax.numpy as jnp
+
+    from benchmarks.common import device_line, median_ms
+    from lgs_jax.render import next_pow2
+    from lgs_jax.train import MCMCStrategy, Settings
+    from lgs_jax.train.data import prepare
+    from lgs_jax.train.loop import _pairs
+    from lgs_jax.train.settings import Setup
+
+    rd = prepare(args.data, args.downscale)
+    backend = args.backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
+    setup = Setup(Settings(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, backend)
+    g, (pool, opt_state, sstate) = densified_pool(rd, setup, args.gaussians, args.pool)
+    cam = jax.tree.map(lambda x: x[0], rd.train_cams)
+    pairs = int(_pairs(pool, cam))
+    capacity = next_pow2(2 * pairs)
+    fns = rows(rd, setup, g, pool, opt_state, sstate, capacity, not args.no_gsplat)
+    ms = median_ms(fns, args.repeat)
+    print(device_line())
+    print(f"{args.gaussians} Gaussians in {args.pool} slots, {cam.width}x{cam.height}, "
+          f"{pairs} pairs, capacity {capacity}, backend {backend}")
+    for name, t in ms.items():
+        print(f"  {name:<12s} {t:8.2f} ms")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
