@@ -46,18 +46,21 @@ from .common import (SCENES, add_data_argument, compiled_mib, load_scene, median
                      pipeline_stages, psnr, torch_peak_mib)
 
 C = lgs_jax.RasterConfig
+K = lgs_jax.KernelConfig
+LOCAL = K(vanilla_from_pairs=None)  # the Local-GS kernel at every size (no routing)
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
 ROWS = {
-    "localgs": ("pallas", C("gsplat")),
-    "localgs:fast": ("pallas", C("gsplat", blend="fast")),
+    "auto": ("pallas", C("gsplat")),  # what users get: vanilla from 2^25 pairs (KernelConfig)
+    "localgs": ("pallas", C("gsplat", tuning=LOCAL)),
+    "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # block-size variants of the Mosaic GPU kernels (KernelConfig)
-    "localgs:px128": ("pallas", C("gsplat", tuning=lgs_jax.KernelConfig(
-        mosaic_forward_pixels=128, mosaic_backward_pixels=128))),
-    "localgs:px256": ("pallas", C("gsplat", tuning=lgs_jax.KernelConfig(
-        mosaic_forward_pixels=256, mosaic_backward_pixels=256))),
+    "localgs:px128": ("pallas", C("gsplat", tuning=K(
+        mosaic_forward_pixels=128, mosaic_backward_pixels=128, vanilla_from_pairs=None))),
+    "localgs:px256": ("pallas", C("gsplat", tuning=K(
+        mosaic_forward_pixels=256, mosaic_backward_pixels=256, vanilla_from_pairs=None))),
 }
 
 

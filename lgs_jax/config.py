@@ -38,6 +38,13 @@ class KernelConfig:
         per kernel as measured, BENCHMARKS.md). In interpret mode "auto" runs Triton, whose
         interpreter (jitted XLA loops) is orders of magnitude faster than Mosaic GPU's
         simulation of a GPU; the two are bit for bit the same there.
+      vanilla_from_pairs: a forward-only `pallas` render runs the vanilla kernel when
+        its pair buffer (`capacity`) holds at least this many pairs (kernel "auto" only): there
+        the Local-GS per-pair preparation in XLA costs more than its kernel saves (H200: vanilla
+        1.47–1.64x gsplat's forward against Local-GS's 1.82–1.96x at 24M pairs, a tie at 10M,
+        Local-GS faster below; BENCHMARKS.md §7). Images agree to float32 rounding (both are
+        exact; the kernels evaluate α in different forms). Under differentiation the Local-GS
+        forward and backward still run (the routed backward has not been measured). None: never.
       interpret: run the Pallas kernels in interpret mode (True), lower them for the GPU (False:
         on a machine without one only tracing and lowering work, which tests use to check that
         every kernel lowers), or decide by the platform (None: interpret unless JAX's default
@@ -64,6 +71,7 @@ class KernelConfig:
     auto_vanilla: Literal["triton", "mosaic"] = "mosaic"
     auto_backward: Literal["triton", "mosaic"] = "mosaic"
     interpret: bool | None = None
+    vanilla_from_pairs: int | None = 2**25
     triton_unroll_localgs: int = 2
     triton_unroll_vanilla: int = 8
     mosaic_unroll_localgs: int = 8
@@ -85,6 +93,8 @@ class KernelConfig:
         for name in ("mosaic_forward_pixels", "mosaic_backward_pixels"):
             _check(f"tuning.{name}", getattr(self, name), (None, 128, 256))
         _check_int("tuning.mosaic_whole_tile_from", self.mosaic_whole_tile_from, 0)
+        if self.vanilla_from_pairs is not None:
+            _check_int("tuning.vanilla_from_pairs", self.vanilla_from_pairs, 1)
         _check_int("tuning.mosaic_chunk", self.mosaic_chunk, 0)
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "

@@ -73,7 +73,8 @@ class RenderStats:
       backend: name of the backend that rendered (static).
       kernel: the Pallas forward kernel that ran ("localgs-triton", "localgs-mosaic",
         "vanilla-triton", "vanilla-mosaic"; "" for the XLA
-        backends) (static).
+        backends) (static). Under differentiation the forward of the backward's plan runs
+        (`backends.pallas.Plan.for_gradients`), which this does not name where they differ.
       interpreted: the Pallas kernel ran in interpret mode (no GPU) (static).
     """
 

@@ -9,7 +9,8 @@ counterpart of each kernel, which the tests compare them with, is lgs_jax.backen
 masks, same hoisted arithmetic, same blending semantics, same backward walk) and
 lgs_jax.backends.reference (per-pixel semantics).
 
-`pallas` runs the Local-GS kernel (Sec. III): a hoisted 6-vector V per (tile, Gaussian) pair
+`pallas` runs the Local-GS kernel (Sec. III; except a forward-only render whose pair buffer
+reaches `KernelConfig.vanilla_from_pairs`, which runs the vanilla kernel, faster there): a hoisted 6-vector V per (tile, Gaussian) pair
 (Eq. 8, `kernel_steps.pair_records`), ln α as V·[x'², x'y', y'², x', y', 1] per pixel (Eq. 10),
 the strip masks as warp-uniform predicates or branches (Sec. III-C), exact or fast (Sec. III-D)
 blending. `pallas_vanilla` runs the original 3DGS rasterizer (difference form, per-pixel
@@ -64,6 +65,8 @@ class Plan:
     Attributes:
       config: the RasterConfig rendered.
       vanilla: the vanilla kernel (else Local-GS).
+      routed: the `pallas` backend running the vanilla kernel for a forward-only render
+        (`KernelConfig.vanilla_from_pairs`); `for_gradients` goes back to Local-GS.
       forward, backward: "triton" or "mosaic", the forward and backward kernels' implementation.
       interpret: the kernels run in Pallas interpret mode.
       forward_pixels, backward_pixels: Mosaic GPU pixels per block (128 or 256).
@@ -76,6 +79,7 @@ class Plan:
     interpret: bool
     forward_pixels: int
     backward_pixels: int
+    routed: bool = False
 
     @property
     def kernel_name(self) -> str:
@@ -83,11 +87,13 @@ class Plan:
         return f"{'vanilla' if self.vanilla else 'localgs'}-{self.forward}"
 
     def for_gradients(self) -> Plan:
-        """The plan of the forward whose residuals the backward kernel uses: with kernel="auto",
-        the forward of the backward's implementation."""
+        """The plan of the forward whose residuals the backward kernel uses (and of that
+        backward): with kernel="auto", the forward of the backward's implementation, and the
+        backend's own kernel where a forward-only render would be `routed`."""
         if self.config.kernel != "auto":
             return self
-        return dataclasses.replace(self, forward=self.backward)
+        return dataclasses.replace(self, forward=self.backward,
+                                   vanilla=self.vanilla and not self.routed, routed=False)
 
 
 def interpreted(config: RasterConfig) -> bool:
@@ -107,10 +113,14 @@ def block_pixels(fixed: int | None, n_tiles: int, config: RasterConfig) -> int:
     return 256 if n_tiles >= config.tuning.mosaic_whole_tile_from else 128
 
 
-def plan(config: RasterConfig, vanilla: bool, n_tiles: int) -> Plan:
-    """Resolve `config` for an image of `n_tiles` tiles on this platform."""
+def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -> Plan:
+    """Resolve `config` for an image of `n_tiles` tiles and a pair buffer of `capacity` on this
+    platform."""
     t = config.tuning
     interpret = interpreted(config)
+    routed = (not vanilla and config.kernel == "auto" and t.vanilla_from_pairs is not None
+              and capacity >= t.vanilla_from_pairs)
+    vanilla = vanilla or routed
     if config.kernel != "auto":
         forward = backward_impl = config.kernel
     elif interpret:
@@ -120,7 +130,8 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int) -> Plan:
     return Plan(config=config, vanilla=vanilla, forward=forward, backward=backward_impl,
                 interpret=interpret,
                 forward_pixels=block_pixels(t.mosaic_forward_pixels, n_tiles, config),
-                backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config))
+                backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
+                routed=routed)
 
 
 def describe(vanilla: bool):
@@ -185,6 +196,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
                stop_at, saved, cotangents):
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth) from the backward
     kernel's pair rows."""
+    plan_ = plan_.for_gradients()
     masks, records, order = saved
     config = _vanilla_model(plan_.config) if plan_.vanilla else plan_.config
     dt = p.mean2d.dtype
@@ -217,7 +229,7 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
               vanilla: bool = False) -> RasterResult:
     """Composite every tile with the Local-GS (or vanilla) kernel (differentiable: a custom_vjp
     whose backward is the backward kernel)."""
-    plan_ = plan(config, vanilla, bins.tile_start.shape[0])
+    plan_ = plan(config, vanilla, bins.tile_start.shape[0], bins.gauss.shape[0])
     color, trans, depth, stop, strip_pairs = _COMPOSITE(p, bins, width, height, plan_)
     return RasterResult(color=color, trans=trans, depth=depth, stop=stop, strip_pairs=strip_pairs,
                         kernel=plan_.kernel_name, interpreted=plan_.interpret)

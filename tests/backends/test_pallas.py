@@ -167,6 +167,39 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
                                       getattr(outs[0, 128], field))
 
 
+def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
+    """`KernelConfig.vanilla_from_pairs`: with kernel "auto" a `pallas` plan whose pair buffer
+    reaches the threshold runs the vanilla kernel forward, and Local-GS again under
+    differentiation; never for an explicit kernel, nor with the threshold None."""
+    gpu = C(tuning=K(interpret=False))
+    assert not pallas.plan(gpu, False, 1, 2**25 - 1).vanilla
+    routed = pallas.plan(gpu, False, 1, 2**25)
+    assert routed.vanilla and routed.kernel_name == "vanilla-mosaic"
+    assert not routed.for_gradients().vanilla
+    assert pallas.plan(gpu, True, 1, 2**25).for_gradients().vanilla  # pallas_vanilla stays
+    assert not pallas.plan(C(kernel="mosaic", tuning=K(interpret=False)), False, 1, 2**30).vanilla
+    assert not pallas.plan(C(tuning=K(vanilla_from_pairs=None)), False, 1, 2**30).vanilla
+    with pytest.raises(ValueError, match="tuning.vanilla_from_pairs"):
+        K(vanilla_from_pairs=0)
+
+
+def test_routed_render_is_vanillas_image_and_localgs_gradients():
+    """Routed end to end (interpret mode, threshold 1): the image is `pallas_vanilla`'s bit for
+    bit and names its kernel; the gradients are the unrouted `pallas` gradients bit for bit."""
+    g = scenes.cast(scenes.scene(7), np.float32)
+    cam = scenes.camera()
+    routed = C(tuning=K(vanilla_from_pairs=1))
+    out = scenes.render(g, cam, "pallas", routed)
+    ref = scenes.render(g, cam, "pallas_vanilla", routed)
+    assert out.stats.kernel == "vanilla-triton"
+    np.testing.assert_array_equal(out.image, ref.image)
+    w = jax.random.uniform(jax.random.key(2), out.image.shape)
+    grad = lambda cf: jax.grad(lambda g: (scenes.render(g, cam, "pallas", cf).image
+                                          * w).sum())(g)
+    for a, b in zip(jax.tree.leaves(grad(routed)), jax.tree.leaves(grad(C()))):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_plan_resolves_implementation_and_block_size():
     """kernel="auto" runs Mosaic GPU for every kernel on the GPU (`KernelConfig.auto_*`) and
     Triton in interpret mode; an explicit kernel runs everywhere; under differentiation "auto"
