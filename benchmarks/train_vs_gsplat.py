@@ -65,6 +65,9 @@ def parse(argv=None) -> argparse.Namespace:
                                             "lego 300000, skull 500000)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--convention", choices=["3dgs", "gsplat"], default="3dgs",
+                    help="our compositing rule (gsplat's trainer always renders as gsplat: "
+                         "alpha cap 0.999)")
     ap.add_argument("--ssim-padding", choices=["same", "valid"], default="same",
                     help="the loss's SSIM (both trainers): same (the issue's recipe, 3DGS) or "
                          "valid (gsplat's simple_trainer)")
@@ -92,7 +95,7 @@ def scene_setup(args, scene: str):
     strategy = (train.MCMCStrategy(cap_max=cap) if args.strategy == "mcmc"
                 else train.DefaultStrategy())
     settings = train.Settings(eval_every=args.eval_every, checkpoint_every=max(args.steps, 1),
-                              ssim_padding=args.ssim_padding)
+                              ssim_padding=args.ssim_padding, convention=args.convention)
     return d, cap, strategy, settings
 
 

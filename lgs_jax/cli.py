@@ -202,7 +202,8 @@ def _fit(args) -> int:
     if problem:
         raise UsageError(f"--out: {problem}")
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
-                                   eval_every=args.eval_every, init_points=args.init_points)
+                                   eval_every=args.eval_every, init_points=args.init_points,
+                                   convention=args.convention)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
     else:
@@ -286,6 +287,9 @@ def _fit_parser(sub, common) -> None:
                    help="default strategy: reset opacities every 3000 steps (3DGS; gsplat "
                         "1.5.3 never does, through a bug)")
     f.add_argument("--batch", type=_int_at_least(1), default=1, help="views per step")
+    f.add_argument("--convention", choices=["3dgs", "gsplat"], default="3dgs",
+                   help="compositing rule of training and evaluation renders (alpha cap 0.99 "
+                        "or gsplat's 0.999)")
     f.add_argument("--eval-every", type=_int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
     f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"),

@@ -114,10 +114,11 @@ def _save(out: str, setup: Setup, st: _State, seed: int) -> None:
     save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
 
 
-def _evaluate(st: _State, rd: RunData, backend: str, out: str | None = None):
+def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
     """Held-out (PSNR, SSIM); renders beside the ground truth written to `out` when given."""
     images, st.eval_capacity = render_views(st.pool, rd.test_cams, jnp.asarray(rd.background),
-                                            backend, st.eval_capacity)
+                                            setup.backend, st.eval_capacity,
+                                            setup.settings.convention)
     if out:
         report.save_renders(out, images, rd.test_images, rd.test_names)
     return report.heldout_metrics(images, rd.test_images)
@@ -178,7 +179,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
                        seconds=busy, **({} if m["ok"] else dict(skipped=True)))
                 progress.step(m["loss"], m["psnr"], m["count"])
                 if st.step % s.eval_every == 0 and st.step < setup.steps:
-                    psnr, ssim = _evaluate(st, rd, setup.backend)
+                    psnr, ssim = _evaluate(st, rd, setup)
                     record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
                     say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
                 if st.step % s.checkpoint_every == 0 or st.step == setup.steps:
@@ -189,7 +190,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
 
 
 def _check_args(steps, max_gaussians, settings: Settings) -> None:
-    """Raise `ValueError` naming the argument for counts `fit` cannot use."""
+    """Raise `ValueError` naming the argument for counts and names `fit` cannot use."""
     for name, v, low in (("steps", steps, 0), ("max_gaussians", max_gaussians, 1),
                          ("settings.batch", settings.batch, 1),
                          ("settings.eval_every", settings.eval_every, 1),
@@ -198,6 +199,10 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          ("settings.init_points", settings.init_points, 1)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
             raise ValueError(f"{name}: expected an int >= {low}, got {v!r}")
+    for name, v, known in (("settings.convention", settings.convention, ("3dgs", "gsplat")),
+                           ("settings.ssim_padding", settings.ssim_padding, ("same", "valid"))):
+        if v not in known:
+            raise ValueError(f"{name}: expected one of {known}, got {v!r}")
 
 
 def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -> RunData:
@@ -253,7 +258,7 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
 def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log,
             compile_seconds) -> dict:
     """Final evaluation and outputs (module docstring); returns the result."""
-    psnr, ssim = _evaluate(st, rd, setup.backend, out)
+    psnr, ssim = _evaluate(st, rd, setup, out)
     with open(os.path.join(out, "metrics.jsonl"), "a") as f:
         f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
     log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")

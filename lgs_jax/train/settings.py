@@ -14,7 +14,9 @@ class Settings:
     Learning rates per group (Adam, `optim.optimizer`): means lr_means · scene_scale decaying to
     lr_means_decay of that over the run; the others constant. ssim_lambda: weight of 1 − SSIM in
     the loss; ssim_padding: "same" (3DGS, the default) or "valid" (gsplat's simple_trainer),
-    `losses.ssim`. sh_every: one more SH band every sh_every steps up to sh_degree. batch: views per
+    `losses.ssim`. convention: the compositing rule of training and evaluation renders
+    (`RasterConfig.convention`: "3dgs", alpha cap 0.99, or "gsplat", 0.999 as gsplat's trainer
+    renders). sh_every: one more SH band every sh_every steps up to sh_degree. batch: views per
     step. eval_every / checkpoint_every: steps between held-out evaluations / checkpoints.
     init_points, init_extent: the random start of datasets without SfM points (`init.py`):
     that many points in a cube of half-width init_extent · scene_scale; None: 3.0 (gsplat) for
@@ -30,6 +32,7 @@ class Settings:
     lr_sh_rest: float = 2.5e-3 / 20
     ssim_lambda: float = 0.2
     ssim_padding: str = "same"
+    convention: str = "3dgs"
     sh_every: int = 1000
     sh_degree: int = 3
     batch: int = 1

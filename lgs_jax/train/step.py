@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
@@ -54,7 +55,7 @@ def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, back
 
         def one(cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
-                       screen_offsets=off)
+                       config=RasterConfig(s.settings.convention), screen_offsets=off)
             return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
 
@@ -130,17 +131,19 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap:
         pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)
 
 
-@functools.partial(jax.jit, static_argnames=("backend", "capacity"))
-def _render_pool(pool: Pool, cam, background, *, backend: str, capacity: int):
+@functools.partial(jax.jit, static_argnames=("backend", "capacity", "convention"))
+def _render_pool(pool: Pool, cam, background, *, backend: str, capacity: int, convention: str):
     return render(render_gaussians(pool.params, pool.active), cam, background=background,
-                  backend=backend, capacity=capacity)
+                  backend=backend, capacity=capacity, config=RasterConfig(convention))
 
 
-def render_views(pool: Pool, cams, background, backend: str, capacity: int):
+def render_views(pool: Pool, cams, background, backend: str, capacity: int,
+                 convention: str = "3dgs"):
     """([image (H, W, 3) numpy, clipped to [0, 1]] per camera, capacity): every active
-    Gaussian with all its SH bands (gsplat evaluates at full degree), capacity grown as needed."""
+    Gaussian with all its SH bands (gsplat evaluates at full degree) under `convention`,
+    capacity grown as needed."""
     images = []
-    fn = functools.partial(_render_pool, backend=backend)
+    fn = functools.partial(_render_pool, backend=backend, convention=convention)
     for cam in cams:
         out, capacity = render_growing(fn, pool, cam, background, capacity=capacity)
         images.append(np.clip(np.asarray(out.image), 0.0, 1.0))

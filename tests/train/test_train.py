@@ -230,7 +230,9 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["max_gaussians"] == 5000 and seen["downscale"] == 1
     assert cli.main(base + ["--downscale", "4", "--opacity-reset", "--steps", "7"]) == 0
     assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
-    assert seen["downscale"] == 4
+    assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
+    assert cli.main(base + ["--convention", "gsplat"]) == 0
+    assert seen["settings"].convention == "gsplat"
 
 
 def test_run_dir_rules(tmp_path):
@@ -246,9 +248,33 @@ def test_run_dir_rules(tmp_path):
         train.fit("unused", 1, str(tmp_path))
 
 
-@pytest.mark.parametrize("kwargs,match", [(dict(steps=-1), "steps: expected an int >= 0"),
-                                          (dict(max_gaussians=0), "max_gaussians")])
-def test_fit_refuses_bad_counts(tmp_path, kwargs, match):
+def test_training_renders_follow_the_convention():
+    """Settings.convention reaches the renders: an opaque Gaussian over a white background
+    leaves 1 − 0.99 of it under "3dgs" and 1 − 0.999 under "gsplat"."""
+    from lgs_jax.train import pool as P, step as S
+
+    g = lgs_jax.Gaussians(means=jnp.array([[0.0, 0.0, 4.0]]), quats=jnp.array([[1.0, 0, 0, 0]]),
+                          log_scales=jnp.full((1, 3), 2.0), logit_opacities=jnp.array([30.0]),
+                          sh=jnp.zeros((1, 1, 3)))
+    cam = lgs_jax.Camera(viewmat=np.eye(4, dtype=np.float32), fx=20.0, fy=20.0, cx=8.0, cy=8.0,
+                         width=16, height=16)
+    pool = P.from_gaussians(g)
+    centre = {}
+    for convention in ("3dgs", "gsplat"):
+        (image,), _ = S.render_views(pool, [cam], jnp.ones(3), "tiles", 64, convention)
+        want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64,
+                              config=lgs_jax.RasterConfig(convention)).image
+        np.testing.assert_array_equal(image, np.clip(np.asarray(want), 0, 1))
+        centre[convention] = image[8, 8, 0]
+    # SH DC 0 is grey 0.5: 0.5·cap + 1·(1 − cap)
+    np.testing.assert_allclose([centre["3dgs"], centre["gsplat"]], [0.505, 0.5005], atol=1e-5)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(steps=-1), "steps: expected an int >= 0"), (dict(max_gaussians=0), "max_gaussians"),
+    (dict(settings=train.Settings(convention="inria")), "settings.convention"),
+    (dict(settings=train.Settings(ssim_padding="full")), "settings.ssim_padding")])
+def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
 
