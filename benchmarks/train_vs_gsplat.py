@@ -1,8 +1,8 @@
 """Training, ours against gsplat 1.5.3's trainer, in one call on one GPU (issue 20).
 
     python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
-        [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--out DIR]
-        [--no-gsplat] [--no-ours] [--inline]
+        [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
+        [--convention 3dgs|gsplat] [--no-gsplat] [--no-ours] [--inline]
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
 (so each one's peak memory is its own, and JAX stays off the GPU while gsplat runs), on the same:
@@ -19,8 +19,8 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
            `DefaultStrategy()`, against ours with the same settings (`lgs_jax.train.strategy`);
   metrics  held-out PSNR / SSIM with scikit-image (`report.heldout_metrics`) every
            --eval-every steps and at the end, on renders clipped to [0, 1].
-Each renders with its own rasterizer (ours: the 3DGS compositing rule, alpha cap 0.99; gsplat's:
-0.999). Time per step: the training loop's wall time (one host sync per step in both, as
+Each renders with its own rasterizer (ours: the 3DGS compositing rule, alpha cap 0.99, or
+gsplat's with --convention gsplat; gsplat's: 0.999). Time per step: the training loop's wall time (one host sync per step in both, as
 simple_trainer's progress bar does) without evaluations; ours also without compilation (both
 numbers are written), gsplat's after one warm-up render (its CUDA extension loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
