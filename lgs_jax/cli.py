@@ -2,7 +2,8 @@
 `python -m lgs_jax fit --data DIR --out DIR [--strategy default|mcmc] [--steps N] ...`
 (lgs_jax.train).
 
-Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
+Compiled programs are kept in JAX's persistent cache (`use_compile_cache`: $LGS_JAX_CACHE,
+default ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off). Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
 options, input paths, --view, --out, an existing fit run), 1 for a failure while working (a
 malformed file, a render error); `--debug` shows the traceback instead.
 """
@@ -334,9 +335,28 @@ def _one_line(e: BaseException) -> str:
     return " ".join(text.split())
 
 
+def use_compile_cache() -> str | None:
+    """Turn on JAX's persistent compilation cache for the command and return its folder: a
+    later run with the same shapes loads its programs instead of compiling them again (`fit`
+    compiles for 40–80 s on an H200, BENCHMARKS.md §5). The folder is $LGS_JAX_CACHE, else
+    ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off; a folder the caller already configured
+    (`jax_compilation_cache_dir`) is kept."""
+    import jax
+
+    if jax.config.jax_compilation_cache_dir:
+        return jax.config.jax_compilation_cache_dir
+    path = os.environ.get("LGS_JAX_CACHE",
+                          os.path.join(os.path.expanduser("~"), ".cache", "lgs_jax", "jax"))
+    if not path:
+        return None
+    jax.config.update("jax_compilation_cache_dir", path)
+    return path
+
+
 def main(argv=None) -> int:
     """Run the command line; returns the exit code (0 success, 1 failure, 2 usage error)."""
     args = _parser().parse_args(argv)
+    use_compile_cache()
     try:
         return args.func(args)
     except UsageError as e:

@@ -158,3 +158,23 @@ def test_readme_test_command_is_what_ci_runs():
     # CI runs the README's command (the default set), then the slow set the README names.
     assert ci[-2:] == ["python -m pytest -n 2", "python -m pytest -n 2 -m slow"]
     assert "`python -m pytest -n 2 -m slow`" in readme
+
+
+def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
+    """The command line turns JAX's persistent compilation cache on (LGS_JAX_CACHE, "" for off)
+    and keeps a folder the caller configured (here: the test session's)."""
+    import jax
+
+    from lgs_jax.cli import use_compile_cache
+
+    session = jax.config.jax_compilation_cache_dir
+    assert session and use_compile_cache() == session
+    try:
+        jax.config.update("jax_compilation_cache_dir", None)
+        monkeypatch.setenv("LGS_JAX_CACHE", "")
+        assert use_compile_cache() is None and not jax.config.jax_compilation_cache_dir
+        monkeypatch.setenv("LGS_JAX_CACHE", str(tmp_path / "cache"))
+        assert use_compile_cache() == str(tmp_path / "cache")
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "cache")
+    finally:
+        jax.config.update("jax_compilation_cache_dir", session)
