@@ -3,7 +3,9 @@
 (lgs_jax.train).
 
 Compiled programs are kept in JAX's persistent cache (`use_compile_cache`: $LGS_JAX_CACHE,
-default ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off). Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
+default ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off).
+
+Errors are one line on stderr: exit code 2 for a bad command line (checked before any work:
 options, input paths, --view, --out, an existing fit run), 1 for a failure while working (a
 malformed file, a render error); `--debug` shows the traceback instead.
 """
