@@ -123,7 +123,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     import jax
-    import jax.numpy as jnp
 
     from benchmarks.common import device_line, median_ms
     from lgs_jax.render import next_pow2

@@ -18,7 +18,6 @@ SSIM by default (the issue's recipe; gsplat's simple_trainer uses "valid": Setti
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
