@@ -2,7 +2,7 @@
 
     python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
         [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
-        [--convention 3dgs|gsplat] [--no-gsplat] [--no-ours] [--inline]
+        [--backend NAME] [--convention 3dgs|gsplat] [--no-gsplat] [--no-ours] [--inline]
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
 (so each one's peak memory is its own, and JAX stays off the GPU while gsplat runs), on the same:
@@ -19,8 +19,9 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
            `DefaultStrategy()`, against ours with the same settings (`lgs_jax.train.strategy`);
   metrics  held-out PSNR / SSIM with scikit-image (`report.heldout_metrics`) every
            --eval-every steps and at the end, on renders clipped to [0, 1].
-Each renders with its own rasterizer (ours: the 3DGS compositing rule, alpha cap 0.99, or
-gsplat's with --convention gsplat; gsplat's: 0.999). Time per step: the training loop's wall time (one host sync per step in both, as
+Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by default, with the
+3DGS compositing rule, alpha cap 0.99, or gsplat's with --convention gsplat; gsplat's: 0.999).
+Time per step: the training loop's wall time (one host sync per step in both, as
 simple_trainer's progress bar does) without evaluations; ours also without compilation (both
 numbers are written), gsplat's after one warm-up render (its CUDA extension loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
@@ -65,6 +66,8 @@ def parse(argv=None) -> argparse.Namespace:
                                             "lego 300000, skull 500000)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--backend", help="our differentiable backend (default: pallas on a GPU, "
+                                      "tiles elsewhere; e.g. pallas_vanilla)")
     ap.add_argument("--convention", choices=["3dgs", "gsplat"], default="3dgs",
                     help="our compositing rule (gsplat's trainer always renders as gsplat: "
                          "alpha cap 0.999)")
@@ -118,7 +121,7 @@ def run_ours(args, scene: str) -> dict:
     d, cap, strategy, settings = scene_setup(args, scene)
     out = os.path.join(args.run_dir or tempfile.mkdtemp(prefix="lgs_bench_"), f"{scene}_ours")
     result = train.fit(d, args.steps, out, strategy=strategy, settings=settings,
-                       max_gaussians=cap, seed=args.seed, overwrite=True,
+                       max_gaussians=cap, seed=args.seed, overwrite=True, backend=args.backend,
                        pool_size=cap if args.strategy == "mcmc" else None)
     rows = report.read_metrics(os.path.join(out, "metrics.jsonl"))
     count = {r["step"]: r["gaussians"] for r in rows if "gaussians" in r and "step" in r}
