@@ -55,6 +55,8 @@ SCENES = {  # folder in the data root, image downscale, Gaussian cap
 
 def parse(argv=None) -> argparse.Namespace:
     """The command line (module docstring)."""
+    from lgs_jax.config import CONVENTIONS
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data-root", default=os.environ.get(
         "LGS_JAX_DATA", os.path.join(ROOT, "..", "shared", "data")))
@@ -68,7 +70,7 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--backend", help="our differentiable backend (default: pallas on a GPU, "
                                       "tiles elsewhere; e.g. pallas_vanilla)")
-    ap.add_argument("--convention", choices=["3dgs", "gsplat"], default="3dgs",
+    ap.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
                     help="our compositing rule (gsplat's trainer always renders as gsplat: "
                          "alpha cap 0.999)")
     ap.add_argument("--ssim-padding", choices=["same", "valid"], default="same",

@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from .config import CONVENTIONS
+
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
 EXIT_FAILURE, EXIT_USAGE = 1, 2
 
@@ -247,7 +249,7 @@ def _render_parser(sub, common) -> None:
                    help="rasterizer (default: the fastest exact one for the platform, pallas on "
                         "a GPU, tiles elsewhere; pallas and pallas_vanilla run interpreted "
                         "without a GPU)")
-    r.add_argument("--convention", default="3dgs", choices=["3dgs", "gsplat"],
+    r.add_argument("--convention", default="3dgs", choices=CONVENTIONS,
                    help="compositing rule (default: 3dgs)")
     r.add_argument("--background", type=_finite_float, nargs=3, default=[0.0, 0.0, 0.0],
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
@@ -290,7 +292,7 @@ def _fit_parser(sub, common) -> None:
                    help="default strategy: reset opacities every 3000 steps (3DGS; gsplat "
                         "1.5.3 never does, through a bug)")
     f.add_argument("--batch", type=_int_at_least(1), default=1, help="views per step")
-    f.add_argument("--convention", choices=["3dgs", "gsplat"], default="3dgs",
+    f.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
                    help="compositing rule of training and evaluation renders (alpha cap 0.99 "
                         "or gsplat's 0.999)")
     f.add_argument("--eval-every", type=_int_at_least(1), default=500,

@@ -15,6 +15,7 @@ from typing import Literal
 ALPHA_MIN = 1.0 / 255.0
 T_STOP = 1e-4
 _ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}
+CONVENTIONS = tuple(_ALPHA_CAP)
 IMPLEMENTATIONS = ("triton", "mosaic")
 
 
@@ -141,7 +142,7 @@ class RasterConfig:
     tuning: KernelConfig = KernelConfig()
 
     def __post_init__(self):
-        _check("config.convention", self.convention, tuple(_ALPHA_CAP))
+        _check("config.convention", self.convention, CONVENTIONS)
         _check("config.blend", self.blend, ("exact", "fast"))
         _check("config.origin", self.origin, ("corner", "center"))
         _check("config.kernel", self.kernel, ("auto",) + IMPLEMENTATIONS)

@@ -24,12 +24,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import binning
+from ..config import CONVENTIONS
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2
 from . import checkpoint, report
 from .data import RunData, prepare, views_for_step
 from .init import start_gaussians
+from .losses import PADDINGS
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
 from .settings import Settings, Setup
@@ -199,8 +201,8 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          ("settings.init_points", settings.init_points, 1)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
             raise ValueError(f"{name}: expected an int >= {low}, got {v!r}")
-    for name, v, known in (("settings.convention", settings.convention, ("3dgs", "gsplat")),
-                           ("settings.ssim_padding", settings.ssim_padding, ("same", "valid"))):
+    for name, v, known in (("settings.convention", settings.convention, CONVENTIONS),
+                           ("settings.ssim_padding", settings.ssim_padding, PADDINGS)):
         if v not in known:
             raise ValueError(f"{name}: expected one of {known}, got {v!r}")
 

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 LAMBDA_DSSIM = 0.2
+PADDINGS = ("same", "valid")  # `ssim` boundary rules (module docstring)
 RADIUS = 5  # an 11-pixel window
 
 
@@ -46,7 +47,7 @@ def _blur(x, w, mode: str):
 
 def ssim(a, b, data_range: float = 1.0, padding: str = "valid"):
     """Mean SSIM of two (H, W, C) images (module docstring: "same" or "valid" padding)."""
-    if padding not in ("same", "valid"):
+    if padding not in PADDINGS:
         raise ValueError(f"padding: expected 'same' or 'valid', got {padding!r}")
     c = a.shape[-1]
     a, b = jnp.moveaxis(a, -1, 0), jnp.moveaxis(b, -1, 0)
