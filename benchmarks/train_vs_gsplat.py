@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import os
 import subprocess
@@ -66,6 +67,9 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--eval-every", type=int, default=500)
     ap.add_argument("--cap", type=int, help="Gaussian cap for every scene (default: per scene, "
                                             "lego 300000, skull 500000)")
+    ap.add_argument("--refine-from", type=int,
+                    help="both strategies' refine_start_iter (e.g. the step count: no "
+                         "refinement, to tell its effect apart; default: the strategy's)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--backend", help="our differentiable backend (default: pallas on a GPU, "
@@ -99,6 +103,8 @@ def scene_setup(args, scene: str):
     cap = args.cap or cfg["cap"]
     strategy = (train.MCMCStrategy(cap_max=cap) if args.strategy == "mcmc"
                 else train.DefaultStrategy())
+    if args.refine_from is not None:
+        strategy = dataclasses.replace(strategy, refine_start_iter=args.refine_from)
     settings = train.Settings(eval_every=args.eval_every, checkpoint_every=max(args.steps, 1),
                               ssim_padding=args.ssim_padding, convention=args.convention)
     return d, cap, strategy, settings
@@ -202,12 +208,13 @@ def _gsplat_model(g0, rd, settings, strategy, steps: int, cap: int):
             for k, lr in rates.items()}
     sched = torch.optim.lr_scheduler.ExponentialLR(
         opts["means"], gamma=s.lr_means_decay ** (1.0 / max(steps, 1)))
-    if type(strategy).__name__ == "MCMCStrategy":
-        theirs = MCMCStrategy(cap_max=cap)
-        state = theirs.initialize_state()
-    else:
-        theirs = DefaultStrategy()
-        state = theirs.initialize_state(scene_scale=rd.scene_scale)
+    mcmc = type(strategy).__name__ == "MCMCStrategy"
+    cls = MCMCStrategy if mcmc else DefaultStrategy
+    shared = {f.name: getattr(strategy, f.name) for f in dataclasses.fields(cls)
+              if f.name in {g.name for g in dataclasses.fields(strategy)}}
+    theirs = cls(**shared)  # gsplat's strategy with our settings (cap_max, refine_start_iter...)
+    state = (theirs.initialize_state() if mcmc
+             else theirs.initialize_state(scene_scale=rd.scene_scale))
     theirs.check_sanity(params, opts)
     return params, opts, sched, theirs, state
 
