@@ -2,12 +2,16 @@
 timed one by one on a real capture, beside gsplat's forward+backward of the same Gaussians.
 
     python scripts/profile_train_step.py [--data carry/data/skull] [--gaussians 262144]
-        [--pool 500000] [--downscale 1] [--repeat 20] [--no-gsplat]
+        [--pool 500000] [--ply RUN/scene.ply] [--downscale 1] [--repeat 20] [--no-gsplat]
 
 The pool: the capture's start (SfM points, MCMC's initial opacity and scales) densified to
 --gaussians active rows (each point copied k times, means jittered by N(0, 1)·its largest
 scale, log-scales lowered by ln(k)/3, as benchmarks.scale densifies) in --pool slots, SH
-degree 3 with small random higher bands. Rows (median ms of --repeat alternating rounds, one
+degree 3 with small random higher bands; or, with --ply, a trained scene (e.g. the scene.ply
+of a `fit` run, whose Gaussians crowd where the object is) in --pool slots (at least its
+size). The per-tile load of the first training view is printed too: pairs in the busiest tile
+and in the busiest 10% of tiles, against the mean (one program per tile runs its pairs one
+after another, so the busiest tiles bound a kernel's time when there are few tiles). Rows (median ms of --repeat alternating rounds, one
 training view, the capacity `fit` would pick):
   render        forward image only
   render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
@@ -54,6 +58,42 @@ def densified_pool(rd, setup, n: int, size: int, seed: int = 0):
                   logit_opacities=jnp.asarray(np.asarray(g0.logit_opacities)[idx]),
                   sh=jnp.asarray(sh, jnp.float32))
     return g, _templates(setup, size, rd.scene_scale, g)
+
+
+def trained_pool(setup, path: str, size: int, scene_scale: float):
+    """(Gaussians, (pool, opt_state, strategy_state)): a saved scene in max(size, its count)
+    slots, SH bands padded with zeros (or cut) to the setup's degree."""
+    import jax.numpy as jnp
+
+    from lgs_jax.io.ply import load_ply
+    from lgs_jax.scene import Gaussians
+    from lgs_jax.train.loop import _templates
+
+    g = load_ply(path)
+    bases = (setup.settings.sh_degree + 1) ** 2
+    sh = jnp.zeros((g.num, bases, 3), jnp.float32).at[:, :min(bases, g.sh.shape[1])].set(
+        g.sh[:, :bases])
+    g = Gaussians(g.means, g.quats, g.log_scales, g.logit_opacities, sh)
+    return g, _templates(setup, max(size, g.num), scene_scale, g)
+
+
+def tile_load(pool, cam, capacity: int) -> str:
+    """The per-tile pair counts of one view, summarised (module docstring)."""
+    import jax
+    import jax.numpy as jnp
+
+    from lgs_jax import binning
+    from lgs_jax.projection import project
+    from lgs_jax.train.pool import render_gaussians
+
+    p = project(render_gaussians(pool.params, pool.active), cam)
+    bins = jax.jit(binning.bin_gaussians, static_argnums=(1, 2, 3))(
+        p, cam.width, cam.height, capacity)
+    per_tile = np.sort(np.asarray(bins.tile_end - bins.tile_start))[::-1]
+    top = per_tile[:max(1, len(per_tile) // 10)]
+    return (f"{len(per_tile)} tiles: pairs per tile mean {per_tile.mean():.0f}, busiest "
+            f"{per_tile[0]} ({per_tile[0] / max(per_tile.mean(), 1):.1f}x the mean), busiest "
+            f"10% hold {top.sum() / max(per_tile.sum(), 1):.0%} of the pairs")
 
 
 def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool):
@@ -116,6 +156,7 @@ def main(argv=None) -> int:
         os.environ.get("LGS_JAX_DATA", "../shared/data"), "skull"))
     ap.add_argument("--gaussians", type=int, default=262_144)
     ap.add_argument("--pool", type=int, default=500_000)
+    ap.add_argument("--ply", help="a trained scene instead of the densified start")
     ap.add_argument("--downscale", type=int, default=1)
     ap.add_argument("--repeat", type=int, default=20)
     ap.add_argument("--backend", default=None)
@@ -134,15 +175,19 @@ def main(argv=None) -> int:
     rd = prepare(args.data, args.downscale)
     backend = args.backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
     setup = Setup(Settings(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, backend)
-    g, (pool, opt_state, sstate) = densified_pool(rd, setup, args.gaussians, args.pool)
+    if args.ply:
+        g, (pool, opt_state, sstate) = trained_pool(setup, args.ply, args.pool, rd.scene_scale)
+    else:
+        g, (pool, opt_state, sstate) = densified_pool(rd, setup, args.gaussians, args.pool)
     cam = jax.tree.map(lambda x: x[0], rd.train_cams)
     pairs = int(_pairs(pool, cam))
     capacity = next_pow2(2 * pairs)
     fns = rows(rd, setup, g, pool, opt_state, sstate, capacity, not args.no_gsplat)
     ms = median_ms(fns, args.repeat)
     print(device_line())
-    print(f"{args.gaussians} Gaussians in {args.pool} slots, {cam.width}x{cam.height}, "
+    print(f"{g.num} Gaussians in {pool.size} slots, {cam.width}x{cam.height}, "
           f"{pairs} pairs, capacity {capacity}, backend {backend}")
+    print(tile_load(pool, cam, capacity))
     for name, t in ms.items():
         print(f"  {name:<12s} {t:8.2f} ms")
     return 0
