@@ -340,6 +340,8 @@ def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
     bench.print_table([ours, theirs])
     assert "PSNR +0.50 dB, SSIM +0.0000, time per step x2.00, peak memory x1.50" in \
         capsys.readouterr().out
+    args = bench.parse(["--data-root", data_dir, "--downscale", "32", "--refine-from", "7"])
+    assert bench.scene_setup(args, "skull")[2].refine_start_iter == 7  # gsplat's takes it too
 
 
 def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
