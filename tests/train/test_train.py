@@ -344,6 +344,33 @@ def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
     assert bench.scene_setup(args, "skull")[2].refine_start_iter == 7  # gsplat's takes it too
 
 
+def test_seed_summary_pairs_the_trainers_by_step(tmp_path, capsys):
+    """benchmarks/seed_summary.py: ours − gsplat's per run (last step, curve mean from a step),
+    and the mean with its standard error over runs."""
+    from benchmarks import seed_summary
+
+    def write(name, ours, theirs):
+        path = tmp_path / name
+        with open(path, "w") as f:
+            f.write("scene,trainer,step,heldout_psnr,heldout_ssim,gaussians\n")
+            for trainer, curve in (("lgs_jax", ours), ("gsplat", theirs)):
+                f.writelines(f"skull,{trainer},{s},{p},{q},10\n" for s, (p, q) in curve.items())
+        return str(path)
+
+    a = write("a.csv", {500: (20, 0.5), 1000: (22, 0.7), 1500: (24, 0.8)},
+              {500: (30, 0.9), 1000: (21, 0.6), 1500: (25, 0.9), 2000: (26, 0.95)})
+    b = write("b.csv", {1000: (23, 0.8), 1500: (25, 0.85)}, {1000: (22, 0.8), 1500: (24, 0.8)})
+    d = seed_summary.differences(a, "skull", from_step=1000)  # step 2000: gsplat's alone
+    assert d["final_psnr"] == -1 and abs(d["final_ssim"] + 0.1) < 1e-12
+    assert d["curve_psnr"] == 0 and abs(d["curve_ssim"]) < 1e-12
+    assert seed_summary.mean_and_error([1.0, 3.0]) == (2.0, 1.0)
+    assert seed_summary.mean_and_error([1.0])[1] is None
+    assert seed_summary.main([a, b, "--from-step", "1000"]) == 0
+    assert "final_psnr +0.0000 ± 1.0000" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="no step evaluated by both"):
+        seed_summary.differences(a, "lego")
+
+
 def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     from lgs_jax.train import checkpoint
 
