@@ -166,6 +166,9 @@ def main(argv=None) -> int:
     ap.add_argument("--backend", default=None)
     ap.add_argument("--no-gsplat", action="store_true")
     args = ap.parse_args(argv)
+    if args.headroom < 1:
+        ap.error(f"--headroom: must be at least 1 (fewer slots than pairs drop pairs), got "
+                 f"{args.headroom}")
 
     import jax
 
