@@ -5,6 +5,12 @@ each round.
     XLA_PYTHON_CLIENT_PREALLOCATE=false python -m benchmarks.scale [--data DIR] [--scenes a,b]
         [--rows localgs,localgs:fast,vanilla] [--grad] [--repeat 20] [--csv FILE]
 
+Rows (`ROWS`) name a backend and config; every row's pair buffer is `lgs_jax.pair_capacity` of
+the view's pairs, or with the suffix `@pow2` (e.g. `--rows localgs,localgs@pow2`) the power of
+two above them, the policy before `pair_capacity`: the same row at both sizes measures what the
+pair capacity costs in one run. The shared stages below (`project`, `emit`, `sort`,
+`pair_prep`) are timed once, at the `pair_capacity` size.
+
 Scenes (`SCENES`): guitar (91k) and lego_sh3 (60k) as they are, densified copies of guitar
 (lgs_jax.synthetic.densified: x16 1.5M, x64 5.8M, x110 10M) and lego_sh3 (x16 1M), and
 `synthetic` scenes (lgs_jax.synthetic.random_scene), each through view 0 of its cameras scaled
@@ -38,9 +44,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import lgs_jax
-from lgs_jax import pairs
+from lgs_jax import binning, pairs
 from lgs_jax.backends import REGISTRY, kernel_steps
 from lgs_jax.layout import tile_grid
+from lgs_jax.projection import project
+from lgs_jax.render import next_pow2
 
 from .common import (SCENES, add_data_argument, compiled_mib, load_scene, median_ms,
                      pipeline_stages, psnr, torch_peak_mib)
@@ -62,13 +70,31 @@ ROWS = {
     "localgs:px256": ("pallas", C("gsplat", tuning=K(
         mosaic_forward_pixels=256, mosaic_backward_pixels=256, vanilla_from_pairs=None))),
 }
+POW2 = "@pow2"
+"""Row-name suffix: the row's pair capacity is the power of two above the pairs."""
+
+
+def row_setup(name: str, n_pairs: int):
+    """(backend, config, pair capacity) of row `name` (a `ROWS` key, optionally + `POW2`) for a
+    view of `n_pairs` tile–Gaussian pairs."""
+    backend, config = ROWS[name.removesuffix(POW2)]
+    cap = next_pow2(n_pairs) if name.endswith(POW2) else lgs_jax.pair_capacity(n_pairs)
+    return backend, config, cap
+
+
+def count_pairs(g, cam) -> int:
+    """Tile–Gaussian pairs of scene `g` through `cam`."""
+    p = jax.jit(project)(g, cam)
+    return int(jax.jit(binning.count_pairs, static_argnums=(1, 2))(p, cam.width, cam.height))
 
 
 def ours_forward(g, cam, rows):
-    """Timed callables (stages, then raster and e2e per row), images and memory."""
+    """Timed callables (stages and pair prep at the default capacity, then raster and e2e per
+    row at the row's capacity), images, memory, pairs and {row: capacity}."""
     w, h = cam.width, cam.height
-    cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
-    p, bins, stages = pipeline_stages(g, cam, cap)
+    n_pairs = count_pairs(g, cam)
+    p, bins, stages = pipeline_stages(g, cam, lgs_jax.pair_capacity(n_pairs))
+    bin_at = jax.jit(binning.bin_gaussians, static_argnums=(1, 2, 3))
     tiles_x = tile_grid(w, h)[0]
 
     def pair_prep(p, b):
@@ -79,18 +105,20 @@ def ours_forward(g, cam, rows):
     prep = jax.jit(pair_prep)
     fns = {f"ours:{k}": lambda f=f: jax.block_until_ready(f()) for k, f in stages.items()}
     fns["ours:pair_prep"] = lambda: jax.block_until_ready(prep(p, bins))
-    images, memory = {}, {}
+    images, memory, caps = {}, {}, {}
     for name in rows:
-        backend, config = ROWS[name]
+        backend, config, cap = row_setup(name, n_pairs)
+        caps[name] = cap
         rasterize = REGISTRY[backend].rasterize
-        e2e = jax.jit(lambda g, c, b=backend, cf=config: lgs_jax.render(
+        e2e = jax.jit(lambda g, c, b=backend, cf=config, cap=cap: lgs_jax.render(
             g, c, backend=b, config=cf, capacity=cap).image)
         raster = jax.jit(lambda p, b, r=rasterize, cf=config: r(p, b, w, h, cf).color)
+        row_bins = bins if cap == bins.tile.shape[0] else bin_at(p, w, h, cap)
         images[name] = np.asarray(e2e(g, cam))
         memory[name] = compiled_mib(e2e, g, cam)
-        fns[f"{name}:raster"] = lambda r=raster: jax.block_until_ready(r(p, bins))
+        fns[f"{name}:raster"] = lambda r=raster, b=row_bins: jax.block_until_ready(r(p, b))
         fns[f"{name}:e2e"] = lambda f=e2e: jax.block_until_ready(f(g, cam))
-    return fns, images, memory, int(bins.pairs_required)
+    return fns, images, memory, n_pairs, caps
 
 
 def gsplat_peer(g, cam):
@@ -148,7 +176,7 @@ def gsplat_peer(g, cam):
 
 def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     g, cam = jax.device_put(g), jax.device_put(cam)
-    fns, images, memory, n_pairs = ours_forward(g, cam, rows)
+    fns, images, memory, n_pairs, caps = ours_forward(g, cam, rows)
     peer = gsplat_peer(g, cam) if with_gsplat else None
     if peer:
         fns.update(peer[0])
@@ -156,7 +184,7 @@ def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     base = dict(scene=scene, gaussians=g.num, width=cam.width, height=cam.height)
     out = []
     for name in rows:
-        r = dict(base, row=name, pairs=n_pairs, project_ms=ms["ours:project"],
+        r = dict(base, row=name, pairs=n_pairs, capacity=caps[name], project_ms=ms["ours:project"],
                  emit_ms=ms["ours:emit"], sort_ms=ms["ours:sort"],
                  pair_prep_ms=ms["ours:pair_prep"], raster_ms=ms[f"{name}:raster"],
                  e2e_ms=ms[f"{name}:e2e"], memory_mib=memory[name])
@@ -176,18 +204,18 @@ def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
 def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     g, cam = jax.device_put(g), jax.device_put(cam)
     w, h = cam.width, cam.height
-    cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
+    n_pairs = count_pairs(g, cam)
     weights = jax.random.normal(jax.random.key(0), (h, w, 3), jnp.float32)
     fns, extra = {}, {}
     for name in rows:
-        backend, config = ROWS[name]
-        image = lambda g, b=backend, cf=config: lgs_jax.render(g, cam, backend=b, config=cf,
-                                                               capacity=cap).image
+        backend, config, cap = row_setup(name, n_pairs)
+        image = lambda g, b=backend, cf=config, cap=cap: lgs_jax.render(
+            g, cam, backend=b, config=cf, capacity=cap).image
         f = jax.jit(jax.value_and_grad(lambda g, image=image: jnp.sum(image(g) * weights)))
         first, again = f(g)[1], f(g)[1]
         same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
                                                                  jax.tree.leaves(again)))
-        extra[name] = dict(memory_mib=compiled_mib(f, g), bitwise_repeatable=same)
+        extra[name] = dict(capacity=cap, memory_mib=compiled_mib(f, g), bitwise_repeatable=same)
         fns[name] = lambda f=f: jax.block_until_ready(f(g))
     if with_gsplat:
         step = gsplat_grad_step(g, cam, weights)
@@ -243,13 +271,16 @@ def _format(r) -> str:
         vs = (f" | {r['fwd_bwd_vs_gsplat']:5.2f}x time {r['memory_vs_gsplat']:5.2f}x memory of "
               f"gsplat" if "fwd_bwd_vs_gsplat" in r else "")
         same = {True: " bitwise", False: " NOT BITWISE"}.get(r.get("bitwise_repeatable"), "")
-        return f"{head} fwd+bwd {r['fwd_bwd_ms']:8.2f} ms mem {r['memory_mib']:8.0f} MiB{vs}{same}"
+        cap = f" cap {r['capacity'] / 1e6:6.2f}M" if "capacity" in r else ""
+        return (f"{head} fwd+bwd {r['fwd_bwd_ms']:8.2f} ms mem {r['memory_mib']:8.0f} MiB{cap}"
+                f"{vs}{same}")
     vs = (f" | {r['e2e_vs_gsplat']:5.2f}x time {r['memory_vs_gsplat']:5.2f}x memory of gsplat, "
           f"{r['psnr_vs_gsplat']:5.1f} dB" if "e2e_vs_gsplat" in r else "")
     prep = f" (pair prep {r['pair_prep_ms']:6.2f})" if "pair_prep_ms" in r else ""
+    cap = f" cap {r['capacity'] / 1e6:6.2f}M" if "capacity" in r else ""
     return (f"{head} e2e {r['e2e_ms']:7.2f} raster {r['raster_ms']:7.2f}{prep} proj "
             f"{r['project_ms']:6.2f} emit {r['emit_ms']:6.2f} sort {r['sort_ms']:6.2f} ms "
-            f"mem {r['memory_mib']:7.0f} MiB pairs {r['pairs'] / 1e6:6.2f}M{vs}")
+            f"mem {r['memory_mib']:7.0f} MiB pairs {r['pairs'] / 1e6:6.2f}M{cap}{vs}")
 
 
 def main(argv=None) -> int:
@@ -266,8 +297,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     rows = args.rows.split(",")
     for name in rows:
-        if name not in ROWS:
-            ap.error(f"--rows: unknown row {name!r} (known: {', '.join(ROWS)})")
+        if name.removesuffix(POW2) not in ROWS:
+            ap.error(f"--rows: unknown row {name!r} (known: {', '.join(ROWS)}, each optionally "
+                     f"with the suffix {POW2})")
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     results = []
     for scene in args.scenes.split(","):

@@ -1,8 +1,9 @@
 """lgs_jax: differentiable 3D Gaussian Splatting in JAX, built around Local-GS.
 
 Public API: `Gaussians`, `Camera`, `RasterConfig` (with its `KernelConfig`), `render`
-(-> `RenderOutput`), `render_growing`, `load_ply`, `save_ply`, `load_cameras`, `stack_cameras`,
-`default_scene`, `load_dataset` (-> `Dataset`: COLMAP / transforms.json captures).
+(-> `RenderOutput`), `render_growing`, `pair_capacity` (the pair-buffer size for a pair count),
+`load_ply`, `save_ply`, `load_cameras`, `stack_cameras`, `default_scene`, `load_dataset`
+(-> `Dataset`: COLMAP / transforms.json captures).
 """
 
 from .config import KernelConfig, RasterConfig
@@ -11,14 +12,14 @@ from .io.cameras import load_cameras
 from .io.dataset import Dataset, load_dataset
 from .io.views import DatasetError
 from .io.ply import PlyError, load_ply, save_ply
-from .render import (BACKENDS, CapacityError, RenderOutput, RenderStats, default_backend, render,
-                     render_growing)
+from .render import (BACKENDS, CapacityError, RenderOutput, RenderStats, default_backend,
+                     pair_capacity, render, render_growing)
 from .scene import Camera, Gaussians, stack_cameras
 
 __all__ = [
     "BACKENDS", "Camera", "CapacityError", "Dataset", "DatasetError", "Gaussians",
     "KernelConfig", "PlyError", "RasterConfig", "RenderOutput", "RenderStats", "default_backend",
-    "default_camera", "default_scene", "load_cameras", "load_dataset", "load_ply", "render",
-    "render_growing", "save_ply", "stack_cameras",
+    "default_camera", "default_scene", "load_cameras", "load_dataset", "load_ply", "pair_capacity",
+    "render", "render_growing", "save_ply", "stack_cameras",
 ]
 __version__ = "0.1.0"

@@ -2,7 +2,7 @@
 timed one by one on a real capture, beside gsplat's forward+backward of the same Gaussians.
 
     python scripts/profile_train_step.py [--data carry/data/skull] [--gaussians 262144]
-        [--pool 500000] [--ply RUN/scene.ply] [--headroom 2] [--downscale 1] [--repeat 20]
+        [--pool 500000] [--ply RUN/scene.ply] [--headroom 1.5] [--downscale 1] [--repeat 20]
         [--no-gsplat]
 
 The pool: the capture's start (SfM points, MCMC's initial opacity and scales) densified to
@@ -13,8 +13,9 @@ of a `fit` run, whose Gaussians crowd where the object is) in --pool slots (at l
 size). The per-tile load of the first training view is printed too: pairs in the busiest
 tile and in the busiest 10% of tiles, against the mean (one program per tile runs its pairs
 one after another, so the busiest tiles bound a kernel's time when there are few tiles). The
-pair capacity is the power of two above --headroom x the view's pairs (2: what `fit` picks;
-1: the tightest power of two, to see what the stages sized by the capacity cost). Rows
+pair capacity is `lgs_jax.pair_capacity(pairs, --headroom)` of the view's pairs (1.5: what
+`fit` picks, `train.loop.TRAIN_HEADROOM`; 1: the tightest size, to see what the stages sized by
+the capacity cost; below 1 is refused). Rows
 (median ms of --repeat alternating rounds, one training view):
   render        forward image only
   render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
@@ -160,7 +161,7 @@ def main(argv=None) -> int:
     ap.add_argument("--gaussians", type=int, default=262_144)
     ap.add_argument("--pool", type=int, default=500_000)
     ap.add_argument("--ply", help="a trained scene instead of the densified start")
-    ap.add_argument("--headroom", type=float, default=2.0)
+    ap.add_argument("--headroom", type=float, default=1.5)
     ap.add_argument("--downscale", type=int, default=1)
     ap.add_argument("--repeat", type=int, default=20)
     ap.add_argument("--backend", default=None)
@@ -173,7 +174,7 @@ def main(argv=None) -> int:
     import jax
 
     from benchmarks.common import device_line, median_ms
-    from lgs_jax.render import next_pow2
+    from lgs_jax.render import pair_capacity
     from lgs_jax.train import MCMCStrategy, Settings
     from lgs_jax.train.data import prepare
     from lgs_jax.train.loop import _pairs
@@ -188,7 +189,7 @@ def main(argv=None) -> int:
         g, (pool, opt_state, sstate) = densified_pool(rd, setup, args.gaussians, args.pool)
     cam = jax.tree.map(lambda x: x[0], rd.train_cams)
     pairs = int(_pairs(pool, cam))
-    capacity = next_pow2(int(args.headroom * pairs))
+    capacity = pair_capacity(pairs, args.headroom)
     fns = rows(rd, setup, g, pool, opt_state, sstate, capacity, not args.no_gsplat)
     ms = median_ms(fns, args.repeat)
     print(device_line())

@@ -59,6 +59,25 @@ def test_render_growing_settles_on_enough_capacity(scene32):
     np.testing.assert_array_equal(out.image, lgs_jax.render(scene32, scenes.camera()).image)
 
 
+def test_pair_capacity_is_a_power_of_two_then_eight_sizes_per_octave():
+    cap = lgs_jax.pair_capacity
+    for k in range(17):  # up to 2^16: the power of two above
+        assert cap(2**k) == 2**k and (k < 2 or cap(2**k - 1) == 2**k)
+        assert cap(2**k + 1) == (2 ** (k + 1) if k < 16 else 2**16 + 2**13)
+    assert cap(0) == cap(1) == 1
+    for n in [2**16 + 1, 70_001, 99_999, 2**17, 2**20 + 5, 3_141_592, 10**8, 2**30 + 1]:
+        c, step = cap(n), 2 ** (n.bit_length() - 4)
+        assert c % step == 0 and c % 8192 == 0 and n <= c < 1.125 * n + 1, n
+    caps = [cap(n) for n in range(1, 2**19, 97)] + [cap(n) for n in range(2**19, 2**24, 4099)]
+    assert all(a <= b for a, b in zip(caps, caps[1:]))
+    assert len(set(cap(n) for n in range(2**20 + 1, 2**21 + 1, 1024))) == 8
+    assert cap(100_000, 1.5) == cap(150_000) and cap(1000, 2) == 2048
+    assert cap(2**31 - 10) == cap(2**40) == 2**31 - 1
+    for bad in (0.99, 0, np.nan):
+        with pytest.raises(ValueError, match="headroom"):
+            cap(10, bad)
+
+
 def test_float32_stays_float32_with_x64_and_float64_is_float64(scene32):
     assert jax.config.jax_enable_x64
     out = lgs_jax.render(scene32, scenes.camera(dtype=np.float64))

@@ -2,9 +2,9 @@
 
 Per step s (0-based): the views of `data.views_for_step`, one `step.train_step` (redone with a
 larger pair capacity whenever a view overflows: no pair is dropped; the capacity starts at and
-grows to the power of two above twice the pairs needed, so a run recompiles for it about once
-per 4x growth of its pairs), then `step.refine` where the strategy asks (the pool doubles when
-it needs room, up to `max_gaussians`: a recompile; both are logged).
+grows to `pair_capacity(pairs, TRAIN_HEADROOM)`, see `TRAIN_HEADROOM`), then `step.refine` where
+the strategy asks (the pool doubles when it needs room, up to `max_gaussians`: a recompile; both
+are logged).
 A step whose loss, gradients or parameters would not be finite is skipped (nothing changes),
 logged and recorded. Outputs in OUT: metrics.jsonl (per step: loss, training-view PSNR, active
 Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SSIM), checkpoints
@@ -27,7 +27,7 @@ from .. import binning
 from ..config import CONVENTIONS
 from ..io.ply import save_ply
 from ..projection import project
-from ..render import next_pow2
+from ..render import next_pow2, pair_capacity
 from . import checkpoint, report
 from .data import RunData, prepare, views_for_step
 from .init import start_gaussians
@@ -37,6 +37,13 @@ from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
 from .settings import Settings, Setup
 from .step import refine, render_views, train_step
 from .strategy import DefaultStrategy, Strategy
+
+TRAIN_HEADROOM = 1.5
+"""The pair capacity is `pair_capacity(pairs, TRAIN_HEADROOM)` of the pairs a view needs, at the
+start (first training view) and on every overflow (that step's largest view): at least 1.5x the
+pairs, so pairs that grow with the Gaussians rarely overflow, and each growth is at least 1.5x,
+so a run recompiles for it about once per 1.5x growth of its pairs. (It was the power of two
+above twice the pairs: 2-4x the pairs, and every per-pair pass costs in proportion.)"""
 
 
 @dataclasses.dataclass
@@ -71,7 +78,7 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
     pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
-    capacity = next_pow2(max(int(_pairs(pool, first)), 1) * 2)
+    capacity = pair_capacity(int(_pairs(pool, first)), TRAIN_HEADROOM)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
         f"{rd.scene_scale:.3f}")
     return _State(pool, opt_state, sstate, 0, capacity, capacity)
@@ -138,7 +145,7 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
         if not m["overflow"]:
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
-        st.capacity = next_pow2(2 * m["pairs"])  # headroom: pairs grow as Gaussians do
+        st.capacity = pair_capacity(m["pairs"], TRAIN_HEADROOM)
         say(f"step {st.step + 1}: pair capacity grown to {st.capacity} (one recompile)")
 
 
