@@ -118,6 +118,10 @@ class TileBins:
     Attributes:
       gauss: (capacity,) int32 Gaussian index of each pair (pairs past `tile_end[-1]` are padding).
       tile: (capacity,) int32 tile index of each pair (row-major; n_tiles for padding).
+      slot: (capacity,) int32 emission slot of each pair (`emit_pairs`: Gaussian-major, in depth
+        order): a permutation of arange(capacity), the tile sort's. A Gaussian's pairs fill
+        consecutive emission slots, so gathering per-pair values with the inverse permutation
+        groups them per Gaussian without a second sort (backends.backward.per_gaussian_sum).
       tile_start, tile_end: (n_tiles,) int32 half-open ranges of each tile's pairs in `gauss`.
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
@@ -126,6 +130,7 @@ class TileBins:
 
     gauss: Any
     tile: Any
+    slot: Any
     tile_start: Any
     tile_end: Any
     pairs_required: Any
@@ -214,10 +219,13 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int):
 
 
 def sort_pairs(tile, gauss, n_tiles: int):
-    """Stable sort of pairs by tile (each tile's list stays in (depth, index) order) and the
-    tiles' ranges: (tile, gauss, tile_start, tile_end)."""
-    tile, gauss = lax.sort((tile, gauss), num_keys=1, is_stable=True)
-    return (tile, gauss) + tile_ranges(tile, n_tiles)
+    """Stable sort of the emitted pairs by tile (each tile's list stays in (depth, index) order)
+    and the tiles' ranges: (tile, gauss, slot, tile_start, tile_end), where slot is each sorted
+    pair's emission slot (the sort's permutation: the payload sorted with the tiles is
+    arange(capacity)) and gauss = gauss_emitted[slot]."""
+    slot = jnp.arange(tile.shape[0], dtype=jnp.int32)
+    tile, slot = lax.sort((tile, slot), num_keys=1, is_stable=True)
+    return (tile, gauss[slot], slot) + tile_ranges(tile, n_tiles)
 
 
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
@@ -225,6 +233,6 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileB
     pairs are emitted in depth order and the tile sort is stable."""
     tiles_x, tiles_y = tile_grid(width, height)
     tile, g, total, n_unbounded = emit_pairs(p, width, height, capacity)
-    tile, gauss, start, end = sort_pairs(tile, g, tiles_x * tiles_y)
-    return TileBins(gauss=gauss, tile=tile, tile_start=start, tile_end=end, pairs_required=total,
-                    overflow=total > capacity, n_unbounded=n_unbounded)
+    tile, gauss, slot, start, end = sort_pairs(tile, g, tiles_x * tiles_y)
+    return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
+                    pairs_required=total, overflow=total > capacity, n_unbounded=n_unbounded)

@@ -81,7 +81,7 @@ def profile(g, cam, repeat: int):
         "chain_hoisted_rows": (j(lambda p, b, r: pairs.chain_hoisted_rows(
             pairs.gather(p, b.gauss), b, r, tiles_x, C)), (p, bins, rows11)),
         "per_gaussian_sum": (j(backward.per_gaussian_sum, static_argnums=2),
-                             (rows10, bins.gauss, g.num)),
+                             (rows10, bins, g.num)),
         "projection vjp": (j(proj_vjp), (jax.tree.map(jnp.ones_like, p),)),
         "e2e render": (j(lambda g: lgs_jax.render(g, cam, backend="pallas",
                                                   capacity=cap).image), (g,)),

@@ -69,10 +69,29 @@ def test_box_covers_pixels_on_the_ellipse_edge(log_kappa, theta, log_lmin, angle
     _check_covered(p)
 
 
+@jax.jit
+def _emitted_and_binned(p):
+    cap = 256  # >= M Gaussians x the 4x3 tiles of a W x H image
+    return binning.emit_pairs(p, W, H, cap), binning.bin_gaussians(p, W, H, cap)
+
+
+def _check_slots(p: Projected):
+    """`TileBins.slot` is the tile sort's permutation of the emitted pairs."""
+    (tile, g, _, _), bins = _emitted_and_binned(p)
+    slot = np.asarray(bins.slot)
+    np.testing.assert_array_equal(np.sort(slot), np.arange(slot.size))
+    np.testing.assert_array_equal(np.asarray(g)[slot], bins.gauss)
+    np.testing.assert_array_equal(np.asarray(tile)[slot], bins.tile)
+
+
 @given(seed=st.integers(0, 2**32 - 1), yaw=st.floats(-0.5, 0.5))
 def test_projected_scene_tiles_cover_passing_pixels_float32(seed, yaw):
+    """The tiles of a projected scene hold every passing pixel; its bins' `slot` is the tile
+    sort's permutation of the emitted pairs."""
     g = scenes.cast(scenes.scene(seed, n=M), np.float32)
-    _check_covered(project(g, scenes.camera(W, H, yaw=yaw)))
+    p = project(g, scenes.camera(W, H, yaw=yaw))
+    _check_covered(p)
+    _check_slots(p)
 
 
 def test_box_is_tight_for_ordinary_gaussians():

@@ -15,9 +15,12 @@ power = −½(a·dx² + c·dy²) − b·dx·dy, dx = μx − px (lgs_jax.composi
 
 Determinism: each step gives every tile one pair row (the pair's gradient summed over the
 tile's 256 pixels, a fixed-order reduction) stored at that pair's own slot; rows are then summed
-per Gaussian by a stable sort on Gaussian id and a segmented scan, whose segment ends are stored
-to distinct Gaussians. No scatter-add anywhere, so no float atomics on GPUs. Residuals are the
-inputs and per-pixel state: O(pixels + pairs), nothing per pixel per Gaussian.
+per Gaussian (`per_gaussian_sum`): put back in emission order by the inverse of the tile sort's
+permutation (`TileBins.slot`; a plain store, one writer per slot), where each Gaussian's rows
+are one contiguous run in ascending tile order, then a segmented sum in a fixed association
+whose segment ends are stored to distinct Gaussians. No second sort, no scatter-add anywhere,
+so no float atomics on GPUs. Residuals are the inputs and per-pixel state: O(pixels + pairs),
+nothing per pixel per Gaussian.
 """
 
 from __future__ import annotations
@@ -151,7 +154,7 @@ def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_
                 difference_alpha(mean2d, conic, opacity, pixels, config), 6)
 
 
-SUM_CHUNK = 16  # pair rows summed sequentially per chunk in `per_gaussian_sum`
+SUM_CHUNK = 16  # rows summed sequentially per chunk in `segment_sums`
 
 
 def _segmented_scan(starts, vals):
@@ -163,18 +166,17 @@ def _segmented_scan(starts, vals):
     return lax.associative_scan(combine, (starts, vals))[1]
 
 
-def per_gaussian_sum(rows, gauss, n: int):
-    """Σ of pair rows per Gaussian id (n, C), deterministically (no scatter-add, a fixed
-    association): a stable sort by id, then a segmented sum in two levels. Within chunks of
-    SUM_CHUNK consecutive sorted rows, left to right (one fused pass over the rows); across
-    chunks, a segmented scan of the chunks' last partial sums (1/SUM_CHUNK of the rows), whose
-    carry is added to the rows of the segment still open at a chunk's start. One store per
-    segment end (distinct ids). A segmented scan over all rows costs log2(rows) passes over
-    them; this costs one, plus that scan over the chunk tails."""
-    cap, cols = rows.shape
-    order = jnp.argsort(gauss, stable=True)
-    ids, vals = gauss[order], rows[order]
-    pad = -cap % SUM_CHUNK  # padding rows: id n (dropped at the end), zero
+def segment_sums(ids, vals, n: int):
+    """Σ of the rows `vals` (rows, C) per id (n, C), for ids whose equal values are contiguous
+    (each id one run; rows with id n are dropped; ids without rows get zero), deterministically
+    (no scatter-add, a fixed association): a segmented sum in two levels. Within chunks of
+    SUM_CHUNK consecutive rows, left to right (one fused pass over the rows); across chunks, a
+    segmented scan of the chunks' last partial sums (1/SUM_CHUNK of the rows), whose carry is
+    added to the rows of the segment still open at a chunk's start. One store per segment end
+    (one run per id: distinct targets). A segmented scan over all rows costs log2(rows) passes
+    over them; this costs one, plus that scan over the chunk tails."""
+    m, cols = vals.shape
+    pad = -m % SUM_CHUNK  # padding rows: id n (dropped at the end), zero
     ids = jnp.concatenate([ids, jnp.full((pad,), n, ids.dtype)])
     vals = jnp.concatenate([vals, jnp.zeros((pad, cols), vals.dtype)])
     ids2, vals3 = ids.reshape(-1, SUM_CHUNK), vals.reshape(-1, SUM_CHUNK, cols)
@@ -193,8 +195,21 @@ def per_gaussian_sum(rows, gauss, n: int):
     sums = (within + jnp.where(in_open, carry[:, None, :], 0)).reshape(-1, cols)
     ends = jnp.concatenate([ids[1:] != ids[:-1], jnp.ones((1,), bool)])
     target = jnp.where(ends, ids, n)
-    return jnp.zeros((n, cols), rows.dtype).at[target].set(sums, mode="drop",
+    return jnp.zeros((n, cols), vals.dtype).at[target].set(sums, mode="drop",
                                                           unique_indices=True)
+
+
+def per_gaussian_sum(rows, bins: TileBins, n: int):
+    """Σ of the pair rows (capacity, C), in the bins' sorted pair order, per Gaussian (n, C):
+    the rows put back in emission order (`TileBins.slot`'s inverse permutation: a plain int32
+    store, one writer per slot, then one gather of the rows), where each Gaussian's pairs are
+    one run in ascending tile order, then `segment_sums` (padding pairs, tile == n_tiles,
+    dropped). Deterministic: no sort, no scatter-add."""
+    cap = rows.shape[0]
+    inv = jnp.zeros((cap,), jnp.int32).at[bins.slot].set(jnp.arange(cap, dtype=jnp.int32),
+                                                          unique_indices=True)
+    ids = jnp.where(bins.tile[inv] < bins.tile_start.shape[0], bins.gauss[inv], n)
+    return segment_sums(ids, rows[inv], n)
 
 
 def differentiable(forward, gradients, forward_for_gradients=None):

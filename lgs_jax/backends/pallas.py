@@ -27,8 +27,8 @@ the difference form: the vanilla forward's backward is the Local-GS backward wit
 warp_cull off) and strip masks: the walk of lgs_jax.backends.backward, one pair per step. Each
 pair's gradient, summed over its tile's pixels, is stored as that pair's row (one writer per
 row, no atomics); rows are then chained to the Gaussian (Eq. 8 for the hoisted form,
-`pairs.chain_hoisted_rows`) and summed per Gaussian by `backward.per_gaussian_sum` (sort +
-segmented scan): deterministic.
+`pairs.chain_hoisted_rows`) and summed per Gaussian by `backward.per_gaussian_sum` (rows put
+back in emission order by the tile sort's permutation + a segmented sum): deterministic.
 
 Implementation. `RasterConfig.kernel` picks "triton" or "mosaic" for every kernel; "auto" runs
 `tuning.auto_*` per kernel on the GPU and Triton in interpret mode, and under differentiation
@@ -215,7 +215,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
         rows = pairs.chain_hoisted_rows(pairs.gather(p, bins.gauss), bins, rows, tiles_x, config)
     else:
         rows = jnp.concatenate([rows[:, :6], rows[:, 7:]], -1)
-    return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
+    return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):

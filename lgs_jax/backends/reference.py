@@ -64,7 +64,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
                trans, stop_at, saved, cotangents):
     rows = backward.pair_rows(_fields(p), bins, tile_pixels(width, height, p.mean2d.dtype),
                               config, trans, stop_at, *cotangents)
-    return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
+    return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
 
 
 _composite = backward.differentiable(_forward, _gradients)

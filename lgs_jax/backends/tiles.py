@@ -267,7 +267,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
                             py, config)
         rows = backward.walk(*common, backward.hoisted_alpha(pair_v, basis, config, gate), 7)
         rows = pairs.chain_hoisted_rows(pairs.gather(p, bins.gauss), bins, rows, tiles_x, config)
-    return backward.per_gaussian_sum(rows, bins.gauss, p.mean2d.shape[0])
+    return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
 
 
 _composite = backward.differentiable(_forward, _gradients)
