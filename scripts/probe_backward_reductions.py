@@ -1,0 +1,182 @@
+"""How much of the Mosaic GPU backward kernel's time its per-pair reductions take (issue 18), and
+whether Mosaic GPU can express the reductions a faster kernel would need (GPU only).
+
+    XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/probe_backward_reductions.py [--data DIR]
+        [--scenes guitar_x16_1080p,guitar_x110_4k] [--repeat 10]
+
+1. Reduction share. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
+   its block's pixels, each a warpgroup-wide `jnp.sum` (shuffles within each warp, then an
+   exchange across the four warps through shared memory with a barrier). The `one_sum` variant
+   adds the 11 per-lane terms elementwise and reduces that once (same arithmetic and loads, one
+   reduction instead of 11; its rows are wrong, only its time matters). Both run the kernel
+   alone (`pallas_mosaic.backward_rows`) on the same real inputs; the difference is what ten
+   reductions per pair cost.
+2. Layout probes: small kernels that compile and run (or print the error) the pieces a batched
+   reduction would use: a (R, 256) array in a tiled layout whose pixel axis is split over warps,
+   lanes and a 2-vector, reduced along the pixels (all R rows through one shared-memory
+   exchange), and a within-warp reduction that leaves one partial per warp.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import os
+import sys
+import traceback
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import lgs_jax  # noqa: E402
+from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
+from lgs_jax import binning  # noqa: E402
+from lgs_jax.backends import kernel_steps, pallas, pallas_mosaic  # noqa: E402
+from lgs_jax.layout import tile_grid  # noqa: E402
+from lgs_jax.projection import project  # noqa: E402
+
+
+def _one_sum_step(original):
+    """`kernel_steps.backward_step` whose 11 terms are added per lane into the first (one
+    reduction per pair in the kernel); the others are None (written as zero)."""
+    def step(*args, **kwargs):
+        values, carry = original(*args, **kwargs)
+        total = functools.reduce(jnp.add, [v for v in values if v is not None])
+        return [total] + [None] * (len(values) - 1), carry
+
+    return step
+
+
+def reduction_share(g, cam, repeat: int):
+    """Backward kernel time with 11 and with 1 reduction per pair (ms), and the rows' scale."""
+    config = lgs_jax.RasterConfig()
+    w, h = cam.width, cam.height
+    tiles_x, tiles_y = tile_grid(w, h)
+    cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
+    p = jax.jit(project)(g, cam)
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    plan = pallas.plan(config, False, tiles_x * tiles_y)
+    state, stop, _, saved = jax.jit(lambda p, b: pallas._forward(p, b, w, h, plan))(p, bins)
+    masks, records, order = saved
+    rng = np.random.default_rng(0)
+    cot = [jnp.asarray(rng.normal(size=state.trans.shape).astype(np.float32)) for _ in range(5)]
+    lane_rows = (state.trans, stop, *cot)
+
+    def rows_fn():
+        return jax.jit(lambda b, m, r, o, lr: pallas_mosaic.backward_rows(
+            config, False, plan.backward_pixels, tiles_x, o, b, m, r, lr, jnp.float32))
+
+    eleven = rows_fn()
+    args = (bins, masks, records, order, lane_rows)
+    jax.block_until_ready(eleven(*args))
+    original = kernel_steps.backward_step
+    kernel_steps.backward_step = _one_sum_step(original)
+    try:
+        one = rows_fn()
+        jax.block_until_ready(one(*args))
+    finally:
+        kernel_steps.backward_step = original
+    ms = median_ms({"11 sums": lambda: jax.block_until_ready(eleven(*args)),
+                    "1 sum": lambda: jax.block_until_ready(one(*args))}, repeat)
+    return ms, int(bins.pairs_required), cap, plan.backward_pixels
+
+
+# ------------------------------------------------------------------------------ layout probes
+
+def _probe(name: str, build):
+    try:
+        got, want = build()
+        ok = np.allclose(np.asarray(got), want, rtol=1e-5, atol=1e-4)
+        print(f"  {name:<44s} {'OK' if ok else 'WRONG VALUES'}", flush=True)
+        if not ok:
+            print(f"    got {np.asarray(got).ravel()[:8]} want {np.asarray(want).ravel()[:8]}")
+    except Exception as e:  # noqa: BLE001 - report and go on
+        msg = "".join(traceback.format_exception_only(type(e), e)).strip().splitlines()
+        print(f"  {name:<44s} FAILS: {msg[-1][:300]}", flush=True)
+
+
+def layout_probes():
+    from jax.experimental import pallas as pl
+    from jax.experimental.pallas import mosaic_gpu as plgpu
+    from jax.experimental.mosaic.gpu.fragmented_array import Tiling
+
+    def pixel_layout(rows: int):
+        """(rows, 256): rows in registers, pixels over 4 warps x 32 lanes x 2-vectors."""
+        return plgpu.Layout.TILED(Tiling(((rows, 256), (64,), (2,))),
+                                  warp_dims=(-3,), lane_dims=(-2,), vector_dim=-1)
+
+    def warp_layout():
+        """(4, 64): warp w holds row w, 2 elements per lane (the strided (256,) order)."""
+        return plgpu.Layout.TILED(Tiling(((4, 64), (2,))),
+                                  warp_dims=(-3,), lane_dims=(-2,), vector_dim=-1)
+
+    x = np.random.default_rng(0).normal(size=(16, 256)).astype(np.float32)
+
+    def rows_sum(rows):
+        def kernel(x_ref, o_ref):
+            v = plgpu.load(x_ref, layout=pixel_layout(rows))
+            o_ref[...] = jnp.sum(v * 2.0, axis=1)
+        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((rows,), jnp.float32))(
+            jnp.asarray(x[:rows]))
+        return out, 2.0 * x[:rows].sum(1)
+
+    def iota_rows_sum():
+        def kernel(o_ref):
+            i = plgpu.broadcasted_iota(jnp.int32, (16, 256), 1,
+                                       layout=pixel_layout(16)).astype(jnp.float32)
+            r = plgpu.broadcasted_iota(jnp.int32, (16, 256), 0,
+                                       layout=pixel_layout(16)).astype(jnp.float32)
+            o_ref[...] = jnp.sum(i * r, axis=1)
+        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((16,), jnp.float32))()
+        return out, np.arange(16) * np.arange(256).sum()
+
+    def broadcast_row():
+        def kernel(x_ref, o_ref):
+            row = plgpu.load(x_ref.at[pl.ds(0, 1)], layout=pixel_layout(1))
+            basis = plgpu.load(x_ref, layout=pixel_layout(16))
+            o_ref[...] = jnp.sum(basis * jnp.broadcast_to(row, (16, 256)), axis=1)
+        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((16,), jnp.float32))(
+            jnp.asarray(x))
+        return out, (x * x[:1]).sum(1)
+
+    def per_warp_sum():
+        def kernel(x_ref, o_ref):
+            v = plgpu.load(x_ref, layout=warp_layout())
+            o_ref[...] = jnp.sum(v, axis=1)
+        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((4,), jnp.float32))(
+            jnp.asarray(x[0].reshape(4, 64)))
+        return out, x[0].reshape(4, 64).sum(1)
+
+    _probe("(16,256) tiled load + sum over pixels", lambda: rows_sum(16))
+    _probe("(64,256) tiled load + sum over pixels", lambda: rows_sum(64))
+    _probe("(16,256) tiled iota + sum over pixels", iota_rows_sum)
+    _probe("(1,256) row broadcast to (16,256) + sum", broadcast_row)
+    _probe("(4,64) per-warp sum (no cross-warp step)", per_warp_sum)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_data_argument(ap)
+    ap.add_argument("--scenes", default="guitar_x16_1080p,guitar_x110_4k")
+    ap.add_argument("--repeat", type=int, default=10)
+    args = ap.parse_args()
+    print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
+    print("layout probes:", flush=True)
+    layout_probes()
+    for scene in args.scenes.split(","):
+        g, cam = load_scene(scene, args.data)
+        g, cam = jax.device_put(g), jax.device_put(cam)
+        ms, n_pairs, cap, px = reduction_share(g, cam, args.repeat)
+        print(f"{scene}: {g.num} Gaussians, {n_pairs} pairs, capacity {cap}, {px}-pixel blocks: "
+              f"backward kernel {ms['11 sums']:.3f} ms with 11 reductions per pair, "
+              f"{ms['1 sum']:.3f} ms with 1 ({ms['1 sum'] / ms['11 sums']:.2f}x)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
