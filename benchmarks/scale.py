@@ -58,7 +58,7 @@ K = lgs_jax.KernelConfig
 LOCAL = K(vanilla_from_pairs=None)  # the Local-GS kernel at every size (no routing)
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
 ROWS = {
-    "auto": ("pallas", C("gsplat")),  # what users get: vanilla from 2^25 pairs (KernelConfig)
+    "auto": ("pallas", C("gsplat")),  # what users get: vanilla from 2^24 pairs (KernelConfig)
     "localgs": ("pallas", C("gsplat", tuning=LOCAL)),
     "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),

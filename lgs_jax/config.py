@@ -41,9 +41,9 @@ class KernelConfig:
         simulation of a GPU; the two are bit for bit the same there.
       vanilla_from_pairs: a forward-only `pallas` render runs the vanilla kernel when
         its pair buffer (`capacity`) holds at least this many pairs (kernel "auto" only): there
-        the Local-GS per-pair preparation in XLA costs more than its kernel saves (H200: vanilla
-        1.47–1.64x gsplat's forward against Local-GS's 1.82–1.96x at 24M pairs, a tie at 10M,
-        Local-GS faster below; BENCHMARKS.md §7). Images agree to float32 rounding (both are
+        the Local-GS per-pair preparation in XLA costs more than its kernel saves (H200, pair
+        buffers sized by `pair_capacity`: vanilla 8.39 against Local-GS 9.72 ms at 24M pairs,
+        a tie at 10M, Local-GS 17% faster at 3.4M; BENCHMARKS.md §7). Images agree to float32 rounding (both are
         exact; the kernels evaluate α in different forms). Under differentiation the Local-GS
         forward and backward still run (the routed backward has not been measured). None: never.
       interpret: run the Pallas kernels in interpret mode (True), lower them for the GPU (False:
@@ -72,7 +72,7 @@ class KernelConfig:
     auto_vanilla: Literal["triton", "mosaic"] = "mosaic"
     auto_backward: Literal["triton", "mosaic"] = "mosaic"
     interpret: bool | None = None
-    vanilla_from_pairs: int | None = 2**25
+    vanilla_from_pairs: int | None = 2**24
     triton_unroll_localgs: int = 2
     triton_unroll_vanilla: int = 8
     mosaic_unroll_localgs: int = 8

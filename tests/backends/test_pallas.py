@@ -178,11 +178,11 @@ def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
     reaches the threshold runs the vanilla kernel forward, and Local-GS again under
     differentiation; never for an explicit kernel, nor with the threshold None."""
     gpu = C(tuning=K(interpret=False))
-    assert not pallas.plan(gpu, False, 1, 2**25 - 1).vanilla
-    routed = pallas.plan(gpu, False, 1, 2**25)
+    assert not pallas.plan(gpu, False, 1, 2**24 - 1).vanilla
+    routed = pallas.plan(gpu, False, 1, 2**24)
     assert routed.vanilla and routed.kernel_name == "vanilla-mosaic"
     assert not routed.for_gradients().vanilla
-    assert pallas.plan(gpu, True, 1, 2**25).for_gradients().vanilla  # pallas_vanilla stays
+    assert pallas.plan(gpu, True, 1, 2**24).for_gradients().vanilla  # pallas_vanilla stays
     assert not pallas.plan(C(kernel="mosaic", tuning=K(interpret=False)), False, 1, 2**30).vanilla
     assert not pallas.plan(C(tuning=K(vanilla_from_pairs=None)), False, 1, 2**30).vanilla
     with pytest.raises(ValueError, match="tuning.vanilla_from_pairs"):
