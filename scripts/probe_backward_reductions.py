@@ -4,13 +4,13 @@ whether Mosaic GPU can express the reductions a faster kernel would need (GPU on
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/probe_backward_reductions.py [--data DIR]
         [--scenes guitar_x16_1080p,guitar_x110_4k] [--repeat 10]
 
-1. Reduction share. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
+1. Reduction share and record staging. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
    its block's pixels, each a warpgroup-wide `jnp.sum` (shuffles within each warp, then an
    exchange across the four warps through shared memory with a barrier). The `one_sum` variant
    adds the 11 per-lane terms elementwise and reduces that once (same arithmetic and loads, one
-   reduction instead of 11; its rows are wrong, only its time matters). Both run the kernel
-   alone (`pallas_mosaic.backward_rows`) on the same real inputs; the difference is what ten
-   reductions per pair cost.
+   reduction instead of 11; its rows are wrong, only its time matters). Each runs with the
+   records read from global memory (`mosaic_chunk` 0) and staged in shared memory (64), the
+   kernel alone (`pallas_mosaic.backward_rows`) on the same real inputs.
 2. Layout probes: small kernels that compile and run (or print the error) the pieces a batched
    reduction would use: a (R, 256) array in a tiled layout whose pixel axis is split over warps,
    lanes and a 2-vector, reduced along the pixels (all R rows through one shared-memory
@@ -20,10 +20,10 @@ whether Mosaic GPU can express the reductions a faster kernel would need (GPU on
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import os
 import sys
-import traceback
 
 import jax
 import jax.numpy as jnp
@@ -52,7 +52,8 @@ def _one_sum_step(original):
 
 
 def reduction_share(g, cam, repeat: int):
-    """Backward kernel time with 11 and with 1 reduction per pair (ms), and the rows' scale."""
+    """Backward kernel time (ms) with 11 and with 1 reduction per pair, records read from
+    global memory (chunk 0) or staged in shared memory (chunk 64), on the same inputs."""
     config = lgs_jax.RasterConfig()
     w, h = cam.width, cam.height
     tiles_x, tiles_y = tile_grid(w, h)
@@ -64,25 +65,27 @@ def reduction_share(g, cam, repeat: int):
     masks, records, order = saved
     rng = np.random.default_rng(0)
     cot = [jnp.asarray(rng.normal(size=state.trans.shape).astype(np.float32)) for _ in range(5)]
-    lane_rows = (state.trans, stop, *cot)
+    args = (bins, masks, records, order, (state.trans, stop, *cot))
 
-    def rows_fn():
-        return jax.jit(lambda b, m, r, o, lr: pallas_mosaic.backward_rows(
-            config, False, plan.backward_pixels, tiles_x, o, b, m, r, lr, jnp.float32))
+    def rows_fn(chunk: int):
+        cf = dataclasses.replace(config, tuning=dataclasses.replace(config.tuning,
+                                                                    mosaic_chunk=chunk))
+        f = jax.jit(lambda b, m, r, o, lr: pallas_mosaic.backward_rows(
+            cf, False, plan.backward_pixels, tiles_x, o, b, m, r, lr, jnp.float32))
+        jax.block_until_ready(f(*args))  # compiled now, with backward_step as it is now
+        return f
 
-    eleven = rows_fn()
-    args = (bins, masks, records, order, lane_rows)
-    jax.block_until_ready(eleven(*args))
+    fns = {f"11 sums, chunk {c}": rows_fn(c) for c in (0, 64)}
+    same = bool(jnp.array_equal(fns["11 sums, chunk 0"](*args), fns["11 sums, chunk 64"](*args)))
     original = kernel_steps.backward_step
     kernel_steps.backward_step = _one_sum_step(original)
     try:
-        one = rows_fn()
-        jax.block_until_ready(one(*args))
+        fns.update({f"1 sum, chunk {c}": rows_fn(c) for c in (0, 64)})
     finally:
         kernel_steps.backward_step = original
-    ms = median_ms({"11 sums": lambda: jax.block_until_ready(eleven(*args)),
-                    "1 sum": lambda: jax.block_until_ready(one(*args))}, repeat)
-    return ms, int(bins.pairs_required), cap, plan.backward_pixels
+    ms = median_ms({k: lambda f=f: jax.block_until_ready(f(*args)) for k, f in fns.items()},
+                   repeat)
+    return ms, same, int(bins.pairs_required), cap, plan.backward_pixels
 
 
 # ------------------------------------------------------------------------------ layout probes
@@ -95,8 +98,8 @@ def _probe(name: str, build):
         if not ok:
             print(f"    got {np.asarray(got).ravel()[:8]} want {np.asarray(want).ravel()[:8]}")
     except Exception as e:  # noqa: BLE001 - report and go on
-        msg = "".join(traceback.format_exception_only(type(e), e)).strip().splitlines()
-        print(f"  {name:<44s} FAILS: {msg[-1][:300]}", flush=True)
+        text = str(e).strip()
+        print(f"  {name:<44s} FAILS: {type(e).__name__}: {text[:400]}", flush=True)
 
 
 def layout_probes():
@@ -171,10 +174,12 @@ def main() -> int:
     for scene in args.scenes.split(","):
         g, cam = load_scene(scene, args.data)
         g, cam = jax.device_put(g), jax.device_put(cam)
-        ms, n_pairs, cap, px = reduction_share(g, cam, args.repeat)
-        print(f"{scene}: {g.num} Gaussians, {n_pairs} pairs, capacity {cap}, {px}-pixel blocks: "
-              f"backward kernel {ms['11 sums']:.3f} ms with 11 reductions per pair, "
-              f"{ms['1 sum']:.3f} ms with 1 ({ms['1 sum'] / ms['11 sums']:.2f}x)", flush=True)
+        ms, same, n_pairs, cap, px = reduction_share(g, cam, args.repeat)
+        print(f"{scene}: {g.num} Gaussians, {n_pairs} pairs, capacity {cap}, {px}-pixel blocks; "
+              f"staged rows {'equal' if same else 'DIFFER FROM'} unstaged bit for bit; "
+              "backward kernel ms:", flush=True)
+        for k, v in ms.items():
+            print(f"  {k:<20s} {v:8.3f}", flush=True)
     return 0
 
 

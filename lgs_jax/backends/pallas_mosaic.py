@@ -204,11 +204,13 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
 
 
 def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
-                    g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *, config: RasterConfig,
+                    g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch, config: RasterConfig,
                     tiles_x: int, pixels: int):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, j] =
     pair j's gradient summed over this block's pixels, for the pairs before the block's last
-    stop pair (the others are left unwritten; `backward_rows` masks them)."""
+    stop pair (the others are left unwritten; `backward_rows` masks them). `scratch`, when
+    `staged`: the shared-memory record buffers and their barriers (`_smem_records_backward`).
+    Each pair's strip mask is loaded one pair ahead (the skip branch waits on it)."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -221,26 +223,74 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     last = jnp.minimum(ranges_ref[tile, 1], jnp.max(stop_at))
     mine = _strip_bits(wg, pixels)
     zero_row = [jnp.zeros((), dt)] * ks.GRAD_VALUES
+    if scratch:
+        record, begin = _smem_records_backward(rec_ref, *scratch, start, last,
+                                               config.tuning.mosaic_chunk)
+    else:
+        def record(j):
+            return [rec_ref[j, c] for c in range(ks.REC - 1)]
 
-    def step(j, carry):
-        rec = [rec_ref[j, c] for c in range(ks.REC - 1)]
-        values, carry = ks.backward_step(j, rec, mask_ref[j] if config.warp_cull else None, lane,
-                                         carry, config)
+        begin = None
+    mask_at = ((lambda j: mask_ref[jnp.maximum(j, 0)]) if config.warp_cull
+               else (lambda j: jnp.int32(0)))
+
+    def step(j, mask_word, carry):
+        values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
+                                         lane, carry, config)
         return [zero_row[0] if v is None else jnp.sum(v) for v in values], carry
 
-    def body(i, carry):
+    def body(i, state):
+        mask_word, carry = state
         j = last - 1 - i
+        if begin is not None:
+            begin(i, j)
+        next_mask = mask_at(j - 1)
         if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
-            sums, carry = lax.cond((mask_ref[j] & mine) != 0, step,
-                                   lambda j, carry: (zero_row, carry), j, carry)
+            sums, carry = lax.cond((mask_word & mine) != 0, step,
+                                   lambda j, m, carry: (zero_row, carry), j, mask_word, carry)
         else:
-            sums, carry = step(j, carry)
+            sums, carry = step(j, mask_word, carry)
         for c, s in enumerate(sums):
             rows_ref[wg, j, c] = s
-        return carry
+        return next_mask, carry
 
     zero = jnp.zeros(k.shape, dt)
-    lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
+    lax.fori_loop(0, jnp.maximum(last - start, 0), body,
+                  (mask_at(last - 1), (trans, zero, zero, zero, zero)))
+
+
+def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
+    """(record(j), begin(i, j)) of the backward walk over pairs last − 1 down to start with
+    their records staged in shared memory: chunks of `chunk` records aligned to multiples of
+    `chunk` (chunk q holds pairs [q·chunk, (q + 1)·chunk)), copied by TMA into slot q % 2,
+    double-buffered: `begin`, at the first pair of each chunk the walk enters, waits for that
+    chunk and starts the copy of the one below it if the walk reaches it (every copy started is
+    waited for). Records are read only inside a step that reduces over the warpgroup (whose
+    barrier every warp passes after its reads), so no warp still reads a slot when the next
+    copy into it starts."""
+    def copy(q):
+        plgpu.copy_gmem_to_smem(rec_ref.at[pl.ds(q * chunk, chunk)], smem.at[q % 2],
+                                barriers.at[q % 2])
+
+    @pl.when(last > start)
+    def _():
+        copy((last - 1) // chunk)
+
+    def begin(i, j):
+        q = j // chunk
+
+        @pl.when((i == 0) | (j % chunk == chunk - 1))
+        def _():
+            plgpu.barrier_wait(barriers.at[q % 2])
+
+            @pl.when(q * chunk > start)
+            def _():
+                copy(q - 1)
+
+    def record(j):
+        return [smem[(j // chunk) % 2, j % chunk, c] for c in range(ks.REC - 1)]
+
+    return record, begin
 
 
 def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, order, bins,
@@ -253,7 +303,12 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels)
     out = jax.ShapeDtypeStruct((n, capacity, ks.GRAD_VALUES), dt)
-    rows = plgpu.kernel(kernel, out_type=out, grid=(n_tiles, n), grid_names=("tile", "wg"),
+    scratch = ()
+    if staged(config, dt):
+        scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
+                   plgpu.Barrier(num_barriers=2))
+    rows = plgpu.kernel(kernel, out_type=out, scratch_types=scratch, grid=(n_tiles, n),
+                        grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
                         kernel_name="localgs_backward_mosaic")(
         order, _ranges(bins), masks, records, *lane_rows)

@@ -173,6 +173,29 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
                                       getattr(outs[0, 128], field))
 
 
+@pytest.mark.parametrize("backend,pixels", [("pallas", 128), pytest.param("pallas", 256,
+                                                                          marks=SLOW),
+                                            pytest.param("pallas_vanilla", 256, marks=SLOW)])
+@settings(max_examples=2)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_mosaic_backward_staging_is_bit_for_bit(backend, pixels, seed):
+    """The Mosaic GPU backward kernel with its float32 records staged in shared memory, in
+    chunks of 8 so that every tile's walk crosses several (chunks entered part-way, the copy
+    of the chunk below started at each boundary), gives the gradients of records read from
+    global memory bit for bit."""
+    g = scenes.cast(scenes.scene(seed), np.float32)
+    cam = scenes.camera()
+    w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
+    grads = []
+    for chunk in (0, 8):
+        config = C(kernel="mosaic", tuning=K(mosaic_chunk=chunk, mosaic_backward_pixels=pixels))
+        loss = lambda g, config=config: jax.numpy.sum(
+            scenes.render(g, cam, backend, config).image * w.astype(np.float32))
+        grads.append(jax.tree.leaves(jax.grad(loss)(g)))
+    for staged, unstaged in zip(*grads):
+        np.testing.assert_array_equal(staged, unstaged)
+
+
 def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
     """`KernelConfig.vanilla_from_pairs`: with kernel "auto" a `pallas` plan whose pair buffer
     reaches the threshold runs the vanilla kernel forward, and Local-GS again under
