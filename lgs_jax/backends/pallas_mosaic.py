@@ -35,13 +35,17 @@ images are the same to the bit in interpret mode (on the GPU the two compilers' 
 multiply-add contraction differ by ulps); both record per-pixel stop pairs for the backward.
 
 Backward. The same blocks walk the tile's pairs back to front from the last pair any of their
-pixels blended (`kernel_steps.backward_step`), and reduce each pair's 11 gradient terms over
-their pixels (11 warpgroup reductions: Mosaic GPU reduces a warpgroup array to a scalar, but has
-no multi-column cross-warp reduction like the Triton kernel's (256, 16) one). A pair none of the
-block's strips takes (mask bits clear) is skipped by one uniform branch: unlike the forward's
-staged groups, a backward step is long enough for the branch to pay. Each block writes its own
-row per pair (`backward_rows` masks the pairs it did not visit and adds a tile's blocks): one
-writer per row, no atomics, deterministic.
+pixels blended (`kernel_steps.backward_step`), float32 records staged in shared memory as in the
+forward (chunks aligned to multiples of the chunk size, copied downward), and reduce each pair's
+11 gradient terms over their pixels together: the 11 lane vectors regrouped as the rows of one
+(11, pixels) array (`_stacked`, through `plgpu.inline_mgpu`: Pallas has no cast from the strided
+layout to a tiled one) whose pixel-axis sum exchanges all 11 across the warps in one round,
+where 11 warpgroup reductions took 11. Bit for bit the per-term reductions (GPU; interpret mode,
+which cannot run inline Mosaic GPU code, takes the per-term path). A pair none of the block's
+strips takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged
+groups, a backward step is long enough for the branch to pay. Each block writes its own row per
+pair (`backward_rows` masks the pairs it did not visit and adds a tile's blocks): one writer per
+row, no atomics, deterministic.
 """
 
 from __future__ import annotations
@@ -49,9 +53,11 @@ from __future__ import annotations
 import functools
 
 import jax
+import numpy as np
 import jax.numpy as jnp
 from jax import lax
 from jax.experimental import pallas as pl
+from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
 from jax.experimental.pallas import mosaic_gpu as plgpu
 
 from ..config import RasterConfig
@@ -205,12 +211,15 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
 
 def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
                     g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch, config: RasterConfig,
-                    tiles_x: int, pixels: int):
+                    tiles_x: int, pixels: int, stacked: bool):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, j] =
     pair j's gradient summed over this block's pixels, for the pairs before the block's last
     stop pair (the others are left unwritten; `backward_rows` masks them). `scratch`, when
     `staged`: the shared-memory record buffers and their barriers (`_smem_records_backward`).
-    Each pair's strip mask is loaded one pair ahead (the skip branch waits on it)."""
+    Each pair's strip mask is loaded one pair ahead (the skip branch waits on it). `stacked`:
+    the pair's GRAD_VALUES terms are reduced together (`_stacked_sums`: one exchange across the
+    warps per pair) and stored as one vector; else one warpgroup reduction and one scalar store
+    per term."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -234,10 +243,20 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     mask_at = ((lambda j: mask_ref[jnp.maximum(j, 0)]) if config.warp_cull
                else (lambda j: jnp.int32(0)))
 
+    def store_zero(j):
+        for c, z in enumerate(zero_row):
+            rows_ref[wg, j, c] = z
+
     def step(j, mask_word, carry):
         values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
                                          lane, carry, config)
-        return [zero_row[0] if v is None else jnp.sum(v) for v in values], carry
+        if stacked:
+            terms = [jnp.zeros(k.shape, dt) if v is None else v for v in values]
+            rows_ref[wg, j, pl.ds(0, ks.GRAD_VALUES)] = jnp.sum(_stacked(terms, pixels, dt), 1)
+        else:
+            for c, v in enumerate(values):
+                rows_ref[wg, j, c] = zero_row[c] if v is None else jnp.sum(v)
+        return carry
 
     def body(i, state):
         mask_word, carry = state
@@ -246,17 +265,43 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
             begin(i, j)
         next_mask = mask_at(j - 1)
         if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
-            sums, carry = lax.cond((mask_word & mine) != 0, step,
-                                   lambda j, m, carry: (zero_row, carry), j, mask_word, carry)
+            carry = lax.cond((mask_word & mine) != 0, step,
+                             lambda j, m, carry: (store_zero(j), carry)[1], j, mask_word, carry)
         else:
-            sums, carry = step(j, mask_word, carry)
-        for c, s in enumerate(sums):
-            rows_ref[wg, j, c] = s
+            carry = step(j, mask_word, carry)
         return next_mask, carry
 
     zero = jnp.zeros(k.shape, dt)
     lax.fori_loop(0, jnp.maximum(last - start, 0), body,
                   (mask_at(last - 1), (trans, zero, zero, zero, zero)))
+
+
+def _stacked(terms, pixels: int, dt):
+    """The (len(terms), pixels) array whose row c is terms[c], each a block-wide (pixels,)
+    lane vector in Mosaic GPU's strided layout (lane l of warp w holds pixels 32·v·w + v·l ..
+    + v − 1, v = pixels / 128), laid out so that every thread keeps its own pixels of every
+    row: a tiled layout with the rows in registers and the pixels over the 4 warps, 32 lanes
+    and v-vectors as before. No data moves (the registers are only regrouped); a sum over the
+    pixel axis then reduces every row within each thread and warp and exchanges all rows across
+    the warps at once (one barrier round for the pair instead of one per term). Pallas has no
+    cast from the strided to a tiled layout, hence `plgpu.inline_mgpu` (GPU only: interpret mode
+    cannot run it)."""
+    rows, vec = len(terms), pixels // 128
+    tiled = mgpu_fa.TiledLayout(
+        mgpu_fa.Tiling(((rows, pixels), (32 * vec,), (vec,))), warp_dims=(-3,),
+        lane_dims=(-2,), vector_dim=-1, _check_canonical=False).canonicalize()
+    out = plgpu.Layout.TILED(tiled.tiling, warp_dims=tiled.warp_dims,
+                             lane_dims=tiled.lane_dims, vector_dim=tiled.vector_dim)
+
+    @plgpu.inline_mgpu(arg_types=(plgpu.Layout.WG_STRIDED((pixels,), vec_size=vec),) * rows,
+                       return_type=plgpu.ShapeDtypeStruct((rows, pixels), dt, layout=out))
+    def stack(_, *arrays):
+        registers = np.stack([a.registers.reshape(-1) for a in arrays])
+        return mgpu_fa.FragmentedArray(
+            _registers=registers.reshape(tiled.registers_shape((rows, pixels))), _layout=tiled,
+            _is_signed=None)
+
+    return stack(*terms)
 
 
 def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
@@ -294,14 +339,17 @@ def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
 
 
 def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, order, bins,
-                  masks, records, lane_rows, dt):
+                  masks, records, lane_rows, dt, stacked: bool | None = None):
     """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, blocks per
     tile) grid: each block's rows, zero where that block did not visit the pair (pairs at or
     after its last stop pair, padding pairs), summed over a tile's blocks in a fixed order.
-    `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D)."""
+    `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D). `stacked`
+    (default: on the GPU, not in interpret mode) reduces a pair's terms together
+    (`_stacked`)."""
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     n = TILE_PIXELS // pixels
-    kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels)
+    kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
+                               stacked=not interpret if stacked is None else stacked)
     out = jax.ShapeDtypeStruct((n, capacity, ks.GRAD_VALUES), dt)
     scratch = ()
     if staged(config, dt):
