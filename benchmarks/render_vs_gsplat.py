@@ -205,13 +205,14 @@ def _grad_rows(case, repeat, slow_repeat, names=tuple(GRAD_ROWS)):
         backend, config = GRAD_ROWS[name]
         image = lambda g, b=backend, c=config: render(g, cam, backend=b, config=c,
                                                       capacity=cap).image
-        f = jax.jit(jax.value_and_grad(lambda g, image=image: jnp.sum(image(g) * weights)))
+        # w is an argument: closed over, XLA would constant-fold the image-sized weights.
+        f = jax.jit(jax.value_and_grad(lambda g, w, image=image: jnp.sum(image(g) * w)))
         fwd_f = jax.jit(image)
-        mem = f.lower(g).compile().memory_analysis()
-        first, again = f(g)[1], f(g)[1]
+        mem = f.lower(g, weights).compile().memory_analysis()
+        first, again = f(g, weights)[1], f(g, weights)[1]
         same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
                                                                  jax.tree.leaves(again)))
-        fns[name] = lambda f=f: jax.block_until_ready(f(g))
+        fns[name] = lambda f=f: jax.block_until_ready(f(g, weights))
         fwd[name] = lambda f=fwd_f: jax.block_until_ready(f(g))
         rows[name] = dict(scene=case.name, width=w, height=h, row=f"grad:{name}",
                           peak_mb=(mem.temp_size_in_bytes + mem.argument_size_in_bytes

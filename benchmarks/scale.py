@@ -211,12 +211,15 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
         backend, config, cap = row_setup(name, n_pairs)
         image = lambda g, b=backend, cf=config, cap=cap: lgs_jax.render(
             g, cam, backend=b, config=cf, capacity=cap).image
-        f = jax.jit(jax.value_and_grad(lambda g, image=image: jnp.sum(image(g) * weights)))
-        first, again = f(g)[1], f(g)[1]
+        # w is an argument: closed over, XLA would constant-fold the image-sized weights into
+        # the backward (minutes of compilation at 4K).
+        f = jax.jit(jax.value_and_grad(lambda g, w, image=image: jnp.sum(image(g) * w)))
+        first, again = f(g, weights)[1], f(g, weights)[1]
         same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
                                                                  jax.tree.leaves(again)))
-        extra[name] = dict(capacity=cap, memory_mib=compiled_mib(f, g), bitwise_repeatable=same)
-        fns[name] = lambda f=f: jax.block_until_ready(f(g))
+        extra[name] = dict(capacity=cap, memory_mib=compiled_mib(f, g, weights),
+                           bitwise_repeatable=same)
+        fns[name] = lambda f=f: jax.block_until_ready(f(g, weights))
     if with_gsplat:
         step = gsplat_grad_step(g, cam, weights)
         if step:
