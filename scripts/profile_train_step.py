@@ -84,7 +84,6 @@ def trained_pool(setup, path: str, size: int, scene_scale: float):
 def tile_load(pool, cam, capacity: int) -> str:
     """The per-tile pair counts of one view, summarised (module docstring)."""
     import jax
-    import jax.numpy as jnp
 
     from lgs_jax import binning
     from lgs_jax.projection import project
