@@ -53,8 +53,8 @@ from __future__ import annotations
 import functools
 
 import jax
-import numpy as np
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
@@ -217,7 +217,7 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     stop pair (the others are left unwritten; `backward_rows` masks them). `scratch`, when
     `staged`: the shared-memory record buffers and their barriers (`_smem_records_backward`).
     Each pair's strip mask is loaded one pair ahead (the skip branch waits on it). `stacked`:
-    the pair's GRAD_VALUES terms are reduced together (`_stacked_sums`: one exchange across the
+    the pair's GRAD_VALUES terms are reduced together (`_stacked`: one exchange across the
     warps per pair) and stored as one vector; else one warpgroup reduction and one scalar store
     per term."""
     dt = rec_ref.dtype
@@ -243,9 +243,11 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     mask_at = ((lambda j: mask_ref[jnp.maximum(j, 0)]) if config.warp_cull
                else (lambda j: jnp.int32(0)))
 
-    def store_zero(j):
+    def skip(j, mask_word, carry):  # a zero row, the carry unchanged
+        del mask_word
         for c, z in enumerate(zero_row):
             rows_ref[wg, j, c] = z
+        return carry
 
     def step(j, mask_word, carry):
         values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
@@ -265,8 +267,7 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
             begin(i, j)
         next_mask = mask_at(j - 1)
         if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
-            carry = lax.cond((mask_word & mine) != 0, step,
-                             lambda j, m, carry: (store_zero(j), carry)[1], j, mask_word, carry)
+            carry = lax.cond((mask_word & mine) != 0, step, skip, j, mask_word, carry)
         else:
             carry = step(j, mask_word, carry)
         return next_mask, carry
