@@ -59,9 +59,10 @@ class KernelConfig:
       mosaic_forward_pixels, mosaic_backward_pixels: pixels per block, 128 (half a tile, one per
         lane) or 256 (the whole tile, two per lane); None: by the image's tile count, whole
         tiles from `mosaic_whole_tile_from` tiles on.
-      mosaic_chunk: Local-GS pair records per TMA copy into shared memory (double-buffered;
-        float32 only, TMA has no 64-bit float type); 0 reads records from global memory. A
-        multiple of mosaic_unroll_localgs (a staged group never straddles two chunks).
+      mosaic_chunk: pair records per TMA copy into shared memory, in the Local-GS forward
+        and in the backward kernel (double-buffered; float32 only, TMA has no 64-bit float
+        type); 0 reads records from global memory. A multiple of mosaic_unroll_localgs (a
+        staged group never straddles two chunks).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
