@@ -2,7 +2,7 @@
 whether Mosaic GPU can express the reductions a faster kernel would need (GPU only).
 
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/probe_backward_reductions.py [--data DIR]
-        [--scenes guitar_x16_1080p,guitar_x110_4k] [--repeat 10]
+        [--scenes guitar_x16_1080p,guitar_x110_4k] [--repeat 10] [--lower-only]
 
 1. Reduction share and record staging. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
    its block's pixels, each a warpgroup-wide `jnp.sum` (shuffles within each warp, then an
@@ -15,7 +15,9 @@ whether Mosaic GPU can express the reductions a faster kernel would need (GPU on
 2. Layout probes: small kernels that compile and run (or print the error) the pieces a batched
    reduction would use: a (R, 256) array in a tiled layout whose pixel axis is split over warps,
    lanes and a 2-vector, reduced along the pixels (all R rows through one shared-memory
-   exchange), and a within-warp reduction that leaves one partial per warp.
+   exchange), a within-warp reduction that leaves one partial per warp, and the regrouping the
+   backward kernel uses (`pallas_mosaic._stacked`). `--lower-only` only lowers them for the
+   GPU, which needs no GPU and raises the same layout errors (for designing on a CPU).
 """
 
 from __future__ import annotations
@@ -96,19 +98,25 @@ def reduction_share(g, cam, repeat: int):
 
 # ------------------------------------------------------------------------------ layout probes
 
-def _probe(name: str, build):
+def _probe(name: str, fn, args, want, lower_only: bool):
+    """Run `fn(*args)` and compare with `want`, or (lower_only) only lower it for the GPU, which
+    works without one and raises the same layout errors."""
     try:
-        got, want = build()
-        ok = np.allclose(np.asarray(got), want, rtol=1e-5, atol=1e-4)
-        print(f"  {name:<44s} {'OK' if ok else 'WRONG VALUES'}", flush=True)
+        if lower_only:
+            jax.jit(fn).trace(*args).lower(lowering_platforms=("cuda",))
+            print(f"  {name:<48s} lowers", flush=True)
+            return
+        got = np.asarray(fn(*args))
+        ok = np.allclose(got, want, rtol=1e-5, atol=1e-4)
+        print(f"  {name:<48s} {'OK' if ok else 'WRONG VALUES'}", flush=True)
         if not ok:
-            print(f"    got {np.asarray(got).ravel()[:8]} want {np.asarray(want).ravel()[:8]}")
+            print(f"    got {got.ravel()[:8]} want {np.asarray(want).ravel()[:8]}")
     except Exception as e:  # noqa: BLE001 - report and go on
         text = str(e).strip()
-        print(f"  {name:<44s} FAILS: {type(e).__name__}: {text[:400]}", flush=True)
+        print(f"  {name:<48s} FAILS: {type(e).__name__}: {text[:400]}", flush=True)
 
 
-def layout_probes():
+def layout_probes(lower_only: bool):
     from jax.experimental import pallas as pl
     from jax.experimental.pallas import mosaic_gpu as plgpu
     from jax.experimental.mosaic.gpu.fragmented_array import Tiling
@@ -123,15 +131,16 @@ def layout_probes():
         return plgpu.Layout.TILED(Tiling(((4, 64), (2,))),
                                   warp_dims=(-3,), lane_dims=(-2,), vector_dim=-1)
 
+    def call(kernel, shape, *args):
+        return plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct(shape, jnp.float32))(*args)
+
     x = np.random.default_rng(0).normal(size=(16, 256)).astype(np.float32)
 
     def rows_sum(rows):
         def kernel(x_ref, o_ref):
             v = plgpu.load(x_ref, layout=pixel_layout(rows))
             o_ref[...] = jnp.sum(v * 2.0, axis=1)
-        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((rows,), jnp.float32))(
-            jnp.asarray(x[:rows]))
-        return out, 2.0 * x[:rows].sum(1)
+        return lambda x: call(kernel, (rows,), x), (jnp.asarray(x[:rows]),), 2 * x[:rows].sum(1)
 
     def iota_rows_sum():
         def kernel(o_ref):
@@ -140,31 +149,38 @@ def layout_probes():
             r = plgpu.broadcasted_iota(jnp.int32, (16, 256), 0,
                                        layout=pixel_layout(16)).astype(jnp.float32)
             o_ref[...] = jnp.sum(i * r, axis=1)
-        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((16,), jnp.float32))()
-        return out, np.arange(16) * np.arange(256).sum()
+        return lambda: call(kernel, (16,)), (), np.arange(16) * np.arange(256).sum()
 
     def broadcast_row():
         def kernel(x_ref, o_ref):
             row = plgpu.load(x_ref.at[pl.ds(0, 1)], layout=pixel_layout(1))
             basis = plgpu.load(x_ref, layout=pixel_layout(16))
             o_ref[...] = jnp.sum(basis * jnp.broadcast_to(row, (16, 256)), axis=1)
-        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((16,), jnp.float32))(
-            jnp.asarray(x))
-        return out, (x * x[:1]).sum(1)
+        return lambda x: call(kernel, (16,), x), (jnp.asarray(x),), (x * x[:1]).sum(1)
 
     def per_warp_sum():
         def kernel(x_ref, o_ref):
             v = plgpu.load(x_ref, layout=warp_layout())
             o_ref[...] = jnp.sum(v, axis=1)
-        out = plgpu.kernel(kernel, out_type=jax.ShapeDtypeStruct((4,), jnp.float32))(
-            jnp.asarray(x[0].reshape(4, 64)))
-        return out, x[0].reshape(4, 64).sum(1)
+        return (lambda x: call(kernel, (4,), x), (jnp.asarray(x[0].reshape(4, 64)),),
+                x[0].reshape(4, 64).sum(1))
 
-    _probe("(16,256) tiled load + sum over pixels", lambda: rows_sum(16))
-    _probe("(64,256) tiled load + sum over pixels", lambda: rows_sum(64))
-    _probe("(16,256) tiled iota + sum over pixels", iota_rows_sum)
-    _probe("(1,256) row broadcast to (16,256) + sum", broadcast_row)
-    _probe("(4,64) per-warp sum (no cross-warp step)", per_warp_sum)
+    def stacked_rows(pixels):
+        """What the backward kernel does (`pallas_mosaic._stacked`): 11 strided lane vectors
+        regrouped as the rows of one tiled array, summed over the pixels at once."""
+        def kernel(x_ref, o_ref):
+            terms = [x_ref[c] * 1.0 for c in range(11)]
+            o_ref[...] = jnp.sum(pallas_mosaic._stacked(terms, pixels, jnp.float32), axis=1)
+        xs = x[:11, :pixels]
+        return lambda x: call(kernel, (11,), x), (jnp.asarray(xs),), xs.sum(1)
+
+    _probe("(16,256) tiled load + sum over pixels", *rows_sum(16), lower_only)
+    _probe("(16,256) tiled iota + sum over pixels", *iota_rows_sum(), lower_only)
+    _probe("(1,256) row broadcast to (16,256) + sum", *broadcast_row(), lower_only)
+    _probe("(4,64) per-warp sum (no cross-warp step)", *per_warp_sum(), lower_only)
+    for pixels in (128, 256):
+        _probe(f"11 strided ({pixels},) regrouped (11,{pixels}) + sum", *stacked_rows(pixels),
+               lower_only)
 
 
 def main() -> int:
@@ -173,10 +189,14 @@ def main() -> int:
     add_data_argument(ap)
     ap.add_argument("--scenes", default="guitar_x16_1080p,guitar_x110_4k")
     ap.add_argument("--repeat", type=int, default=10)
+    ap.add_argument("--lower-only", action="store_true",
+                    help="only lower the layout probes for the GPU (runs without one)")
     args = ap.parse_args()
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     print("layout probes:", flush=True)
-    layout_probes()
+    layout_probes(args.lower_only)
+    if args.lower_only:
+        return 0
     for scene in args.scenes.split(","):
         g, cam = load_scene(scene, args.data)
         g, cam = jax.device_put(g), jax.device_put(cam)
