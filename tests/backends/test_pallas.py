@@ -173,8 +173,7 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
                                       getattr(outs[0, 128], field))
 
 
-@pytest.mark.parametrize("backend,pixels", [("pallas", 128), pytest.param("pallas", 256,
-                                                                          marks=SLOW),
+@pytest.mark.parametrize("backend,pixels", [("pallas", 128),
                                             pytest.param("pallas_vanilla", 256, marks=SLOW)])
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
