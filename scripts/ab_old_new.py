@@ -36,7 +36,10 @@ ROWS = {  # name -> (backend, RasterConfig kwargs, differentiate)
 
 
 def _stage(pkg, backend: str, kwargs: dict, grad: bool, g, cam, weights):
-    """A jitted function of the projected Gaussians: the rasterization stage of `pkg`."""
+    """A jitted function of the projected Gaussians: the rasterization stage of `pkg`, both
+    packages at the current package's pair capacity (`lgs_jax.pair_capacity`), so the rows
+    differ only in the code compared."""
+    cap = int(importlib.import_module("lgs_jax").render(g, cam).stats.capacity)
     binning = importlib.import_module(f"{pkg}.binning")
     projection = importlib.import_module(f"{pkg}.projection")
     config = importlib.import_module(f"{pkg}.config").RasterConfig(**kwargs)
@@ -44,7 +47,6 @@ def _stage(pkg, backend: str, kwargs: dict, grad: bool, g, cam, weights):
     g = lib.Gaussians(g.means, g.quats, g.log_scales, g.logit_opacities, g.sh)  # pkg's classes
     cam = lib.Camera(viewmat=cam.viewmat, fx=cam.fx, fy=cam.fy, cx=cam.cx, cy=cam.cy,
                      width=cam.width, height=cam.height, near=cam.near, far=cam.far)
-    cap = int(lib.render(g, cam).stats.capacity)
     w, h = cam.width, cam.height
     p = jax.jit(projection.project)(g, cam)
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
