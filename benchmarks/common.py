@@ -216,9 +216,9 @@ def pipeline_stages(g, cam, capacity: int):
     sort = jax.jit(lambda t, i: binning.sort_pairs(t, i, n_tiles))
     p = proj(g, cam)
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, capacity))(p)
-    tile, gauss, _, _ = emit(p)
+    e = emit(p)
     return p, bins, {"project": lambda: proj(g, cam), "emit": lambda: emit(p),
-                     "sort": lambda: sort(tile, gauss)}
+                     "sort": lambda: sort(e.tile, e.gauss)}
 
 
 def torch_peak_mib(f) -> float:

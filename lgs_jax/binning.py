@@ -123,6 +123,9 @@ class TileBins:
         consecutive emission slots, so gathering per-pair values with the inverse permutation
         groups them per Gaussian without a second sort (backends.backward.per_gaussian_sum).
       tile_start, tile_end: (n_tiles,) int32 half-open ranges of each tile's pairs in `gauss`.
+      first, count: (N,) int32 per Gaussian: its pairs fill emission slots [first, first + count)
+        (count = 0 for a Gaussian with no pair within the capacity), in ascending tile order.
+        The Pallas backward sums each Gaussian's pair rows there (backends.gaussian_grads).
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
       n_unbounded: int32 Gaussians binned to every tile because rounding could not bound them.
@@ -133,6 +136,8 @@ class TileBins:
     slot: Any
     tile_start: Any
     tile_end: Any
+    first: Any
+    count: Any
     pairs_required: Any
     overflow: Any
     n_unbounded: Any
@@ -190,13 +195,34 @@ def segment_of_slot(starts, counts, capacity: int):
     return jnp.where(jnp.arange(capacity, dtype=jnp.int32) < total, k, n - 1)
 
 
-def emit_pairs(p: Projected, width: int, height: int, capacity: int):
-    """Tile–Gaussian pairs in (depth, index) order: (tile, gauss, total, n_unbounded).
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class Emission:
+    """The pairs `emit_pairs` makes, in emission order (Gaussian-major, depth order).
+
+    Attributes:
+      tile, gauss: (capacity,) int32 tile and Gaussian of each slot (tile = n_tiles: padding).
+      total: int32 pairs the scene needs (`total_pairs`).
+      n_unbounded: int32 Gaussians binned to every tile.
+      first, count: (N,) int32 per Gaussian, as `TileBins.first` and `TileBins.count`.
+    """
+
+    tile: Any
+    gauss: Any
+    total: Any
+    n_unbounded: Any
+    first: Any
+    count: Any
+
+
+def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission:
+    """Tile–Gaussian pairs in (depth, index) order.
 
     Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
     prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
     row. `segment_of_slot` finds each slot's k (no scatter-add, so deterministic on GPUs); slots
-    past the total get tile = n_tiles (padding, sorts last).
+    past the total get tile = n_tiles (padding, sorts last). Each Gaussian's (first slot, count
+    within the capacity) is stored at its index (a permutation: one writer per element).
     """
     if not 0 < capacity <= MAX_PAIRS:
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
@@ -215,7 +241,13 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int):
     local = slot - per_k[:, 0]
     tile = (rect[:, 1] + local // rect[:, 2]) * tiles_x + rect[:, 0] + local % rect[:, 2]
     tile = jnp.where(slot < total, tile, tiles_x * tiles_y)
-    return tile, g, total, jnp.sum(unbounded, dtype=jnp.int32)
+    inside = (counts_sorted > 0) & (starts >= 0) & (starts < capacity)
+    kept = jnp.where(inside, jnp.minimum(counts_sorted, capacity - starts), 0)
+    first_count = jnp.zeros((order.shape[0], 2), jnp.int32).at[order].set(
+        jnp.stack([jnp.where(inside, starts, 0), kept], -1), unique_indices=True)
+    return Emission(tile=tile, gauss=g, total=total,
+                    n_unbounded=jnp.sum(unbounded, dtype=jnp.int32),
+                    first=first_count[:, 0], count=first_count[:, 1])
 
 
 def sort_pairs(tile, gauss, n_tiles: int):
@@ -232,7 +264,8 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileB
     """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
     pairs are emitted in depth order and the tile sort is stable."""
     tiles_x, tiles_y = tile_grid(width, height)
-    tile, g, total, n_unbounded = emit_pairs(p, width, height, capacity)
-    tile, gauss, slot, start, end = sort_pairs(tile, g, tiles_x * tiles_y)
+    e = emit_pairs(p, width, height, capacity)
+    tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
-                    pairs_required=total, overflow=total > capacity, n_unbounded=n_unbounded)
+                    first=e.first, count=e.count, pairs_required=e.total,
+                    overflow=e.total > capacity, n_unbounded=e.n_unbounded)

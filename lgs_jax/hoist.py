@@ -24,6 +24,22 @@ def hoist_terms(a, b, c, dx, dy, log_opacity):
             -0.5 * a * dx * dx - b * dx * dy - 0.5 * c * dy * dy + log_opacity)
 
 
+def hoist_terms_vjp(g, a, b, c, dx, dy):
+    """The transpose of Eq. 8's Jacobian: ∂L/∂(a, b, c, Δx, Δy, ln o) from g = ∂L/∂V (six
+    values; arrays or scalars), as the backward chains each pair's ∂L/∂V to its Gaussian:
+
+        ∂a = −½g₀ + g₃Δx − ½g₅Δx²,   ∂b = −g₁ + g₃Δy + g₄Δx − g₅ΔxΔy,   ∂c = −½g₂ + g₄Δy − ½g₅Δy²,
+        ∂Δx = g₃a + g₄b − g₅(aΔx + bΔy),   ∂Δy = g₃b + g₄c − g₅(bΔx + cΔy),   ∂ln o = g₅.
+    """
+    g0, g1, g2, g3, g4, g5 = g
+    return (-0.5 * g0 + g3 * dx - 0.5 * g5 * (dx * dx),
+            -g1 + g3 * dy + g4 * dx - g5 * (dx * dy),
+            -0.5 * g2 + g4 * dy - 0.5 * g5 * (dy * dy),
+            g3 * a + g4 * b - g5 * (a * dx + b * dy),
+            g3 * b + g4 * c - g5 * (b * dx + c * dy),
+            g5)
+
+
 def hoist(mean2d, conic, log_opacity, origin):
     """The hoisted 6-vector V (Eq. 8) of Gaussians (..., ) relative to tile origins (..., 2)."""
     dx, dy = mean2d[..., 0] - origin[..., 0], mean2d[..., 1] - origin[..., 1]

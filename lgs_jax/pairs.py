@@ -100,9 +100,10 @@ def chain_hoisted_rows(pg: PairGaussians, bins: TileBins, rows, tiles_x: int,
     the pair's Gaussian through Eq. 8 (the vjp of `hoist.hoist`): (capacity, 10) rows of
     ∂L/∂(mean2d, conic, opacity, rgb, depth)."""
     origin = _pair_origins(bins, tiles_x, config, pg.mean2d.dtype)
+    dx, dy = pg.mean2d[:, 0] - origin[:, 0], pg.mean2d[:, 1] - origin[:, 1]
+    q = pg.conic
+    d_a, d_b, d_c, d_dx, d_dy, d_log_o = hoist.hoist_terms_vjp(
+        [rows[:, i] for i in range(6)], q[:, 0], q[:, 1], q[:, 2], dx, dy)
     o = pg.opacity
-    _, vjp = jax.vjp(lambda m, q, lo: hoist.hoist(m, q, lo, origin), pg.mean2d, pg.conic,
-                     jnp.log(jnp.where(o > 0, o, 1)))
-    d_mean, d_conic, d_log_o = vjp(rows[:, :6])
     d_o = jnp.where(o > 0, (d_log_o + rows[:, 6]) / jnp.where(o > 0, o, 1), 0)
-    return jnp.concatenate([d_mean, d_conic, d_o[:, None], rows[:, 7:]], -1)
+    return jnp.concatenate([jnp.stack([d_dx, d_dy, d_a, d_b, d_c, d_o], -1), rows[:, 7:]], -1)

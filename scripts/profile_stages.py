@@ -7,9 +7,10 @@ Each stage is its own jitted function of the previous stages' (precomputed) outp
 alone (median of `--repeat` calls, all stages alternating): projection, the pieces of binning
 (tile rectangles, depth order, slot segments, the full emission, the tile sort), the per-pair
 preparation (row gather, strip masks, records), the forward kernel from prepared inputs, and
-the backward's pieces (backward kernel rows, the Eq. 8 chain, the per-Gaussian sum, the vjp of
-projection). Stage times do not add up to the end-to-end time exactly (fusion across stage
-boundaries, launch gaps), which is printed last for comparison.
+the backward's pieces (backward kernel rows, the per-Gaussian chain and sum kernel, the vjp of
+projection; and, for comparison in the same run, the XLA chain and per-Gaussian sum the
+`tiles` backend takes). Stage times do not add up to the end-to-end time exactly (fusion
+across stage boundaries, launch gaps), which is printed last for comparison.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ sys.path.insert(0, ROOT)
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
-from lgs_jax.backends import backward, kernel_steps, pallas  # noqa: E402
+from lgs_jax.backends import backward, gaussian_grads, kernel_steps, pallas, pallas_mosaic  # noqa: E402
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import depth_order, project  # noqa: E402
 
@@ -50,7 +51,7 @@ def profile(g, cam, repeat: int):
     counts = rects[2] * rects[3]
     cs = counts[order]
     starts = jnp.cumsum(cs) - cs
-    tile, gi, _, _ = j(lambda p: binning.emit_pairs(p, w, h, cap))(p)
+    e = j(lambda p: binning.emit_pairs(p, w, h, cap))(p)
     bins = j(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
     pg = j(pairs.gather)(p, bins.gauss)
     masks = j(lambda pg, b: pairs.strip_masks(pg, b, tiles_x, C))(pg, bins)
@@ -62,6 +63,15 @@ def profile(g, cam, repeat: int):
     cot = tuple(jnp.asarray(rng.normal(size=x.shape).astype(np.float32))
                 for x in (state.color, state.trans, state.depth))
     grads = j(lambda p, b, t, s, sv, c: pallas._gradients(p, b, w, h, plan, t, s, sv, c))
+    bplan = plan.for_gradients()
+
+    def rows_of(b, t, s, sv, c):
+        lane_rows = (t, s, c[0][..., 0], c[0][..., 1], c[0][..., 2], c[1], c[2])
+        return pallas_mosaic.backward_rows(C, bplan.interpret, bplan.backward_pixels, tiles_x,
+                                           sv[2], b, sv[0], sv[1], lane_rows, jnp.float32)
+
+    kernel_rows = j(rows_of)
+    emission_rows = kernel_rows(bins, state.trans, stop, saved, cot)
     rows11 = jnp.asarray(rng.normal(size=(cap, 11)).astype(np.float32))
     rows10 = jnp.asarray(rng.normal(size=(cap, 10)).astype(np.float32))
     _, proj_vjp = jax.vjp(lambda g: project(g, cam), g)
@@ -71,17 +81,23 @@ def profile(g, cam, repeat: int):
         "depth_order": (j(depth_order), (p,)),
         "segment_of_slot": (j(binning.segment_of_slot, static_argnums=2), (starts, cs, cap)),
         "emit_pairs (all)": (j(lambda p: binning.emit_pairs(p, w, h, cap)), (p,)),
-        "sort_pairs": (j(lambda t, i: binning.sort_pairs(t, i, tiles_x * tiles_y)), (tile, gi)),
+        "sort_pairs": (j(lambda t, i: binning.sort_pairs(t, i, tiles_x * tiles_y)),
+                       (e.tile, e.gauss)),
         "pairs.gather": (j(pairs.gather), (p, bins.gauss)),
         "strip_masks": (j(lambda pg, b: pairs.strip_masks(pg, b, tiles_x, C)), (pg, bins)),
         "pair_records": (j(lambda pg, b, m: kernel_steps.pair_records(pg, b, tiles_x, C, m)),
                          (pg, bins, masks)),
         "forward (prep + kernel)": (fwd, (p, bins)),
         "backward (kernel + chain + sum)": (grads, (p, bins, state.trans, stop, saved, cot)),
-        "chain_hoisted_rows": (j(lambda p, b, r: pairs.chain_hoisted_rows(
+        "backward kernel (rows)": (kernel_rows, (bins, state.trans, stop, saved, cot)),
+        "gaussian_grads (chain + sum)": (j(lambda r, b, p: gaussian_grads.sums(
+            r, b, p, tiles_x, C, False)), (emission_rows, bins, p)),
+        "XLA: chain_hoisted_rows": (j(lambda p, b, r: pairs.chain_hoisted_rows(
             pairs.gather(p, b.gauss), b, r, tiles_x, C)), (p, bins, rows11)),
-        "per_gaussian_sum": (j(backward.per_gaussian_sum, static_argnums=2),
-                             (rows10, bins, g.num)),
+        "XLA: per_gaussian_sum": (j(backward.per_gaussian_sum, static_argnums=2),
+                                  (rows10, bins, g.num)),
+        "XLA: segment_sums (ids in order)": (j(backward.segment_sums, static_argnums=2),
+                                             (jnp.sort(bins.gauss), rows10, g.num)),
         "projection vjp": (j(proj_vjp), (jax.tree.map(jnp.ones_like, p),)),
         "e2e render": (j(lambda g: lgs_jax.render(g, cam, backend="pallas",
                                                   capacity=cap).image), (g,)),

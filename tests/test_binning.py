@@ -4,6 +4,8 @@ Searched where bugs live: conics with condition numbers up to 1e8 (needles), cen
 pixels outside the image, opacities within a hair of 1/255, and the real projection pipeline.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -69,29 +71,38 @@ def test_box_covers_pixels_on_the_ellipse_edge(log_kappa, theta, log_lmin, angle
     _check_covered(p)
 
 
-@jax.jit
-def _emitted_and_binned(p):
-    cap = 256  # >= M Gaussians x the 4x3 tiles of a W x H image
+@functools.partial(jax.jit, static_argnums=1)
+def _emitted_and_binned(p, cap):
     return binning.emit_pairs(p, W, H, cap), binning.bin_gaussians(p, W, H, cap)
 
 
-def _check_slots(p: Projected):
-    """`TileBins.slot` is the tile sort's permutation of the emitted pairs."""
-    (tile, g, _, _), bins = _emitted_and_binned(p)
+def _check_slots(p: Projected, cap: int = 256):
+    """`TileBins.slot` is the tile sort's permutation of the emitted pairs; `first` and `count`
+    locate each Gaussian's pairs (256 >= M Gaussians x the 4x3 tiles of a W x H image; a
+    smaller `cap` drops the tail)."""
+    e, bins = _emitted_and_binned(p, cap)
     slot = np.asarray(bins.slot)
     np.testing.assert_array_equal(np.sort(slot), np.arange(slot.size))
-    np.testing.assert_array_equal(np.asarray(g)[slot], bins.gauss)
-    np.testing.assert_array_equal(np.asarray(tile)[slot], bins.tile)
+    np.testing.assert_array_equal(np.asarray(e.gauss)[slot], bins.gauss)
+    np.testing.assert_array_equal(np.asarray(e.tile)[slot], bins.tile)
+    # Each Gaussian's pairs are the emission slots [first, first + count), and no others.
+    gauss, first, count = np.asarray(e.gauss), np.asarray(bins.first), np.asarray(bins.count)
+    real = np.asarray(e.tile) < bins.tile_start.shape[0]
+    for i in range(first.size):
+        np.testing.assert_array_equal(np.flatnonzero(real & (gauss == i)),
+                                      first[i] + np.arange(count[i]))
 
 
 @given(seed=st.integers(0, 2**32 - 1), yaw=st.floats(-0.5, 0.5))
 def test_projected_scene_tiles_cover_passing_pixels_float32(seed, yaw):
     """The tiles of a projected scene hold every passing pixel; its bins' `slot` is the tile
-    sort's permutation of the emitted pairs."""
+    sort's permutation of the emitted pairs, and `first`/`count` locate each Gaussian's pairs,
+    also when the capacity drops some."""
     g = scenes.cast(scenes.scene(seed, n=M), np.float32)
     p = project(g, scenes.camera(W, H, yaw=yaw))
     _check_covered(p)
     _check_slots(p)
+    _check_slots(p, cap=24)
 
 
 def test_box_is_tight_for_ordinary_gaussians():

@@ -25,3 +25,22 @@ def test_hoist_equals_the_quadratic_form_float64():
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(v[:, :3], np.stack([-0.5 * conic[:, 0], -conic[:, 1],
                                                    -0.5 * conic[:, 2]], -1))
+
+
+def test_hoist_terms_vjp_is_the_transpose_of_eq8_float64():
+    """The backward's explicit chain through Eq. 8 equals JAX's vjp of `hoist` (float64)."""
+    import jax
+
+    rng = np.random.default_rng(1)
+    n = 100
+    mean, conic = rng.uniform(-50, 80, (n, 2)), rng.uniform(-1, 1, (n, 3))
+    log_o, origin = rng.uniform(-5, 0, n), rng.integers(0, 5, (n, 2)) * 16.0
+    g = rng.normal(size=(n, 6))
+    _, vjp = jax.vjp(lambda m, q, lo: hoist.hoist(m, q, lo, origin), mean, conic, log_o)
+    d_mean, d_conic, d_log_o = (np.asarray(x) for x in vjp(g))
+    assert d_mean.dtype == np.float64  # conftest enables x64
+    got = [np.asarray(x) for x in hoist.hoist_terms_vjp(
+        list(g.T), *conic.T, mean[:, 0] - origin[:, 0], mean[:, 1] - origin[:, 1])]
+    np.testing.assert_allclose(np.stack(got[:3], -1), d_conic, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.stack(got[3:5], -1), d_mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got[5], d_log_o, rtol=1e-12, atol=1e-12)

@@ -30,6 +30,8 @@ from . import backward
 ROW = 12  # Gaussian row (vanilla)
 REC = 12  # pair record (Local-GS); the strip mask in the last column (exact as a float: < 2^8)
 GRAD_VALUES = 11  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z
+TILE_COLUMN = GRAD_VALUES  # then the pair's tile index, as a float (backends.gaussian_grads)
+ROW_WIDTH = 12  # backward row: GRAD_VALUES, the tile (48 bytes)
 
 
 def gaussian_rows(p: Projected):

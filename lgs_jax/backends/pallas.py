@@ -25,10 +25,10 @@ Backward (both backends): the backward kernel walks each tile's pairs back to fr
 last pair any pixel blended, with the forward's own α arithmetic (hoisted V·B clamped at ln o, or
 the difference form: the vanilla forward's backward is the Local-GS backward with hoist and
 warp_cull off) and strip masks: the walk of lgs_jax.backends.backward, one pair per step. Each
-pair's gradient, summed over its tile's pixels, is stored as that pair's row (one writer per
-row, no atomics); rows are then chained to the Gaussian (Eq. 8 for the hoisted form,
-`pairs.chain_hoisted_rows`) and summed per Gaussian by `backward.per_gaussian_sum` (rows put
-back in emission order by the tile sort's permutation + a segmented sum): deterministic.
+pair's gradient, summed over its tile's pixels, is stored as a row at the pair's emission slot
+(one writer per row, no atomics), where each Gaussian's pairs are consecutive; a second kernel
+(lgs_jax.backends.gaussian_grads) chains each Gaussian's rows through Eq. 8 (hoisted form) and
+sums them, one lane per Gaussian in slot order: deterministic, and no per-pair XLA pass.
 
 Implementation. `RasterConfig.kernel` picks "triton" or "mosaic" for every kernel; "auto" runs
 `tuning.auto_*` per kernel on the GPU and Triton in interpret mode, and under differentiation
@@ -54,7 +54,7 @@ from ..composite import PixelState
 from ..config import RasterConfig
 from ..layout import STRIPS, tile_grid
 from ..projection import Projected
-from . import backward, kernel_steps, pallas_mosaic, pallas_triton
+from . import backward, gaussian_grads, kernel_steps, pallas_mosaic, pallas_triton
 from .interface import Backend, RasterResult, stop_within
 
 
@@ -211,11 +211,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     else:
         rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, masks,
                                            records, lane_rows, dt)
-    if config.hoist:
-        rows = pairs.chain_hoisted_rows(pairs.gather(p, bins.gauss), bins, rows, tiles_x, config)
-    else:
-        rows = jnp.concatenate([rows[:, :6], rows[:, 7:]], -1)
-    return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
+    return gaussian_grads.sums(rows, bins, p, tiles_x, config, plan_.interpret)
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):

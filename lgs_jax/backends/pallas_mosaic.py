@@ -44,8 +44,9 @@ where 11 warpgroup reductions took 11. Bit for bit the per-term reductions (GPU;
 which cannot run inline Mosaic GPU code, takes the per-term path). A pair none of the block's
 strips takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged
 groups, a backward step is long enough for the branch to pay. Each block writes its own row per
-pair (`backward_rows` masks the pairs it did not visit and adds a tile's blocks): one writer per
-row, no atomics, deterministic.
+pair at the pair's emission slot (zero where its pixels had stopped;
+lgs_jax.backends.gaussian_grads adds a tile's blocks and sums each Gaussian's rows): one writer
+per row, no atomics, deterministic.
 """
 
 from __future__ import annotations
@@ -209,17 +210,19 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
                         kernel_name=kernel.func.__name__)(order, _ranges(bins), *data)
 
 
-def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_ref, g_r_ref,
-                    g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch, config: RasterConfig,
-                    tiles_x: int, pixels: int, stacked: bool):
-    """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, j] =
-    pair j's gradient summed over this block's pixels, for the pairs before the block's last
-    stop pair (the others are left unwritten; `backward_rows` masks them). `scratch`, when
-    `staged`: the shared-memory record buffers and their barriers (`_smem_records_backward`).
-    Each pair's strip mask is loaded one pair ahead (the skip branch waits on it). `stacked`:
+def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_ref, stop_ref,
+                    g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch,
+                    config: RasterConfig, tiles_x: int, pixels: int, stacked: bool):
+    """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, s] =
+    (pair j's gradient summed over this block's pixels, its tile) at the pair's emission slot
+    s = slot_ref[j] (backends.gaussian_grads reads them there), for the pairs before the
+    block's last stop pair, and zero rows for the tile's pairs after it: every real pair's row
+    is written once per block (the tile in every one). `scratch`, when `staged`: the
+    shared-memory record buffers and their barriers (`_smem_records_backward`). Each pair's
+    strip mask and slot are loaded one pair ahead (the skip branch waits on them). `stacked`:
     the pair's GRAD_VALUES terms are reduced together (`_stacked`: one exchange across the
-    warps per pair) and stored as one vector; else one warpgroup reduction and one scalar store
-    per term."""
+    warps per pair) and stored as one vector; else one warpgroup reduction and one scalar
+    store per term."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -228,10 +231,10 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
     lane = ks.backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
                              [ref[tile, half] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
                                                           g_d_ref)])
-    start = ranges_ref[tile, 0]
-    last = jnp.minimum(ranges_ref[tile, 1], jnp.max(stop_at))
+    start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
+    last = jnp.maximum(jnp.minimum(end, jnp.max(stop_at)), start)
     mine = _strip_bits(wg, pixels)
-    zero_row = [jnp.zeros((), dt)] * ks.GRAD_VALUES
+    zero_scalar = jnp.zeros((), dt)
     if scratch:
         record, begin = _smem_records_backward(rec_ref, *scratch, start, last,
                                                config.tuning.mosaic_chunk)
@@ -240,41 +243,53 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, rec_ref, trans_ref, stop_re
             return [rec_ref[j, c] for c in range(ks.REC - 1)]
 
         begin = None
-    mask_at = ((lambda j: mask_ref[jnp.maximum(j, 0)]) if config.warp_cull
-               else (lambda j: jnp.int32(0)))
 
-    def skip(j, mask_word, carry):  # a zero row, the carry unchanged
-        del mask_word
-        for c, z in enumerate(zero_row):
-            rows_ref[wg, j, c] = z
+    def ahead(j):  # pair j's (strip mask, emission slot)
+        jj = jnp.maximum(j, 0)
+        return mask_ref[jj] if config.warp_cull else jnp.int32(0), slot_ref[jj]
+
+    def zero_row(s):  # the tile too: a tile's other block may have a row there
+        for c in range(ks.GRAD_VALUES):
+            rows_ref[wg, s, c] = zero_scalar
+        rows_ref[wg, s, ks.TILE_COLUMN] = tile.astype(dt)
+
+    def skip(j, mask_word, s, carry):  # a zero row, the carry unchanged
+        del j, mask_word
+        zero_row(s)
         return carry
 
-    def step(j, mask_word, carry):
+    def step(j, mask_word, s, carry):
         values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
                                          lane, carry, config)
         if stacked:
             terms = [jnp.zeros(k.shape, dt) if v is None else v for v in values]
-            rows_ref[wg, j, pl.ds(0, ks.GRAD_VALUES)] = jnp.sum(_stacked(terms, pixels, dt), 1)
+            rows_ref[wg, s, pl.ds(0, ks.GRAD_VALUES)] = jnp.sum(_stacked(terms, pixels, dt), 1)
         else:
             for c, v in enumerate(values):
-                rows_ref[wg, j, c] = zero_row[c] if v is None else jnp.sum(v)
+                rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(v)
+        rows_ref[wg, s, ks.TILE_COLUMN] = tile.astype(dt)
         return carry
 
     def body(i, state):
-        mask_word, carry = state
+        (mask_word, s), carry = state
         j = last - 1 - i
         if begin is not None:
             begin(i, j)
-        next_mask = mask_at(j - 1)
+        following = ahead(j - 1)
         if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
-            carry = lax.cond((mask_word & mine) != 0, step, skip, j, mask_word, carry)
+            carry = lax.cond((mask_word & mine) != 0, step, skip, j, mask_word, s, carry)
         else:
-            carry = step(j, mask_word, carry)
-        return next_mask, carry
+            carry = step(j, mask_word, s, carry)
+        return following, carry
 
     zero = jnp.zeros(k.shape, dt)
-    lax.fori_loop(0, jnp.maximum(last - start, 0), body,
-                  (mask_at(last - 1), (trans, zero, zero, zero, zero)))
+    lax.fori_loop(0, last - start, body, (ahead(last - 1), (trans, zero, zero, zero, zero)))
+
+    def after(i, c):  # pairs no pixel of this block reached
+        zero_row(slot_ref[last + i])
+        return c
+
+    lax.fori_loop(0, end - last, after, jnp.int32(0))
 
 
 def _stacked(terms, pixels: int, dt):
@@ -341,30 +356,23 @@ def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
 
 def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, order, bins,
                   masks, records, lane_rows, dt, stacked: bool | None = None):
-    """(capacity, GRAD_VALUES) pair rows from `backward_kernel` on a (n_tiles, blocks per
-    tile) grid: each block's rows, zero where that block did not visit the pair (pairs at or
-    after its last stop pair, padding pairs), summed over a tile's blocks in a fixed order.
-    `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D). `stacked`
-    (default: on the GPU, not in interpret mode) reduces a pair's terms together
-    (`_stacked`)."""
+    """(blocks per tile, capacity, ROW_WIDTH) pair rows in emission order from
+    `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each real pair
+    (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
+    padding slots are left unwritten (no Gaussian's slots reach them). `lane_rows` = the
+    per-tile final T, stop pairs and cotangents (r, g, b, T, D). `stacked` (default: on the
+    GPU, not in interpret mode) reduces a pair's terms together (`_stacked`)."""
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                stacked=not interpret if stacked is None else stacked)
-    out = jax.ShapeDtypeStruct((n, capacity, ks.GRAD_VALUES), dt)
+    out = jax.ShapeDtypeStruct((n, capacity, ks.ROW_WIDTH), dt)
     scratch = ()
     if staged(config, dt):
         scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
                    plgpu.Barrier(num_barriers=2))
-    rows = plgpu.kernel(kernel, out_type=out, scratch_types=scratch, grid=(n_tiles, n),
+    return plgpu.kernel(kernel, out_type=out, scratch_types=scratch, grid=(n_tiles, n),
                         grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
                         kernel_name="localgs_backward_mosaic")(
-        order, _ranges(bins), masks, records, *lane_rows)
-    stop_at = lane_rows[1]
-    last = jnp.minimum(bins.tile_end[:, None],
-                       jnp.max(stop_at.reshape(n_tiles, n, pixels), -1))
-    tile = jnp.minimum(bins.tile, n_tiles - 1)
-    j = jnp.arange(capacity)
-    visited = (bins.tile[None] < n_tiles) & (j[None] < last[tile].T)  # (blocks, capacity)
-    return jnp.sum(jnp.where(visited[..., None], rows, 0), axis=0)
+        order, _ranges(bins), masks, bins.slot, records, *lane_rows)
