@@ -9,12 +9,14 @@ Implements conventions.md, "Camera and projection":
   Σ2 = J Σc Jᵀ + 0.3·I;  det = Σ2xx·Σ2yy − Σ2xy², invalid if det <= 0;
   conic (a, b, c) = (Σ2yy, −Σ2xy, Σ2xx)/det;  mean2d = (fx·tx/tz + cx, fy·ty/tz + cy);
   rgb = max(SH(dir) + 0.5, 0), dir = normalise(μ − camera centre).
-All products are written as explicit multiply-adds (no matmul), so TF32 never applies on GPUs.
+All products are written as explicit multiply-adds on per-Gaussian columns (no matmul), so TF32
+never applies on GPUs and XLA fuses the whole projection.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any
 
 import jax
@@ -22,7 +24,7 @@ import jax.numpy as jnp
 
 from .config import ALPHA_MIN
 from .scene import Camera, Gaussians
-from .sh import sh_to_rgb
+from .sh import sh_basis_terms
 
 EPS2D = 0.3  # low-pass dilation added to the 2D covariance
 
@@ -52,22 +54,8 @@ class Projected:
 def quat_to_rotmat(q):
     """Rotation matrices (N, 3, 3) from quaternions (N, 4) w, x, y, z (normalised here)."""
     q = q / jnp.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return jnp.stack([
-        jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
-def _matmul(a, b):
-    """Batched a @ b for tiny matrices, unrolled into elementwise multiply-adds: exact float32 on
-    GPUs (no TF32), and fused by XLA (a broadcast-and-sum becomes a slow batched dot on CPU)."""
-    rows = []
-    for i in range(a.shape[-2]):
-        rows.append(jnp.stack([sum(a[..., i, l] * b[..., l, j] for l in range(a.shape[-1]))
-                               for j in range(b.shape[-1])], -1))
-    return jnp.stack(rows, -2)
+    rows = _rotation(q[..., 0], q[..., 1], q[..., 2], q[..., 3])
+    return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
 
 
 def camera_center(viewmat):
@@ -76,72 +64,103 @@ def camera_center(viewmat):
     return -jnp.sum(r * t[:, None], axis=0)
 
 
+def _rotation(qw, qx, qy, qz):
+    """Rows of R(q) (3 x 3 nested lists of (N,) arrays) of unit quaternions w, x, y, z."""
+    return [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
+            [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
+            [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)]]
+
+
+def _camera_covariance(rot, scales, w):
+    """The six entries (xx, xy, xz, yy, yz, zz) of Σc = W Σ Wᵀ, Σ = R S Sᵀ Rᵀ: with
+    M = W R S (columns scaled by s), Σc = M Mᵀ. rot: R(q) rows; w: the camera rotation W's
+    rows (scalars); scales: (s_x, s_y, s_z)."""
+    m = [[sum(w[i][l] * rot[l][j] for l in range(3)) * scales[j] for j in range(3)]
+         for i in range(3)]
+    dot = lambda i, j: m[i][0] * m[j][0] + m[i][1] * m[j][1] + m[i][2] * m[j][2]
+    return dot(0, 0), dot(0, 1), dot(0, 2), dot(1, 1), dot(1, 2), dot(2, 2)
+
+
 def project(g: Gaussians, cam: Camera) -> Projected:
-    """Project Gaussians `g` through camera `cam` (all arithmetic in g's dtype)."""
+    """Project Gaussians `g` through camera `cam` (all arithmetic in g's dtype).
+
+    Written on per-Gaussian (N,) columns, every step elementwise (no stacked 3x3 matrices, no
+    reductions over small axes), so that XLA fuses the projection and its autodiff backward
+    into a few passes over the Gaussians; `jax.checkpoint` makes the backward recompute these
+    elementwise intermediates instead of storing them."""
+    return _project(g, cam)
+
+
+@jax.checkpoint
+def _project(g: Gaussians, cam: Camera) -> Projected:
     dt = g.dtype
     viewmat = jnp.asarray(cam.viewmat, dt)
     fx, fy, cx, cy, near, far = (jnp.asarray(v, dt) for v in
                                  (cam.fx, cam.fy, cam.cx, cam.cy, cam.near, cam.far))
-    means, quats = g.means, g.quats
-    input_ok = (jnp.all(jnp.isfinite(means), -1) & jnp.all(jnp.isfinite(quats), -1)
-                & ~jnp.any(jnp.isnan(g.log_scales), -1) & ~jnp.any(g.log_scales == jnp.inf, -1)
-                & ~jnp.isnan(g.logit_opacities) & jnp.all(~jnp.isnan(g.sh), (-1, -2))
-                & (jnp.sum(quats * quats, -1) > 0))
+    mean = [g.means[:, i] for i in range(3)]
+    quat = [g.quats[:, i] for i in range(4)]
+    log_scale = [g.log_scales[:, i] for i in range(3)]
+    n_sh = g.sh.shape[1]
+    sh = [[g.sh[:, k, c] for c in range(3)] for k in range(n_sh)]
+    all_of = lambda xs: functools.reduce(jnp.logical_and, xs)
+    input_ok = all_of([jnp.isfinite(x) for x in mean + quat]
+                      + [~jnp.isnan(x) & (x != jnp.inf) for x in log_scale]
+                      + [~jnp.isnan(g.logit_opacities)]
+                      + [~jnp.isnan(x) for row in sh for x in row]
+                      + [sum(q * q for q in quat) > 0])
     # Placeholders keep invalid rows finite so no NaN can leak through a masked arithmetic path.
-    safe = input_ok[:, None]
-    means = jnp.where(safe, means, 0.0)
-    quats = jnp.where(safe, quats, jnp.array([1.0, 0.0, 0.0, 0.0], dt))
-    log_scales = jnp.where(safe, g.log_scales, 0.0)
+    mean = [jnp.where(input_ok, x, 0.0) for x in mean]
+    quat = [jnp.where(input_ok, x, float(i == 0)) for i, x in enumerate(quat)]
+    log_scale = [jnp.where(input_ok, x, 0.0) for x in log_scale]
 
-    r_cam, t_cam = viewmat[:3, :3], viewmat[:3, 3]
-    t = jnp.sum(r_cam[None] * means[:, None, :], -1) + t_cam  # (N, 3)
-    tz = t[:, 2]
+    w = [[viewmat[i, j] for j in range(3)] for i in range(3)]
+    tx, ty, tz = (w[i][0] * mean[0] + w[i][1] * mean[1] + w[i][2] * mean[2] + viewmat[i, 3]
+                  for i in range(3))
     in_range = (tz > near) & (tz < far)
     tz_safe = jnp.where(in_range, tz, 1.0)
 
-    rot = quat_to_rotmat(quats)
-    m = rot * jnp.exp(log_scales)[:, None, :]  # R S
-    cov3 = _matmul(m, jnp.swapaxes(m, -1, -2))
-    w = jnp.broadcast_to(r_cam, cov3.shape)
-    cov_c = _matmul(_matmul(w, cov3), jnp.swapaxes(w, -1, -2))
+    norm = jnp.sqrt(sum(q * q for q in quat))
+    rot = _rotation(*(q / norm for q in quat))
+    cxx, cxy, cxz, cyy, cyz, czz = _camera_covariance(rot, [jnp.exp(x) for x in log_scale], w)
 
     width, height = jnp.asarray(cam.width, dt), jnp.asarray(cam.height, dt)
     tan_fovx, tan_fovy = 0.5 * width / fx, 0.5 * height / fy
     lim_xp, lim_xn = (width - cx) / fx + 0.3 * tan_fovx, cx / fx + 0.3 * tan_fovx
     lim_yp, lim_yn = (height - cy) / fy + 0.3 * tan_fovy, cy / fy + 0.3 * tan_fovy
-    tx = tz_safe * jnp.clip(t[:, 0] / tz_safe, -lim_xn, lim_xp)
-    ty = tz_safe * jnp.clip(t[:, 1] / tz_safe, -lim_yn, lim_yp)
-    zero = jnp.zeros_like(tz_safe)
-    jac = jnp.stack([
-        jnp.stack([fx / tz_safe, zero, -fx * tx / (tz_safe * tz_safe)], -1),
-        jnp.stack([zero, fy / tz_safe, -fy * ty / (tz_safe * tz_safe)], -1),
-    ], -2)  # (N, 2, 3)
-    cov2 = _matmul(_matmul(jac, cov_c), jnp.swapaxes(jac, -1, -2))
-    sxx, sxy, syy = cov2[:, 0, 0] + EPS2D, cov2[:, 0, 1], cov2[:, 1, 1] + EPS2D
+    tx_c = tz_safe * jnp.clip(tx / tz_safe, -lim_xn, lim_xp)
+    ty_c = tz_safe * jnp.clip(ty / tz_safe, -lim_yn, lim_yp)
+    j00, j11 = fx / tz_safe, fy / tz_safe
+    j02, j12 = -fx * tx_c / (tz_safe * tz_safe), -fy * ty_c / (tz_safe * tz_safe)
+    # Σ2 = J Σc Jᵀ with J = [[j00, 0, j02], [0, j11, j12]].
+    sxx = j00 * (j00 * cxx + j02 * cxz) + j02 * (j00 * cxz + j02 * czz) + EPS2D
+    sxy = j00 * (j11 * cxy + j12 * cxz) + j02 * (j11 * cyz + j12 * czz)
+    syy = j11 * (j11 * cyy + j12 * cyz) + j12 * (j11 * cyz + j12 * czz) + EPS2D
     det = sxx * syy - sxy * sxy
     det_ok = det > 0
     det_safe = jnp.where(det_ok, det, 1.0)
-    conic = jnp.stack([syy / det_safe, -sxy / det_safe, sxx / det_safe], -1)
-    mean2d = jnp.stack([fx * t[:, 0] / tz_safe + cx, fy * t[:, 1] / tz_safe + cy], -1)
+    conic = (syy / det_safe, -sxy / det_safe, sxx / det_safe)
+    mean2d = (fx * tx / tz_safe + cx, fy * ty / tz_safe + cy)
 
     opacity = jax.nn.sigmoid(jnp.where(input_ok, g.logit_opacities, 0.0))
-    dirs = means - camera_center(viewmat)
-    norm = jnp.sqrt(jnp.sum(dirs * dirs, -1, keepdims=True))
-    dirs = jnp.where(norm > 0, dirs / jnp.where(norm > 0, norm, 1.0), 0.0)
-    rgb = sh_to_rgb(jnp.where(safe[:, :, None], g.sh, 0.0), dirs)
+    centre = camera_center(viewmat)
+    d = [mean[i] - centre[i] for i in range(3)]
+    dnorm = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    d = [jnp.where(dnorm > 0, x / jnp.where(dnorm > 0, dnorm, 1.0), 0.0) for x in d]
+    basis = sh_basis_terms(*d, n_sh)
+    rgb = [jnp.maximum(sum(basis[k] * jnp.where(input_ok, sh[k][c], 0.0) for k in range(n_sh))
+                       + 0.5, 0.0) for c in range(3)]
 
-    finite = (jnp.all(jnp.isfinite(mean2d), -1) & jnp.all(jnp.isfinite(conic), -1)
-              & jnp.all(jnp.isfinite(rgb), -1))
+    finite = all_of([jnp.isfinite(x) for x in mean2d + conic + tuple(rgb)])
     invalid = ~(input_ok & in_range & det_ok & finite)
     valid = ~invalid & (opacity >= jnp.asarray(ALPHA_MIN, dt))
-    vm = valid[:, None]
+    keep = lambda xs, fill: jnp.stack([jnp.where(valid, x, f) for x, f in zip(xs, fill)], -1)
     return Projected(
-        mean2d=jnp.where(vm, mean2d, 0.0),
-        cov2d=jnp.where(vm, jnp.stack([sxx, sxy, syy], -1), jnp.array([1.0, 0.0, 1.0], dt)),
-        conic=jnp.where(vm, conic, jnp.array([1.0, 0.0, 1.0], dt)),
+        mean2d=keep(mean2d, (0.0, 0.0)),
+        cov2d=keep((sxx, sxy, syy), (1.0, 0.0, 1.0)),
+        conic=keep(conic, (1.0, 0.0, 1.0)),
         depth=jnp.where(valid, tz, 0.0),
         opacity=jnp.where(valid, opacity, 0.0),
-        rgb=jnp.where(vm, rgb, 0.0),
+        rgb=keep(rgb, (0.0, 0.0, 0.0)),
         valid=valid,
         invalid=invalid,
     )

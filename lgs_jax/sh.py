@@ -12,14 +12,12 @@ C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.37317633259
       -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 
 
-def sh_basis(dirs, num_bases: int):
-    """The first `num_bases` real SH basis functions at unit directions `dirs` (..., 3).
-
-    Returns (..., num_bases), ordered as the INRIA coefficients (degree-major).
-    """
-    x, y, z = dirs[..., 0], dirs[..., 1], dirs[..., 2]
-    one = jnp.ones_like(x)
-    out = [C0 * one]
+def sh_basis_terms(x, y, z, num_bases: int):
+    """The first `num_bases` real SH basis functions at unit directions (x, y, z) (arrays of
+    any one shape), as a list ordered as the INRIA coefficients (degree-major). The colour is
+    max(Σ_k basis_k·sh_k + 0.5, 0) per channel (conventions.md, "Colour";
+    lgs_jax.projection)."""
+    out = [C0 * jnp.ones_like(x)]
     if num_bases > 1:
         out += [-C1 * y, C1 * z, -C1 * x]
     if num_bases > 4:
@@ -30,17 +28,4 @@ def sh_basis(dirs, num_bases: int):
         out += [C3[0] * y * (3.0 * xx - yy), C3[1] * xy * z, C3[2] * y * (4.0 * zz - xx - yy),
                 C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy), C3[4] * x * (4.0 * zz - xx - yy),
                 C3[5] * z * (xx - yy), C3[6] * x * (xx - 3.0 * yy)]
-    return jnp.stack(out, axis=-1).astype(dirs.dtype)
-
-
-def sh_to_rgb(sh, dirs):
-    """Colour = max(Σ_k basis_k(dir)·sh_k + 0.5, 0) (conventions.md, "Colour").
-
-    Args:
-      sh: (N, K, 3) coefficients.
-      dirs: (N, 3) unit view directions (Gaussian centre minus camera centre).
-    """
-    basis = sh_basis(dirs, sh.shape[1])
-    # Unrolled multiply-adds: no TF32 on GPUs, and no slow tiny batched dot on CPUs.
-    rgb = sum(basis[:, k, None] * sh[:, k, :] for k in range(sh.shape[1]))
-    return jnp.maximum(rgb + 0.5, 0.0)
+    return out

@@ -28,7 +28,9 @@ def test_jit_and_vmap_over_cameras_match_single_renders(scene32):
     assert out.image.shape == (3, scenes.H, scenes.W, 3)
     for i, c in enumerate(cams):
         one = lgs_jax.render(scene32, c, capacity=cap)
-        np.testing.assert_array_equal(out.image[i], one.image)  # bit-identical
+        # XLA vectorises the batched projection differently (CPU and GPU): its colours and
+        # covariances may differ by an ulp, so pixels may too (BENCHMARKS.md §3).
+        np.testing.assert_allclose(out.image[i], one.image, rtol=0, atol=1e-6)
         assert int(out.stats.pairs_required[i]) == int(one.stats.pairs_required)
 
 

@@ -126,11 +126,12 @@ def test_global_coordinates_show_float32_cancellation():
 
 # ------------------------------------------------------------------ API behaviour
 
-def test_tiles_under_vmap_and_repeated_calls_are_bit_identical():
+def test_tiles_repeated_calls_are_bit_identical_and_vmap_within_2_ulps():
     """Repeated calls agree bit for bit (everywhere), and a vmapped batch equals each view
-    rendered alone: bit for bit on CPUs; on GPUs within 2 ulps, because XLA compiles the batched
-    program's fusions differently and contracts different multiply-adds into FMAs (measured on
-    the H100: 1% of pixels differ by 1 ulp; BENCHMARKS.md).
+    rendered alone within 2 ulps, because XLA compiles the batched program's fusions
+    differently (GPU: different multiply-adds contracted into FMAs, measured on the H100: 1% of
+    pixels differ by 1 ulp; CPU: the vectorised batched projection rounds a few colours by an
+    ulp; BENCHMARKS.md §3).
 
     Scene and background are arguments in both programs: folded in as constants, XLA would
     compile different arithmetic even on CPUs."""
@@ -144,10 +145,7 @@ def test_tiles_under_vmap_and_repeated_calls_are_bit_identical():
     for i, cam in enumerate(cams):
         one = lgs_jax.render(g, cam, background=bg, backend="tiles", capacity=cap)
         again = lgs_jax.render(g, cam, background=bg, backend="tiles", capacity=cap)
-        if jax.default_backend() == "cpu":
-            np.testing.assert_array_equal(batch.image[i], one.image)
-        else:
-            np.testing.assert_allclose(batch.image[i], one.image, rtol=2.0**-22, atol=2e-7)
+        np.testing.assert_allclose(batch.image[i], one.image, rtol=2.0**-22, atol=2e-7)
         np.testing.assert_array_equal(again.image, one.image)
         assert one.stats.backend == "tiles"
 
