@@ -120,8 +120,9 @@ class TileBins:
       tile: (capacity,) int32 tile index of each pair (row-major; n_tiles for padding).
       slot: (capacity,) int32 emission slot of each pair (`emit_pairs`: Gaussian-major, in depth
         order): a permutation of arange(capacity), the tile sort's. A Gaussian's pairs fill
-        consecutive emission slots, so gathering per-pair values with the inverse permutation
-        groups them per Gaussian without a second sort (backends.backward.per_gaussian_sum).
+        consecutive emission slots, so per-pair values stored at their slot (the Pallas
+        backward kernels) or gathered with the inverse permutation
+        (backends.backward.per_gaussian_sum) are grouped per Gaussian without a second sort.
       tile_start, tile_end: (n_tiles,) int32 half-open ranges of each tile's pairs in `gauss`.
       first, count: (N,) int32 per Gaussian: its pairs fill emission slots [first, first + count)
         (count = 0 for a Gaussian with no pair within the capacity), in ascending tile order.

@@ -16,8 +16,9 @@ Gaussian g this computes, walking its slots in order,
 
 the blocks of a pair added in block order first. One lane owns one Gaussian's sum, so the
 result is deterministic without atomics, and nothing per pair is materialised beyond the rows:
-no chained copy, no permutation, no segmented scan (the XLA path of the `tiles` backend,
-backends.backward.per_gaussian_sum, which `reference` here mirrors lane for lane).
+no chained copy, no permutation, no segmented scan (the XLA path the `tiles` backend takes,
+pairs.chain_hoisted_rows then backends.backward.per_gaussian_sum: the same values, summed in
+another association).
 
 `sums` is the Pallas Triton kernel (one program per `LANES` Gaussians, looping to the longest
 count among them; per-lane gathers of rows, which Mosaic GPU's Pallas cannot express);
