@@ -28,8 +28,9 @@ def hoist_terms_vjp(g, a, b, c, dx, dy):
     """The transpose of Eq. 8's Jacobian: ∂L/∂(a, b, c, Δx, Δy, ln o) from g = ∂L/∂V (six
     values; arrays or scalars), as the backward chains each pair's ∂L/∂V to its Gaussian:
 
-        ∂a = −½g₀ + g₃Δx − ½g₅Δx²,   ∂b = −g₁ + g₃Δy + g₄Δx − g₅ΔxΔy,   ∂c = −½g₂ + g₄Δy − ½g₅Δy²,
-        ∂Δx = g₃a + g₄b − g₅(aΔx + bΔy),   ∂Δy = g₃b + g₄c − g₅(bΔx + cΔy),   ∂ln o = g₅.
+        ∂a = −½g₀ + g₃Δx − ½g₅Δx²,   ∂b = −g₁ + g₃Δy + g₄Δx − g₅ΔxΔy,
+        ∂c = −½g₂ + g₄Δy − ½g₅Δy²,   ∂Δx = g₃a + g₄b − g₅(aΔx + bΔy),
+        ∂Δy = g₃b + g₄c − g₅(bΔx + cΔy),   ∂ln o = g₅.
     """
     g0, g1, g2, g3, g4, g5 = g
     return (-0.5 * g0 + g3 * dx - 0.5 * g5 * (dx * dx),

@@ -97,8 +97,8 @@ def hoisted_vectors(pg: PairGaussians, bins: TileBins, tiles_x: int, config: Ras
 def chain_hoisted_rows(pg: PairGaussians, bins: TileBins, rows, tiles_x: int,
                        config: RasterConfig):
     """Pair rows (∂L/∂V, ∂L/∂ln o from the clamp, ∂L/∂rgb, ∂L/∂z: capacity x 11) chained to
-    the pair's Gaussian through Eq. 8 (the vjp of `hoist.hoist`): (capacity, 10) rows of
-    ∂L/∂(mean2d, conic, opacity, rgb, depth)."""
+    the pair's Gaussian through Eq. 8 (`hoist.hoist_terms_vjp`, the vjp of `hoist.hoist`):
+    (capacity, 10) rows of ∂L/∂(mean2d, conic, opacity, rgb, depth)."""
     origin = _pair_origins(bins, tiles_x, config, pg.mean2d.dtype)
     dx, dy = pg.mean2d[:, 0] - origin[:, 0], pg.mean2d[:, 1] - origin[:, 1]
     q = pg.conic
