@@ -78,28 +78,36 @@ def _fields(p: Projected):
     return p.mean2d, p.conic, p.opacity
 
 
-def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, out_ref, *,
-            config: RasterConfig, tiles_x: int, n: int, blocks: int):
-    g = pl.program_id(0) * LANES + lax.iota(jnp.int32, LANES)
-    inside = g < n
-    gi = jnp.minimum(g, n - 1)
-    first, count = first_ref[gi], jnp.where(inside, count_ref[gi], 0)
-    fields = (mean_ref[gi, 0], mean_ref[gi, 1], conic_ref[gi, 0], conic_ref[gi, 1],
-              conic_ref[gi, 2])
-    dt = out_ref.dtype
-
+def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
+          config: RasterConfig):
+    """COLUMNS sums (arrays shaped as `first`) of the Gaussians whose slots are [first,
+    first + count): each slot's blocks added in block order, chained (`_pair_terms`), summed in
+    slot order; `rows` is the (blocks, capacity, >= TILE_COLUMN + 1) ref (kernel) or array
+    (`reference`), indexed alike. fields = (μx, μy, a, b, c), opacity: of those Gaussians."""
     def body(i, acc):
         live = i < count
         s = jnp.where(live, first + i, 0)  # lanes done read slot 0 (cached) and keep acc
-        vals = [functools.reduce(lambda x, y: x + y, [rows_ref[w, s, col] for w in range(blocks)])
+        vals = [functools.reduce(lambda x, y: x + y, [rows[w, s, col] for w in range(blocks)])
                 for col in range(ks.GRAD_VALUES)]
-        tile = rows_ref[0, s, ks.TILE_COLUMN].astype(jnp.int32)
+        tile = rows[0, s, ks.TILE_COLUMN].astype(jnp.int32)
         terms = _pair_terms(vals, tile, fields, tiles_x, config)
         return tuple(jnp.where(live, x + t, x) for x, t in zip(acc, terms))
 
-    zero = jnp.zeros((LANES,), dt)
+    zero = jnp.zeros(first.shape, opacity.dtype)
     acc = lax.fori_loop(0, jnp.max(count), body, (zero,) * COLUMNS)
-    for col, v in enumerate(_finish(list(acc), opacity_ref[gi], config)):
+    return _finish(list(acc), opacity, config)
+
+
+def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, out_ref, *,
+            config: RasterConfig, tiles_x: int, n: int, blocks: int):
+    g = pl.program_id(0) * LANES + lax.iota(jnp.int32, LANES)
+    gi = jnp.minimum(g, n - 1)
+    fields = (mean_ref[gi, 0], mean_ref[gi, 1], conic_ref[gi, 0], conic_ref[gi, 1],
+              conic_ref[gi, 2])
+    count = jnp.where(g < n, count_ref[gi], 0)
+    sums_ = _walk(rows_ref, blocks, first_ref[gi], count, fields, opacity_ref[gi], tiles_x,
+                  config)
+    for col, v in enumerate(sums_):
         out_ref[g, col] = v  # rows n and up: padding (distinct rows, dropped)
 
 
@@ -121,19 +129,8 @@ def sums(rows, bins: TileBins, p: Projected, tiles_x: int, config: RasterConfig,
 
 def reference(rows, bins: TileBins, p: Projected, tiles_x: int, config: RasterConfig):
     """`sums` in jnp: every Gaussian at once, the same walk over its slots and the same
-    arithmetic (tests compare the kernel with it in interpret mode)."""
+    arithmetic (`_walk`; tests compare the kernel with it in interpret mode)."""
     mean, conic, opacity = _fields(p)
     fields = (mean[:, 0], mean[:, 1], conic[:, 0], conic[:, 1], conic[:, 2])
-
-    def body(i, acc):
-        live = i < bins.count
-        s = jnp.where(live, bins.first + i, 0)
-        vals = [functools.reduce(lambda x, y: x + y, [rows[w, s, col] for w in range(len(rows))])
-                for col in range(ks.GRAD_VALUES)]
-        tile = rows[0, s, ks.TILE_COLUMN].astype(jnp.int32)
-        terms = _pair_terms(vals, tile, fields, tiles_x, config)
-        return tuple(jnp.where(live, x + t, x) for x, t in zip(acc, terms))
-
-    zero = jnp.zeros(opacity.shape, rows.dtype)
-    acc = lax.fori_loop(0, jnp.max(bins.count), body, (zero,) * COLUMNS)
-    return jnp.stack(_finish(list(acc), opacity, config), -1)
+    return jnp.stack(_walk(rows, rows.shape[0], bins.first, bins.count, fields, opacity,
+                           tiles_x, config), -1)
