@@ -195,6 +195,38 @@ def test_mosaic_backward_staging_is_bit_for_bit(backend, pixels, seed):
         np.testing.assert_array_equal(staged, unstaged)
 
 
+
+@pytest.mark.parametrize("rows", [1, 2, 3, 5, 8, 11, 16])
+def test_transposing_butterfly_leaves_every_row_sum_in_its_lane_pair(rows):
+    """`pallas_mosaic.butterfly_plan`, simulated as `_transposed_row` runs it on a warp (lane l
+    sends the half its partner l ^ d keeps and adds what it receives): every row's sum over
+    the 32 lanes ends in the lane pairs the plan names (one pair per row from 9 rows on) (the kernel itself only
+    runs on a GPU: scripts/grad_gpu_check.sh)."""
+    halves, slot_rows = pallas_mosaic.butterfly_plan(rows)
+    x = np.random.default_rng(rows).normal(size=(32, rows))
+    lanes = np.arange(32)
+    vals = [x[:, r] for r in range(rows)]
+    for d, h in zip((16, 8, 4, 2, 1), halves):
+        partner = lanes ^ d
+        if h == 0:
+            vals = [vals[0] + vals[0][partner]]
+            continue
+        upper = (lanes & d) != 0
+        merged = []
+        for k in range(h):
+            lo, hi = vals[k], vals[k + h] if k + h < len(vals) else np.zeros(32)
+            send, keep = np.where(upper, lo, hi), np.where(upper, hi, lo)
+            merged.append(keep + send[partner])
+        vals = merged
+    assert len(vals) == 1
+    assert {r for r in slot_rows if r >= 0} == set(range(rows))
+    for s, r in enumerate(slot_rows):
+        assert vals[0][2 * s] == vals[0][2 * s + 1]
+        if r >= 0:
+            np.testing.assert_allclose(vals[0][2 * s], x[:, r].sum(), rtol=1e-12)
+    with pytest.raises(ValueError, match="rows"):
+        pallas_mosaic.butterfly_plan(17)
+
 def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
     """`KernelConfig.vanilla_from_pairs`: with kernel "auto" a `pallas` plan whose pair buffer
     reaches the threshold runs the vanilla kernel forward, and Local-GS again under
