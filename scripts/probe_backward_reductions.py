@@ -4,20 +4,22 @@ whether Mosaic GPU can express the reductions a faster kernel would need (GPU on
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/probe_backward_reductions.py [--data DIR]
         [--scenes guitar_x16_1080p,guitar_x110_4k] [--repeat 10] [--lower-only]
 
-1. Reduction share and record staging. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
-   its block's pixels, each a warpgroup-wide `jnp.sum` (shuffles within each warp, then an
-   exchange across the four warps through shared memory with a barrier). The `one_sum` variant
-   adds the 11 per-lane terms elementwise and reduces that once (same arithmetic and loads, one
-   reduction instead of 11; its rows are wrong, only its time matters), a bound on what
-   reducing the terms together (`stacked`, the default on the GPU) can reach. Records read from
-   global memory (`mosaic_chunk` 0) or staged in shared memory (64); the kernel alone
-   (`pallas_mosaic.backward_rows`) on the same real inputs.
+1. Reduction variants. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
+   its block's pixels: `terms` reduces each with a warpgroup-wide `jnp.sum` (shuffles within
+   each warp, an exchange across the four warps through shared memory with barriers, a store
+   from every thread); `transposed` (the default on the GPU) with `_transposed_row`'s
+   transposing butterfly (13 shuffles per thread for the 11 terms, one exchange, one barrier,
+   one coalesced store). The `one_sum` variant adds the 11 per-lane terms elementwise and
+   reduces that once with `terms` (same loads and arithmetic, wrong rows; only its time
+   matters). Records read from global memory (`mosaic_chunk` 0) or staged in shared memory
+   (64); the kernel alone (`pallas_mosaic.backward_rows`) on the same real inputs; each
+   variant's rows against those of `terms` (a different summation order: rounding only).
 2. Layout probes: small kernels that compile and run (or print the error) the pieces a batched
-   reduction would use: a (R, 256) array in a tiled layout whose pixel axis is split over warps,
-   lanes and a 2-vector, reduced along the pixels (all R rows through one shared-memory
-   exchange), a within-warp reduction that leaves one partial per warp, and the regrouping the
-   backward kernel uses (`pallas_mosaic._stacked`). `--lower-only` only lowers them for the
-   GPU, which needs no GPU and raises the same layout errors (for designing on a CPU).
+   reduction through Pallas' own layouts would use: a (R, 256) array in a tiled layout whose
+   pixel axis is split over warps, lanes and a 2-vector, reduced along the pixels (all R rows
+   through one shared-memory exchange), and a within-warp reduction that leaves one partial per
+   warp (BENCHMARKS.md §7 has what they showed). `--lower-only` only lowers them for the GPU,
+   which needs no GPU and raises the same layout errors (for designing on a CPU).
 """
 
 from __future__ import annotations
@@ -55,10 +57,10 @@ def _one_sum_step(original):
 
 
 def reduction_share(g, cam, repeat: int):
-    """Backward kernel time (ms) on the same inputs: 11 reductions per pair with records read
-    from global memory (chunk 0) or staged in shared memory (chunk 64), the 11 terms reduced
-    together (`stacked`), and 1 reduction per pair (a bound); whether each variant's rows equal
-    the first's bit for bit."""
+    """Backward kernel time (ms) on the same inputs: 11 reductions per pair (`terms`) and the
+    transposing butterfly (`transposed`, records staged (chunk 64) or read from global memory
+    (chunk 0)), and 1 reduction per pair (a bound); how far each variant's rows are from the
+    first's."""
     config = lgs_jax.RasterConfig()
     w, h = cam.width, cam.height
     tiles_x, tiles_y = tile_grid(w, h)
@@ -81,7 +83,7 @@ def reduction_share(g, cam, repeat: int):
         jax.block_until_ready(f(*args))  # compiled now, with backward_step as it is now
         return f
 
-    fns = {"11 sums, chunk 64": rows_fn(64, "terms"), "stacked, chunk 64": rows_fn(64, "stacked"),
+    fns = {"11 sums, chunk 64": rows_fn(64, "terms"),
            "transposed, chunk 64": rows_fn(64, "transposed"),
            "transposed, chunk 0": rows_fn(0, "transposed")}
     # Rows sit at emission slots; slots from the pair count on are padding, never written.
@@ -173,22 +175,10 @@ def layout_probes(lower_only: bool):
         return (lambda x: call(kernel, (4,), x), (jnp.asarray(x[0].reshape(4, 64)),),
                 x[0].reshape(4, 64).sum(1))
 
-    def stacked_rows(pixels):
-        """What the backward kernel does (`pallas_mosaic._stacked`): 11 strided lane vectors
-        regrouped as the rows of one tiled array, summed over the pixels at once."""
-        def kernel(x_ref, o_ref):
-            terms = [x_ref[c] * 1.0 for c in range(11)]
-            o_ref[...] = jnp.sum(pallas_mosaic._stacked(terms, pixels, jnp.float32), axis=1)
-        xs = x[:11, :pixels]
-        return lambda x: call(kernel, (11,), x), (jnp.asarray(xs),), xs.sum(1)
-
     _probe("(16,256) tiled load + sum over pixels", *rows_sum(16), lower_only)
     _probe("(16,256) tiled iota + sum over pixels", *iota_rows_sum(), lower_only)
     _probe("(1,256) row broadcast to (16,256) + sum", *broadcast_row(), lower_only)
     _probe("(4,64) per-warp sum (no cross-warp step)", *per_warp_sum(), lower_only)
-    for pixels in (128, 256):
-        _probe(f"11 strided ({pixels},) regrouped (11,{pixels}) + sum", *stacked_rows(pixels),
-               lower_only)
 
 
 def main() -> int:

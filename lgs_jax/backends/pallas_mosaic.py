@@ -37,16 +37,17 @@ multiply-add contraction differ by ulps); both record per-pixel stop pairs for t
 Backward. The same blocks walk the tile's pairs back to front from the last pair any of their
 pixels blended (`kernel_steps.backward_step`), float32 records staged in shared memory as in the
 forward (chunks aligned to multiples of the chunk size, copied downward), and reduce each pair's
-11 gradient terms over their pixels together: the 11 lane vectors regrouped as the rows of one
-(11, pixels) array (`_stacked`, through `plgpu.inline_mgpu`: Pallas has no cast from the strided
-layout to a tiled one) whose pixel-axis sum exchanges all 11 across the warps in one round,
-where 11 warpgroup reductions took 11. Bit for bit the per-term reductions (GPU; interpret mode,
-which cannot run inline Mosaic GPU code, takes the per-term path). A pair none of the block's
-strips takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged
-groups, a backward step is long enough for the branch to pay. Each block writes its own row per
-pair at the pair's emission slot (zero where its pixels had stopped;
-lgs_jax.backends.gaussian_grads adds a tile's blocks and sums each Gaussian's rows): one writer
-per row, no atomics, deterministic.
+11 gradient terms over their pixels with a transposing butterfly (`_transposed_row`, through
+`plgpu.inline_mgpu`): each shuffle step exchanges only the half of the terms a lane's partner
+keeps, 13 shuffles per thread for the 11 terms where one warp reduction per term takes 55; one
+exchange across the warps through shared memory, one barrier per pair, and the first warp
+stores the row with one coalesced store. Interpret mode, which cannot run inline Mosaic GPU
+code, reduces each term with `jnp.sum` (`reduction="terms"`). A pair none of the block's strips
+takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged groups, a
+backward step is long enough for the branch to pay. Each block writes its own row per pair at
+the pair's emission slot (zero where its pixels had stopped; lgs_jax.backends.gaussian_grads
+adds a tile's blocks and sums each Gaussian's rows): one writer per row, no atomics, a fixed
+summation order, deterministic.
 """
 
 from __future__ import annotations
@@ -58,7 +59,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 from jax.experimental import pallas as pl
-from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
 from jax.experimental.mosaic.gpu import utils as mgpu_utils
 from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
@@ -220,12 +220,12 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     (pair j's gradient summed over this block's pixels, its tile) at the pair's emission slot
     s = slot_ref[j] (backends.gaussian_grads reads them there), for the pairs before the
     block's last stop pair, and zero rows for the tile's pairs after it: every real pair's row
-    is written once per block (the tile in every one). `scratch`, when `staged`: the
-    shared-memory record buffers and their barriers (`_smem_records_backward`). Each pair's
-    strip mask and slot are loaded one pair ahead (the skip branch waits on them). `stacked`:
-    the pair's GRAD_VALUES terms are reduced together (`_stacked`: one exchange across the
-    warps per pair) and stored as one vector; else one warpgroup reduction and one scalar
-    store per term."""
+    is written once per block (the tile in every one). `scratch`: when `staged`, the
+    shared-memory record buffers and their barriers (`_smem_records_backward`), then, for the
+    "transposed" `reduction`, the two (64,) exchange buffers of `_transposed_row`, used in turn
+    (the loop carries which). Each pair's strip mask and slot are loaded one pair ahead (the
+    skip branch waits on them). `reduction`: "transposed" (`_transposed_row`, `_zero_row`; GPU
+    only) or "terms" (one warpgroup `jnp.sum` and one scalar store per term, any mode)."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -273,12 +273,8 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
             _transposed_row(values, pixels, exchange.at[parity], rows_ref.at[wg, s],
                             tile.astype(dt))
             return carry, 1 - parity
-        terms = [jnp.zeros(k.shape, dt) if v is None else v for v in values]
-        if reduction == "stacked":
-            rows_ref[wg, s, pl.ds(0, ks.GRAD_VALUES)] = jnp.sum(_stacked(terms, pixels, dt), 1)
-        else:
-            for c, v in enumerate(values):
-                rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(v)
+        for c, v in enumerate(values):
+            rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(v)
         rows_ref[wg, s, ks.TILE_COLUMN] = tile.astype(dt)
         return carry, parity
 
@@ -304,34 +300,6 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
         return c
 
     lax.fori_loop(0, end - last, after, jnp.int32(0))
-
-
-def _stacked(terms, pixels: int, dt):
-    """The (len(terms), pixels) array whose row c is terms[c], each a block-wide (pixels,)
-    lane vector in Mosaic GPU's strided layout (lane l of warp w holds pixels 32·v·w + v·l ..
-    + v − 1, v = pixels / 128), laid out so that every thread keeps its own pixels of every
-    row: a tiled layout with the rows in registers and the pixels over the 4 warps, 32 lanes
-    and v-vectors as before. No data moves (the registers are only regrouped); a sum over the
-    pixel axis then reduces every row within each thread and warp and exchanges all rows across
-    the warps at once (one barrier round for the pair instead of one per term). Pallas has no
-    cast from the strided to a tiled layout, hence `plgpu.inline_mgpu` (GPU only: interpret mode
-    cannot run it)."""
-    rows, vec = len(terms), pixels // 128
-    tiled = mgpu_fa.TiledLayout(
-        mgpu_fa.Tiling(((rows, pixels), (32 * vec,), (vec,))), warp_dims=(-3,),
-        lane_dims=(-2,), vector_dim=-1, _check_canonical=False).canonicalize()
-    out = plgpu.Layout.TILED(tiled.tiling, warp_dims=tiled.warp_dims,
-                             lane_dims=tiled.lane_dims, vector_dim=tiled.vector_dim)
-
-    @plgpu.inline_mgpu(arg_types=(plgpu.Layout.WG_STRIDED((pixels,), vec_size=vec),) * rows,
-                       return_type=plgpu.ShapeDtypeStruct((rows, pixels), dt, layout=out))
-    def stack(_, *arrays):
-        registers = np.stack([a.registers.reshape(-1) for a in arrays])
-        return mgpu_fa.FragmentedArray(
-            _registers=registers.reshape(tiled.registers_shape((rows, pixels))), _layout=tiled,
-            _is_signed=None)
-
-    return stack(*terms)
 
 
 def butterfly_plan(rows: int):
@@ -371,8 +339,7 @@ def _transposed_row(terms, pixels: int, exchange, row, tile):
     each lane still holds, exchanging only the half its partner keeps (for 11 terms 6 + 3 + 2 +
     1 + 1 = 13 shuffles per thread, where reducing each term over the lanes takes 11 x 5 = 55),
     leaving every lane pair the warp's sum of one term (`butterfly_plan`). Each warp writes its
-    16 sums to `exchange` (a (64,) float32 view of shared memory: term slot s of warp w at
-    4s + w), one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
+    16 sums to `exchange` (a (64,) view of shared memory: slot s of warp w at 4s + w), one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
     ((w0 + w1) + (w2 + w3)) and store the row with one coalesced store (the tile from lane
     len(terms)). The caller alternates two `exchange` buffers between consecutive reductions,
     so one barrier per pair suffices: a warp writes a buffer again only after the barrier of
@@ -503,8 +470,12 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each real pair
     (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
     padding slots are left unwritten (no Gaussian's slots reach them). `lane_rows` = the
-    per-tile final T, stop pairs and cotangents (r, g, b, T, D). `stacked` (default: on the
-    GPU, not in interpret mode) reduces a pair's terms together (`_stacked`)."""
+    per-tile final T, stop pairs and cotangents (r, g, b, T, D). `reduction`: "transposed"
+    (the default on the GPU) or "terms" (the default in interpret mode, which cannot run the
+    former's inline Mosaic GPU code); the rows agree to float rounding (a different summation
+    order)."""
+    if reduction not in (None, "terms", "transposed"):
+        raise ValueError(f"reduction: expected 'terms' or 'transposed', got {reduction!r}")
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     n = TILE_PIXELS // pixels
     if reduction is None:
