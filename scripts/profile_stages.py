@@ -7,10 +7,11 @@ Each stage is its own jitted function of the previous stages' (precomputed) outp
 alone (median of `--repeat` calls, all stages alternating): projection, the pieces of binning
 (tile rectangles, depth order, slot segments, the full emission, the tile sort), the per-pair
 preparation (row gather, strip masks, records), the forward kernel from prepared inputs, and
-the backward's pieces (backward kernel rows, the per-Gaussian chain and sum kernel, the vjp of
-projection; and, for comparison in the same run, the XLA chain and per-Gaussian sum the
-`tiles` backend takes). Stage times do not add up to the end-to-end time exactly (fusion
-across stage boundaries, launch gaps), which is printed last for comparison.
+the backward's pieces (backward kernel rows, the per-Gaussian chain and sum kernel with 32
+(the default), 64 and 128 Gaussians per program, the vjp of projection; and, for comparison in
+the same run, the XLA chain and per-Gaussian sum the `tiles` backend takes). Stage times do not
+add up to the end-to-end time exactly (fusion across stage boundaries, launch gaps), which is
+printed last for comparison.
 """
 
 from __future__ import annotations
@@ -90,8 +91,9 @@ def profile(g, cam, repeat: int):
         "forward (prep + kernel)": (fwd, (p, bins)),
         "backward (kernel + chain + sum)": (grads, (p, bins, state.trans, stop, saved, cot)),
         "backward kernel (rows)": (kernel_rows, (bins, state.trans, stop, saved, cot)),
-        "gaussian_grads (chain + sum)": (j(lambda r, b, p: gaussian_grads.sums(
-            r, b, p, tiles_x, C, False)), (emission_rows, bins, p)),
+        **{f"gaussian_grads (chain + sum), {n} lanes": (
+            j(lambda r, b, p, n=n: gaussian_grads.sums(r, b, p, tiles_x, C, False, lanes=n)),
+            (emission_rows, bins, p)) for n in (32, 64, 128)},
         "XLA: chain_hoisted_rows": (j(lambda p, b, r: pairs.chain_hoisted_rows(
             pairs.gather(p, b.gauss), b, r, tiles_x, C)), (p, bins, rows11)),
         "XLA: per_gaussian_sum": (j(backward.per_gaussian_sum, static_argnums=2),

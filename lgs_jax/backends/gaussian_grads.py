@@ -42,7 +42,8 @@ from ..layout import TILE, origin_offset
 from ..projection import Projected
 from . import kernel_steps as ks
 
-LANES = 128  # Gaussians per program (4 warps)
+LANES = 32  # Gaussians per program (one warp): a program loops to its lanes' longest count;
+# 128 lanes took 2.70 ms at 10M/4K, 32 lanes 1.53 (BENCHMARKS.md §7)
 COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
 
@@ -99,8 +100,8 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
 
 
 def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, out_ref, *,
-            config: RasterConfig, tiles_x: int, n: int, blocks: int):
-    g = pl.program_id(0) * LANES + lax.iota(jnp.int32, LANES)
+            config: RasterConfig, tiles_x: int, n: int, blocks: int, lanes: int):
+    g = pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes)
     gi = jnp.minimum(g, n - 1)
     fields = (mean_ref[gi, 0], mean_ref[gi, 1], conic_ref[gi, 0], conic_ref[gi, 1],
               conic_ref[gi, 2])
@@ -112,16 +113,21 @@ def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, ou
 
 
 def sums(rows, bins: TileBins, p: Projected, tiles_x: int, config: RasterConfig,
-         interpret: bool):
+         interpret: bool, lanes: int = LANES):
     """(N, COLUMNS) per-Gaussian gradients from the backward kernels' emission-order rows
-    (blocks, capacity, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel."""
+    (blocks, capacity, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel with
+    `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
+    its lanes' longest count, so fewer lanes idle less where counts vary)."""
+    if lanes % 32:
+        raise ValueError(f"lanes: expected a multiple of 32, got {lanes}")
     n, blocks = p.mean2d.shape[0], rows.shape[0]
-    programs = pl.cdiv(n, LANES)
-    kernel = functools.partial(_kernel, config=config, tiles_x=tiles_x, n=n, blocks=blocks)
+    programs = pl.cdiv(n, lanes)
+    kernel = functools.partial(_kernel, config=config, tiles_x=tiles_x, n=n, blocks=blocks,
+                               lanes=lanes)
     out = pl.pallas_call(
-        kernel, out_shape=jax.ShapeDtypeStruct((programs * LANES, COLUMNS), rows.dtype),
+        kernel, out_shape=jax.ShapeDtypeStruct((programs * lanes, COLUMNS), rows.dtype),
         grid=(programs,), interpret=interpret,
-        compiler_params=plt.CompilerParams(num_warps=LANES // 32, num_stages=1),
+        compiler_params=plt.CompilerParams(num_warps=lanes // 32, num_stages=1),
         name="gaussian_grads",
     )(bins.first, bins.count, *_fields(p), rows)
     return out[:n]
