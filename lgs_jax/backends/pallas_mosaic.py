@@ -302,6 +302,9 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     lax.fori_loop(0, end - last, after, jnp.int32(0))
 
 
+EXCHANGE = 16 * 4  # `_transposed_row`'s shared-memory exchange: 16 slots x 4 warps
+
+
 def butterfly_plan(rows: int):
     """The transposing butterfly of `_transposed_row` for `rows` <= 16 values per lane: the
     halving sizes h of its steps (lane distance 16, 8, ...; a step on m values keeps
@@ -339,7 +342,8 @@ def _transposed_row(terms, pixels: int, exchange, row, tile):
     each lane still holds, exchanging only the half its partner keeps (for 11 terms 6 + 3 + 2 +
     1 + 1 = 13 shuffles per thread, where reducing each term over the lanes takes 11 x 5 = 55),
     leaving every lane pair the warp's sum of one term (`butterfly_plan`). Each warp writes its
-    16 sums to `exchange` (a (64,) view of shared memory: slot s of warp w at 4s + w), one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
+    16 sums to `exchange` (a (EXCHANGE,) view of shared memory: slot s of warp w at 4s + w),
+    one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
     ((w0 + w1) + (w2 + w3)) and store the row with one coalesced store (the tile from lane
     len(terms)). The caller alternates two `exchange` buffers between consecutive reductions,
     so one barrier per pair suffices: a warp writes a buffer again only after the barrier of
@@ -488,7 +492,7 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
         scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
                    plgpu.Barrier(num_barriers=2))
     if reduction == "transposed":
-        scratch += (plgpu.SMEM((2, 64), dt),)
+        scratch += (plgpu.SMEM((2, EXCHANGE), dt),)
     return plgpu.kernel(kernel, out_type=out, scratch_types=scratch, grid=(n_tiles, n),
                         grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
