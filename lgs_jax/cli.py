@@ -38,6 +38,19 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
+def _float_at_least(low: float):
+    """An argparse type: a finite float >= `low`."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not (math.isfinite(v) and v >= low):
+            raise argparse.ArgumentTypeError(f"must be a finite number >= {low}, got {text}")
+        return v
+    return parse
+
+
 def _int_at_least(low: int):
     """An argparse type: an int >= `low`."""
     def parse(text: str) -> int:
@@ -208,7 +221,7 @@ def _fit(args) -> int:
         raise UsageError(f"--out: {problem}")
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
                                    eval_every=args.eval_every, init_points=args.init_points,
-                                   convention=args.convention)
+                                   convention=args.convention, pair_headroom=args.pair_headroom)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
     else:
@@ -297,6 +310,10 @@ def _fit_parser(sub, common) -> None:
                         "or gsplat's 0.999)")
     f.add_argument("--eval-every", type=_int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
+    f.add_argument("--pair-headroom", type=_float_at_least(1.0), default=1.5,
+                   help="pair buffer size as a multiple of a view's pairs, at the start and at "
+                        "each growth (a recompile); larger: fewer recompiles, larger buffers "
+                        "(default: 1.5)")
     f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"),
                    help="train and evaluate on this window of every image (quick checks)")
     f.add_argument("--seed", type=int, default=0,

@@ -2,7 +2,7 @@
 
 Per step s (0-based): the views of `data.views_for_step`, one `step.train_step` (redone with a
 larger pair capacity whenever a view overflows: no pair is dropped; the capacity starts at and
-grows to `pair_capacity(pairs, TRAIN_HEADROOM)`, see `TRAIN_HEADROOM`), then `step.refine` where
+grows to `pair_capacity(pairs, settings.pair_headroom)`, see `Settings`), then `step.refine` where
 the strategy asks (the pool doubles when it needs room, up to `max_gaussians`: a recompile; both
 are logged).
 A step whose loss, gradients or parameters would not be finite is skipped (nothing changes),
@@ -38,15 +38,6 @@ from .settings import Settings, Setup
 from .step import refine, render_views, train_step
 from .strategy import DefaultStrategy, Strategy
 
-TRAIN_HEADROOM = 1.5
-"""The pair capacity is `pair_capacity(pairs, TRAIN_HEADROOM)` of the pairs a view needs, at the
-start (first training view) and on every overflow (that step's largest view): at least 1.5x the
-pairs, so pairs that grow with the Gaussians rarely overflow, and each growth is at least 1.5x,
-so a run recompiles for it about once per 1.5x growth of its pairs; every per-pair pass costs
-in proportion to the capacity (BENCHMARKS.md §5: Lego 7k steps, 12.36 ms per step against 14.63
-at the power of two above twice the pairs, one more recompile)."""
-
-
 @dataclasses.dataclass
 class _State:
     """Everything a checkpoint restores."""
@@ -79,7 +70,7 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
     pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
-    capacity = pair_capacity(int(_pairs(pool, first)), TRAIN_HEADROOM)
+    capacity = pair_capacity(int(_pairs(pool, first)), setup.settings.pair_headroom)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
         f"{rd.scene_scale:.3f}")
     return _State(pool, opt_state, sstate, 0, capacity, capacity)
@@ -146,7 +137,7 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
         if not m["overflow"]:
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
-        st.capacity = pair_capacity(m["pairs"], TRAIN_HEADROOM)
+        st.capacity = pair_capacity(m["pairs"], setup.settings.pair_headroom)
         say(f"step {st.step + 1}: pair capacity grown to {st.capacity} (one recompile)")
 
 
@@ -209,6 +200,11 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          ("settings.init_points", settings.init_points, 1)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
             raise ValueError(f"{name}: expected an int >= {low}, got {v!r}")
+    h = settings.pair_headroom
+    number = isinstance(h, (int, float, np.integer, np.floating)) and not isinstance(h, bool)
+    if not (number and h >= 1):
+        raise ValueError(f"settings.pair_headroom: expected a number >= 1 (fewer slots than "
+                         f"pairs would drop pairs), got {h!r}")
     for name, v, known in (("settings.convention", settings.convention, CONVENTIONS),
                            ("settings.ssim_padding", settings.ssim_padding, PADDINGS)):
         if v not in known:

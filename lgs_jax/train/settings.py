@@ -21,6 +21,14 @@ class Settings:
     init_points, init_extent: the random start of datasets without SfM points (`init.py`):
     that many points in a cube of half-width init_extent · scene_scale; None: 3.0 (gsplat) for
     captures, 0.25 for NeRF-synthetic scenes (white background; 3DGS's ±1.3 cube on Lego).
+    pair_headroom (>= 1): the pair capacity of a training view is
+    `pair_capacity(pairs · pair_headroom)` of the pairs it needs, at the start (first training
+    view) and whenever a step overflows (that step's largest view; the step is redone, nothing
+    is dropped). Every per-pair pass costs in proportion to the capacity and every growth is a
+    recompile of the step (about 20 s): 1.5 grows about once per 1.5x growth of the pairs (Lego
+    7k: 2 recompiles, 2.3 ms per step less than twice the pairs; skull 7k, whose pairs grow 27x:
+    8 recompiles, 175 s; BENCHMARKS.md §5); a larger value means fewer recompiles and larger
+    buffers. Not part of the checkpointed recipe (it changes no result).
     """
 
     lr_means: float = 1.6e-4
@@ -40,6 +48,7 @@ class Settings:
     checkpoint_every: int = 1000
     init_points: int = 100_000
     init_extent: float | None = None
+    pair_headroom: float = 1.5
 
 
 @dataclasses.dataclass(frozen=True)

@@ -273,7 +273,10 @@ def test_training_renders_follow_the_convention():
 @pytest.mark.parametrize("kwargs,match", [
     (dict(steps=-1), "steps: expected an int >= 0"), (dict(max_gaussians=0), "max_gaussians"),
     (dict(settings=train.Settings(convention="inria")), "settings.convention"),
-    (dict(settings=train.Settings(ssim_padding="full")), "settings.ssim_padding")])
+    (dict(settings=train.Settings(ssim_padding="full")), "settings.ssim_padding"),
+    (dict(settings=train.Settings(pair_headroom=0.9)), "settings.pair_headroom: expected a "
+                                                       "number >= 1"),
+    (dict(settings=train.Settings(pair_headroom=float("nan"))), "settings.pair_headroom")])
 def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
@@ -287,6 +290,12 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
         cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out", str(tmp_path),
                   "--resume", "--overwrite"])
     assert exit_.value.code == 2
+    for value in ("0.5", "inf", "x"):
+        with pytest.raises(SystemExit) as exit_:
+            cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out", str(tmp_path),
+                      "--pair-headroom", value])
+        assert exit_.value.code == 2
+        assert "--pair-headroom" in capsys.readouterr().err
 
 
 def test_progress_bar_redraws_while_a_step_runs():
@@ -377,8 +386,10 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     setup = train.Setup(strategy=train.MCMCStrategy())
     saved = checkpoint.config_of(setup, seed=0)
     assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
-    other = checkpoint.config_of(dataclasses.replace(setup, steps=5, backend="pallas"), 0)
-    assert checkpoint.config_mismatch(saved, other) is None  # run length and backend may change
+    other = checkpoint.config_of(dataclasses.replace(
+        setup, steps=5, backend="pallas", settings=train.Settings(pair_headroom=3.0)), 0)
+    # run length, backend and pair headroom may change
+    assert checkpoint.config_mismatch(saved, other) is None
     changed = checkpoint.config_of(
         dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
     problem = checkpoint.config_mismatch(saved, changed)
