@@ -7,7 +7,7 @@ whether Mosaic GPU can express the reductions a faster kernel would need (GPU on
 1. Reduction variants. Per pair, `pallas_mosaic.backward_kernel` reduces 11 gradient terms over
    its block's pixels: `terms` reduces each with a warpgroup-wide `jnp.sum` (shuffles within
    each warp, an exchange across the four warps through shared memory with barriers, a store
-   from every thread); `transposed` (the default on the GPU) with `_transposed_row`'s
+   from every thread); `transposed` (the default on the GPU) with `mosaic_rows.transposed_row`'s
    transposing butterfly (13 shuffles per thread for the 11 terms, one exchange, one barrier,
    one coalesced store). The `one_sum` variant adds the 11 per-lane terms elementwise and
    reduces that once with `terms` (same loads and arithmetic, wrong rows; only its time

@@ -37,12 +37,10 @@ multiply-add contraction differ by ulps); both record per-pixel stop pairs for t
 Backward. The same blocks walk the tile's pairs back to front from the last pair any of their
 pixels blended (`kernel_steps.backward_step`), float32 records staged in shared memory as in the
 forward (chunks aligned to multiples of the chunk size, copied downward), and reduce each pair's
-11 gradient terms over their pixels with a transposing butterfly (`_transposed_row`, through
-`plgpu.inline_mgpu`): each shuffle step exchanges only the half of the terms a lane's partner
-keeps, 13 shuffles per thread for the 11 terms where one warp reduction per term takes 55; one
-exchange across the warps through shared memory, one barrier per pair, and the first warp
-stores the row with one coalesced store. Interpret mode, which cannot run inline Mosaic GPU
-code, reduces each term with `jnp.sum` (`reduction="terms"`). A pair none of the block's strips
+11 gradient terms over their pixels with a transposing butterfly (lgs_jax.backends.mosaic_rows,
+inline Mosaic GPU code: 13 shuffles per thread where one warp reduction per term takes 55, one
+exchange across the warps, one barrier per pair, one coalesced store of the row; interpret mode,
+which cannot run inline code, sums each term with `jnp.sum`). A pair none of the block's strips
 takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged groups, a
 backward step is long enough for the branch to pay. Each block writes its own row per pair at
 the pair's emission slot (zero where its pixels had stopped; lgs_jax.backends.gaussian_grads
@@ -56,17 +54,14 @@ import functools
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax import lax
 from jax.experimental import pallas as pl
-from jax.experimental.mosaic.gpu import utils as mgpu_utils
 from jax.experimental.pallas import mosaic_gpu as plgpu
-from jaxlib.mlir import ir
-from jaxlib.mlir.dialects import arith, memref, scf, vector
 
 from ..config import RasterConfig
 from ..layout import STRIP_PIXELS, TILE_PIXELS
 from . import kernel_steps as ks
+from . import mosaic_rows
 
 
 def _ranges(bins):
@@ -220,12 +215,11 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     (pair j's gradient summed over this block's pixels, its tile) at the pair's emission slot
     s = slot_ref[j] (backends.gaussian_grads reads them there), for the pairs before the
     block's last stop pair, and zero rows for the tile's pairs after it: every real pair's row
-    is written once per block (the tile in every one). `scratch`: when `staged`, the
-    shared-memory record buffers and their barriers (`_smem_records_backward`), then, for the
-    "transposed" `reduction`, the two (64,) exchange buffers of `_transposed_row`, used in turn
-    (the loop carries which). Each pair's strip mask and slot are loaded one pair ahead (the
-    skip branch waits on them). `reduction`: "transposed" (`_transposed_row`, `_zero_row`; GPU
-    only) or "terms" (one warpgroup `jnp.sum` and one scalar store per term, any mode)."""
+    is written once per block (the tile in every one), as `reduction` says
+    (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the shared-memory record buffers
+    and their barriers (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`;
+    the loop carries which exchange buffer is next). Each pair's strip mask and slot are loaded
+    one pair ahead (the skip branch waits on them)."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -237,11 +231,11 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
     last = jnp.maximum(jnp.minimum(end, jnp.max(stop_at)), start)
     mine = _strip_bits(wg, pixels)
-    zero_scalar = jnp.zeros((), dt)
-    if reduction == "transposed":
-        scratch, exchange = scratch[:-1], scratch[-1]
-    if scratch:
-        record, begin = _smem_records_backward(rec_ref, *scratch, start, last,
+    n = len(scratch) - len(mosaic_rows.scratch(reduction, dt))  # the records' scratch first
+    store_row, zero_row = mosaic_rows.writers(reduction, rows_ref, wg, tile, pixels,
+                                              *scratch[n:])
+    if n:
+        record, begin = _smem_records_backward(rec_ref, *scratch[:n], start, last,
                                                config.tuning.mosaic_chunk)
     else:
         def record(j):
@@ -253,14 +247,6 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
         jj = jnp.maximum(j, 0)
         return mask_ref[jj] if config.warp_cull else jnp.int32(0), slot_ref[jj]
 
-    def zero_row(s):  # the tile too: a tile's other block may have a row there
-        if reduction == "transposed":
-            _zero_row(rows_ref.at[wg, s], tile.astype(dt))
-            return
-        for c in range(ks.GRAD_VALUES):
-            rows_ref[wg, s, c] = zero_scalar
-        rows_ref[wg, s, ks.TILE_COLUMN] = tile.astype(dt)
-
     def skip(j, mask_word, s, carry, parity):  # a zero row, the carry unchanged
         del j, mask_word
         zero_row(s)
@@ -269,14 +255,7 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     def step(j, mask_word, s, carry, parity):
         values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
                                          lane, carry, config)
-        if reduction == "transposed":
-            _transposed_row(values, pixels, exchange.at[parity], rows_ref.at[wg, s],
-                            tile.astype(dt))
-            return carry, 1 - parity
-        for c, v in enumerate(values):
-            rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(v)
-        rows_ref[wg, s, ks.TILE_COLUMN] = tile.astype(dt)
-        return carry, parity
+        return carry, store_row(values, s, parity)
 
     def body(i, state):
         (mask_word, s), carry, parity = state
@@ -300,138 +279,6 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
         return c
 
     lax.fori_loop(0, end - last, after, jnp.int32(0))
-
-
-EXCHANGE = 16 * 4  # `_transposed_row`'s shared-memory exchange: 16 slots x 4 warps
-
-
-def butterfly_plan(rows: int):
-    """The transposing butterfly of `_transposed_row` for `rows` <= 16 values per lane: the
-    halving sizes h of its steps (lane distance 16, 8, ...; a step on m values keeps
-    h = ceil(m / 2), a lane with the distance's bit set keeping values h..m − 1) and, per lane
-    pair (2s, 2s + 1) after the last step, the row s holds (−1: none). Each lane's value
-    at the end is its row's sum over the warp's 32 lanes."""
-    if not 1 <= rows <= 16:
-        raise ValueError(f"rows: must be in [1, 16], got {rows}")
-    lanes = np.arange(32)
-    table = [np.full(32, r) for r in range(rows)]
-    halves = []
-    for d in (16, 8, 4, 2, 1):
-        m = len(table)
-        if m == 1:
-            halves.append(0)
-            continue
-        h = (m + 1) // 2
-        halves.append(h)
-        table = [np.where(lanes & d, table[k + h] if k + h < m else -1, table[k])
-                 for k in range(h)]
-    final = table[0]
-    assert np.array_equal(final[0::2], final[1::2])
-    return tuple(halves), tuple(int(r) for r in final[0::2])
-
-
-def _transposed_row(terms, pixels: int, exchange, row, tile):
-    """Store one pair's row: row[c] = Σ over the block's pixels of terms[c] (c < len(terms)),
-    then row[len(terms)] = tile, from the block-wide (pixels,) lane vectors `terms` (Mosaic GPU
-    strided layout: each thread holds pixels/128 of them; None: a term that is zero, which
-    stays a constant inside: a zero array passed in fails the GPU compiler's LLVM translation
-    with an unrealized layout cast).
-
-    A transposing reduction (`plgpu.inline_mgpu`; GPU only): each thread adds its own pixels,
-    then five butterfly steps over the warp's lanes (distance 16, 8, 4, 2, 1) halve the values
-    each lane still holds, exchanging only the half its partner keeps (for 11 terms 6 + 3 + 2 +
-    1 + 1 = 13 shuffles per thread, where reducing each term over the lanes takes 11 x 5 = 55),
-    leaving every lane pair the warp's sum of one term (`butterfly_plan`). Each warp writes its
-    16 sums to `exchange` (a (EXCHANGE,) view of shared memory: slot s of warp w at 4s + w),
-    one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
-    ((w0 + w1) + (w2 + w3)) and store the row with one coalesced store (the tile from lane
-    len(terms)). The caller alternates two `exchange` buffers between consecutive reductions,
-    so one barrier per pair suffices: a warp writes a buffer again only after the barrier of
-    the reduction in between, which the first warp passes after reading it. Fixed order,
-    no atomics: deterministic."""
-    rows, vec = len(terms), pixels // 128
-    halves, slot_rows = butterfly_plan(rows)
-    slot_of = {r: s for s, r in enumerate(slot_rows) if r >= 0}
-    present = [c for c, v in enumerate(terms) if v is not None]
-
-    @plgpu.inline_mgpu(
-        arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(()))
-        + (plgpu.Layout.WG_STRIDED((pixels,), vec_size=vec),) * len(present))
-    def reduce(_, exchange_ref, row_ref, tile_value, *arrays):
-        i32 = ir.IntegerType.get_signless(32)
-        el = ir.VectorType(arrays[0].registers.flat[0].type).element_type
-        index = ir.IndexType.get()
-        c = lambda v: mgpu_utils.c(v, i32)
-        tid = arith.remui(mgpu_utils.thread_idx(), c(128))
-        lane, warp = arith.remui(tid, c(32)), arith.divui(tid, c(32))
-        zero = arith.constant(el, 0.0)
-        vals = [zero] * rows
-        for col, a in zip(present, arrays):
-            [reg] = a.registers.reshape(-1)
-            parts = [vector.extract(reg, dynamic_position=[],
-                                    static_position=ir.DenseI64ArrayAttr.get([e]))
-                     for e in range(vec)]
-            v = parts[0]
-            for x in parts[1:]:
-                v = arith.addf(v, x)
-            vals[col] = v
-        one = ir.VectorType.get((1,), el)
-
-        def shuffle(v, d):  # as a 1-vector: utils.shfl_bfly cannot bitcast a 64-bit scalar
-            v = mgpu_utils.shfl_bfly(vector.broadcast(one, v), d)
-            return vector.extract(v, dynamic_position=[],
-                                  static_position=ir.DenseI64ArrayAttr.get([0]))
-
-        for d, h in zip((16, 8, 4, 2, 1), halves):
-            if h == 0:
-                vals = [arith.addf(vals[0], shuffle(vals[0], d))]
-                continue
-            upper = arith.cmpi(arith.CmpIPredicate.ne, arith.andi(lane, c(d)), c(0))
-            merged = []
-            for k in range(h):
-                lo = vals[k]
-                hi = vals[k + h] if k + h < len(vals) else zero
-                send = arith.select(upper, lo, hi)
-                keep = arith.select(upper, hi, lo)
-                merged.append(arith.addf(keep, shuffle(send, d)))
-            vals = merged
-        slot = arith.shrui(lane, c(1))
-        at = arith.addi(arith.muli(slot, c(4)), warp)
-        memref.store(vals[0], exchange_ref, [arith.index_cast(index, at)])
-        mgpu_utils.warpgroup_barrier()
-        with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.ule, tid, c(rows)))
-                               .then_block):
-            slot_t = c(0)
-            for r, s in slot_of.items():
-                slot_t = arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, c(r)), c(s),
-                                      slot_t)
-            four = vector.load(ir.VectorType.get((4,), el), exchange_ref,
-                               [arith.index_cast(index, arith.muli(slot_t, c(4)))])
-            p = [vector.extract(four, dynamic_position=[],
-                                static_position=ir.DenseI64ArrayAttr.get([w])) for w in range(4)]
-            total = arith.addf(arith.addf(p[0], p[1]), arith.addf(p[2], p[3]))
-            value = arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, c(rows)),
-                                 tile_value.registers.item(), total)
-            memref.store(value, row_ref, [arith.index_cast(index, tid)])
-            scf.yield_([])
-
-    reduce(exchange, row, tile, *[terms[c] for c in present])
-
-
-@plgpu.inline_mgpu(arg_types=(plgpu.RefType(), plgpu.Layout.WG_SPLAT(())))
-def _zero_row(_, row_ref, tile_value):
-    """row_ref[:] = (0, ..., 0, tile): one coalesced store by the first warp's lanes (where a
-    store from Pallas would have every thread write every column)."""
-    i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
-    width = ir.MemRefType(row_ref.type).shape[0]
-    tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(128, i32))
-    last = mgpu_utils.c(width - 1, i32)
-    value = tile_value.registers.item()
-    with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.ule, tid, last)).then_block):
-        zero = arith.constant(value.type, 0.0)
-        memref.store(arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, last), value, zero),
-                     row_ref, [arith.index_cast(index, tid)])
-        scf.yield_([])
 
 
 def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
@@ -474,16 +321,11 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each real pair
     (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
     padding slots are left unwritten (no Gaussian's slots reach them). `lane_rows` = the
-    per-tile final T, stop pairs and cotangents (r, g, b, T, D). `reduction`: "transposed"
-    (the default on the GPU) or "terms" (the default in interpret mode, which cannot run the
-    former's inline Mosaic GPU code); the rows agree to float rounding (a different summation
-    order)."""
-    if reduction not in (None, "terms", "transposed"):
-        raise ValueError(f"reduction: expected 'terms' or 'transposed', got {reduction!r}")
+    per-tile final T, stop pairs and cotangents (r, g, b, T, D). `reduction`:
+    `mosaic_rows.resolve`'s (by default "transposed" on the GPU, "terms" in interpret mode)."""
+    reduction = mosaic_rows.resolve(reduction, interpret)
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     n = TILE_PIXELS // pixels
-    if reduction is None:
-        reduction = "terms" if interpret else "transposed"
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                reduction=reduction)
     out = jax.ShapeDtypeStruct((n, capacity, ks.ROW_WIDTH), dt)
@@ -491,8 +333,7 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     if staged(config, dt):
         scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
                    plgpu.Barrier(num_barriers=2))
-    if reduction == "transposed":
-        scratch += (plgpu.SMEM((2, EXCHANGE), dt),)
+    scratch += mosaic_rows.scratch(reduction, dt)
     return plgpu.kernel(kernel, out_type=out, scratch_types=scratch, grid=(n_tiles, n),
                         grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),

@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lgs_jax
-from lgs_jax.backends import pallas, pallas_mosaic
+from lgs_jax.backends import mosaic_rows, pallas, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, GRAD_F64_REL,
@@ -198,11 +198,11 @@ def test_mosaic_backward_staging_is_bit_for_bit(backend, pixels, seed):
 
 @pytest.mark.parametrize("rows", [1, 2, 3, 5, 8, 11, 16])
 def test_transposing_butterfly_leaves_every_row_sum_in_its_lane_pair(rows):
-    """`pallas_mosaic.butterfly_plan`, simulated as `_transposed_row` runs it on a warp (lane l
+    """`mosaic_rows.butterfly_plan`, simulated as `transposed_row` runs it on a warp (lane l
     sends the half its partner l ^ d keeps and adds what it receives): every row's sum over
     the 32 lanes ends in the lane pairs the plan names (one pair per row from 9 rows on) (the kernel itself only
     runs on a GPU: scripts/grad_gpu_check.sh)."""
-    halves, slot_rows = pallas_mosaic.butterfly_plan(rows)
+    halves, slot_rows = mosaic_rows.butterfly_plan(rows)
     x = np.random.default_rng(rows).normal(size=(32, rows))
     lanes = np.arange(32)
     vals = [x[:, r] for r in range(rows)]
@@ -225,7 +225,7 @@ def test_transposing_butterfly_leaves_every_row_sum_in_its_lane_pair(rows):
         if r >= 0:
             np.testing.assert_allclose(vals[0][2 * s], x[:, r].sum(), rtol=1e-12)
     with pytest.raises(ValueError, match="rows"):
-        pallas_mosaic.butterfly_plan(17)
+        mosaic_rows.butterfly_plan(17)
 
 def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
     """`KernelConfig.vanilla_from_pairs`: with kernel "auto" a `pallas` plan whose pair buffer
