@@ -22,13 +22,14 @@ class Settings:
     that many points in a cube of half-width init_extent · scene_scale; None: 3.0 (gsplat) for
     captures, 0.25 for NeRF-synthetic scenes (white background; 3DGS's ±1.3 cube on Lego).
     pair_headroom (>= 1): the pair capacity of a training view is
-    `pair_capacity(pairs · pair_headroom)` of the pairs it needs, at the start (first training
+    `pair_capacity(pairs, pair_headroom)` of the pairs it needs, at the start (first training
     view) and whenever a step overflows (that step's largest view; the step is redone, nothing
     is dropped). Every per-pair pass costs in proportion to the capacity and every growth is a
-    recompile of the step (about 20 s): 1.5 grows about once per 1.5x growth of the pairs (Lego
-    7k: 2 recompiles, 2.3 ms per step less than twice the pairs; skull 7k, whose pairs grow 27x:
-    8 recompiles, 175 s; BENCHMARKS.md §5); a larger value means fewer recompiles and larger
-    buffers. Not part of the checkpointed recipe (it changes no result).
+    recompile of the step (about 20 s on an H200): 1.5 grows about once per 1.5x growth of the
+    pairs (BENCHMARKS.md §5: Lego 7k grew twice and ran 2.3 ms per step faster than with the
+    power of two above twice the pairs; skull 7k, whose pairs grew 27x, grew 8 times, 175 s of
+    compilation); a larger value means fewer recompiles and larger buffers. Not part of the
+    checkpointed recipe (it changes no result).
     """
 
     lr_means: float = 1.6e-4
