@@ -38,30 +38,26 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def _float_at_least(low: float):
-    """An argparse type: a finite float >= `low`."""
-    def parse(text: str) -> float:
+def _number_at_least(low, kind=int):
+    """An argparse type: a finite number of `kind` (int or float) >= `low`."""
+    name = "an integer" if kind is int else "a number"
+
+    def parse(text: str):
         try:
-            v = float(text)
+            v = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not (math.isfinite(v) and v >= low):
-            raise argparse.ArgumentTypeError(f"must be a finite number >= {low}, got {text}")
+            raise argparse.ArgumentTypeError(f"expected {name}, got {text!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if v < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
         return v
     return parse
 
 
 def _int_at_least(low: int):
     """An argparse type: an int >= `low`."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if v < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
-        return v
-    return parse
+    return _number_at_least(low, int)
 
 
 def _finite_float(text: str) -> float:
@@ -310,7 +306,7 @@ def _fit_parser(sub, common) -> None:
                         "or gsplat's 0.999)")
     f.add_argument("--eval-every", type=_int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
-    f.add_argument("--pair-headroom", type=_float_at_least(1.0), default=1.5,
+    f.add_argument("--pair-headroom", type=_number_at_least(1.0, float), default=1.5,
                    help="pair buffer size as a multiple of a view's pairs, at the start and at "
                         "each growth (a recompile); larger: fewer recompiles, larger buffers "
                         "(default: 1.5)")
