@@ -44,8 +44,9 @@ class KernelConfig:
         the Local-GS per-pair preparation in XLA costs more than its kernel saves (H200, pair
         buffers sized by `pair_capacity`: vanilla 8.39 against Local-GS 9.72 ms at 24M pairs,
         a tie at 10M, Local-GS 17% faster at 3.4M; BENCHMARKS.md §7). Images agree to float32
-        rounding (both are exact; the kernels evaluate α in different forms). Under differentiation the Local-GS
-        forward and backward still run (the routed backward has not been measured). None: never.
+        rounding (both are exact; the kernels evaluate α in different forms). Under
+        differentiation the Local-GS forward and backward still run (the routed backward has
+        not been measured). None: never.
       interpret: run the Pallas kernels in interpret mode (True), lower them for the GPU (False:
         on a machine without one only tracing and lowering work, which tests use to check that
         every kernel lowers), or decide by the platform (None: interpret unless JAX's default

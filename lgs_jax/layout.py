@@ -81,12 +81,18 @@ def origin_offset(config: RasterConfig) -> float:
     return TILE / 2 if config.origin == "center" else 0.0
 
 
-def tile_origin(tile_x, tile_y, config: RasterConfig, dtype):
-    """Origin T of the hoisting frame (Eq. 1): tile corner or centre; (0, 0) for global coords."""
+def tile_origin_axis(t, config: RasterConfig, dtype):
+    """One coordinate of the origin T of the hoisting frame (Eq. 1) for tile index `t` along an
+    axis: the tile's corner or centre, 0 for global coords (exact: integers below 2^24)."""
     if not config.local_coords:
-        return jnp.zeros(jnp.shape(tile_x) + (2,), dtype)
-    off = origin_offset(config)
-    return jnp.stack([tile_x * TILE + off, tile_y * TILE + off], -1).astype(dtype)
+        return jnp.zeros(jnp.shape(t), dtype)
+    return (t * TILE).astype(dtype) + origin_offset(config)
+
+
+def tile_origin(tile_x, tile_y, config: RasterConfig, dtype):
+    """Origin T of the hoisting frame (Eq. 1), (..., 2): `tile_origin_axis` of both axes."""
+    return jnp.stack([tile_origin_axis(tile_x, config, dtype),
+                      tile_origin_axis(tile_y, config, dtype)], -1)
 
 
 def frame(lx, ly, px, py, config: RasterConfig):

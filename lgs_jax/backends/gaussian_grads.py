@@ -38,7 +38,7 @@ from jax.experimental.pallas import triton as plt
 from .. import hoist
 from ..binning import TileBins
 from ..config import RasterConfig
-from ..layout import TILE, origin_offset
+from ..layout import tile_origin_axis
 from ..projection import Projected
 from . import kernel_steps as ks
 
@@ -55,12 +55,8 @@ def _pair_terms(vals, tile, fields, tiles_x: int, config: RasterConfig):
         return list(vals[0:6]) + list(vals[7:11])
     mx, my, a, b, c = fields
     dt = mx.dtype
-    if config.local_coords:
-        off = origin_offset(config)
-        ox = ((tile % tiles_x) * TILE).astype(dt) + off
-        oy = ((tile // tiles_x) * TILE).astype(dt) + off
-    else:
-        ox = oy = jnp.zeros((), dt)
+    ox = tile_origin_axis(tile % tiles_x, config, dt)
+    oy = tile_origin_axis(tile // tiles_x, config, dt)
     d_a, d_b, d_c, d_dx, d_dy, d_ln_o = hoist.hoist_terms_vjp(vals[0:6], a, b, c, mx - ox,
                                                               my - oy)
     return [d_dx, d_dy, d_a, d_b, d_c, d_ln_o + vals[6]] + list(vals[7:11])
