@@ -9,6 +9,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from hypothesis import given, strategies as st
 
 import lgs_jax
@@ -144,3 +145,22 @@ def test_tile_ranges_equal_searchsorted(seed):
     ids = np.arange(n_tiles)
     np.testing.assert_array_equal(start, np.searchsorted(tile, ids, side="left"))
     np.testing.assert_array_equal(end, np.searchsorted(tile, ids, side="right"))
+
+
+@pytest.mark.parametrize("n_tiles", [12, binning.SORT16_TILES, binning.SORT16_TILES + 1])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_tile_sort_is_the_stable_order_with_16_and_32_bit_keys(n_tiles, seed):
+    """Up to SORT16_TILES tiles the keys are sorted as uint16, above as int32: either way the
+    permutation is numpy's stable argsort of the tiles (ties by emission slot), the largest tile
+    and the padding value (n_tiles) included."""
+    rng = np.random.default_rng(seed)
+    tile = rng.choice(np.array([0, 1, n_tiles // 2, n_tiles - 1, n_tiles]), 200)
+    gauss = rng.integers(0, 50, 200)
+    got_tile, got_gauss, slot, start, end = binning.sort_pairs(
+        jnp.asarray(tile, jnp.int32), jnp.asarray(gauss, jnp.int32), n_tiles)
+    want = np.argsort(tile, kind="stable")
+    np.testing.assert_array_equal(slot, want)
+    np.testing.assert_array_equal(got_tile, tile[want])
+    np.testing.assert_array_equal(got_gauss, gauss[want])
+    assert got_tile.dtype == jnp.int32
+    np.testing.assert_array_equal(end[-1], np.searchsorted(tile[want], n_tiles - 1, "right"))
