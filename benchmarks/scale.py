@@ -61,6 +61,11 @@ ROWS = {
     "auto": ("pallas", C("gsplat")),  # what users get: vanilla from 2^24 pairs (KernelConfig)
     "localgs": ("pallas", C("gsplat", tuning=LOCAL)),
     "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
+    # the Mosaic GPU kernels building their pair records from Gaussians (KernelConfig)
+    "localgs:staged": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                      mosaic_pair_source="gaussians"))),
+    "localgs:staged:fast": ("pallas", C("gsplat", blend="fast", tuning=K(
+        vanilla_from_pairs=None, mosaic_pair_source="gaussians"))),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),

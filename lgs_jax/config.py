@@ -17,6 +17,7 @@ T_STOP = 1e-4
 _ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}
 CONVENTIONS = tuple(_ALPHA_CAP)
 IMPLEMENTATIONS = ("triton", "mosaic")
+PAIR_SOURCES = ("records", "gaussians")
 
 
 def _check(name: str, value, allowed):
@@ -64,6 +65,14 @@ class KernelConfig:
         and in the backward kernel (double-buffered; float32 only, TMA has no 64-bit float
         type); 0 reads records from global memory. A multiple of mosaic_unroll_localgs (a
         staged group never straddles two chunks).
+      mosaic_pair_source: where the Local-GS Mosaic GPU forward gets its pair records:
+        "records", built for every pair in XLA before the kernel (and staged per mosaic_chunk);
+        "gaussians", built inside the kernel per chunk of 128 pairs from per-Gaussian rows
+        (lgs_jax.backends.mosaic_staging: no per-pair buffer or XLA pass; float32 and float64;
+        RenderStats.strip_pairs is then −1, not counted). The backward and the Triton kernels
+        read records either way (under differentiation XLA builds them for the backward).
+        "gaussians" runs in interpret mode and lowers for the GPU, but has not yet been run or
+        timed on one: "records" stays the default until it has (BENCHMARKS.md §7).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -83,6 +92,7 @@ class KernelConfig:
     mosaic_backward_pixels: int | None = None
     mosaic_whole_tile_from: int = 8192
     mosaic_chunk: int = 64
+    mosaic_pair_source: Literal["records", "gaussians"] = "records"
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -99,6 +109,10 @@ class KernelConfig:
         if self.vanilla_from_pairs is not None:
             _check_int("tuning.vanilla_from_pairs", self.vanilla_from_pairs, 1)
         _check_int("tuning.mosaic_chunk", self.mosaic_chunk, 0)
+        _check("tuning.mosaic_pair_source", self.mosaic_pair_source, PAIR_SOURCES)
+        if self.mosaic_pair_source == "gaussians" and 128 % self.mosaic_unroll_localgs:
+            raise ValueError(f"tuning.mosaic_unroll_localgs: must divide the 128 pairs of a "
+                             f"chunk staged from Gaussians, got {self.mosaic_unroll_localgs}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
                              f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")

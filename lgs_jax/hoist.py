@@ -77,7 +77,15 @@ def error_bound(mean2d, conic, log_opacity, origin, reach_x, reach_y, gamma):
     float evaluation of V and the 6-term dot product errs by at most γ times that sum
     (γ = 16u is generous for both).
     """
-    a, b, c = conic[..., 0], jnp.abs(conic[..., 1]), conic[..., 2]
-    dx = jnp.abs(mean2d[..., 0] - origin[..., 0]) + reach_x
-    dy = jnp.abs(mean2d[..., 1] - origin[..., 1]) + reach_y
-    return gamma * (0.5 * a * dx * dx + b * dx * dy + 0.5 * c * dy * dy + jnp.abs(log_opacity))
+    return error_bound_terms(conic[..., 0], conic[..., 1], conic[..., 2],
+                             mean2d[..., 0] - origin[..., 0], mean2d[..., 1] - origin[..., 1],
+                             log_opacity, reach_x, reach_y, gamma)
+
+
+def error_bound_terms(a, b, c, dx, dy, log_opacity, reach_x, reach_y, gamma):
+    """`error_bound` from the conic's and Δ = μ − T's components (separate arrays, as
+    `hoist_terms` takes them)."""
+    dx = jnp.abs(dx) + reach_x
+    dy = jnp.abs(dy) + reach_y
+    return gamma * (0.5 * a * dx * dx + jnp.abs(b) * dx * dy + 0.5 * c * dy * dy
+                    + jnp.abs(log_opacity))

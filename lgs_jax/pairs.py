@@ -25,7 +25,7 @@ from jax import lax
 from . import hoist
 from .binning import TileBins, padded_ellipse
 from .config import RasterConfig
-from .layout import TILE, tile_origin
+from .layout import TILE, tile_origin, tile_origin_axis
 from .projection import Projected
 from .warp_masks import FULL_MASK, strip_mask
 
@@ -47,18 +47,32 @@ class PairGaussians:
     unbounded: Any
 
 
-def gather(p: Projected, gauss) -> PairGaussians:
-    """Every pair's Gaussian fields, through one packed per-Gaussian row per pair."""
+TABLE_COLUMNS = 14  # `gaussian_table`: μx, μy, a, b, c, o, r, g, b, z, τ, τ_pad, det_lo, unbounded
+
+
+def gaussian_table(p: Projected):
+    """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (the padded ellipse of
+    lgs_jax.binning included; `unbounded` as 0/1), materialised once: fused into the per-pair
+    consumers, XLA would recompute the rows (and read every field separately) for every pair."""
     e = padded_ellipse(p)
     cols = [p.mean2d, p.conic, p.opacity[:, None], p.rgb, p.depth[:, None], e.tau[:, None],
             e.tau_pad[:, None], e.det_lo[:, None], e.unbounded[:, None].astype(p.mean2d.dtype)]
-    # Materialised once per Gaussian: fused into the per-pair consumers, XLA would recompute
-    # the rows (and read every field separately) for every pair.
-    table = lax.optimization_barrier(jnp.concatenate(cols, -1))
-    rows = table[gauss]
+    return lax.optimization_barrier(jnp.concatenate(cols, -1))
+
+
+def gather(p: Projected, gauss) -> PairGaussians:
+    """Every pair's Gaussian fields, through one packed `gaussian_table` row per pair."""
+    rows = gaussian_table(p)[gauss]
     return PairGaussians(mean2d=rows[:, 0:2], conic=rows[:, 2:5], opacity=rows[:, 5],
                          rgb=rows[:, 6:9], depth=rows[:, 9], tau=rows[:, 10],
                          tau_pad=rows[:, 11], det_lo=rows[:, 12], unbounded=rows[:, 13] > 0.5)
+
+
+def columns(pg: PairGaussians) -> list:
+    """The `gaussian_table` columns of `pg` (what `record_columns` takes)."""
+    return [pg.mean2d[:, 0], pg.mean2d[:, 1], pg.conic[:, 0], pg.conic[:, 1], pg.conic[:, 2],
+            pg.opacity, pg.rgb[:, 0], pg.rgb[:, 1], pg.rgb[:, 2], pg.depth, pg.tau, pg.tau_pad,
+            pg.det_lo, pg.unbounded.astype(pg.mean2d.dtype)]
 
 
 def _pair_origins(bins: TileBins, tiles_x: int, config: RasterConfig, dtype):
@@ -66,32 +80,55 @@ def _pair_origins(bins: TileBins, tiles_x: int, config: RasterConfig, dtype):
     return tile_origin(t % tiles_x, t // tiles_x, config, dtype)
 
 
-def strip_masks(pg: PairGaussians, bins: TileBins, tiles_x: int, config: RasterConfig):
-    """Strip masks of every pair (FULL_MASK for Gaussians the binning could not bound; 0 for
-    padding pairs)."""
-    dt = pg.mean2d.dtype
+def strip_mask_columns(cols, tx, ty, config: RasterConfig):
+    """Strip masks (int32) of Gaussians `cols` (`gaussian_table` columns) in tiles (tx, ty),
+    FULL_MASK for those the binning could not bound. Written on columns, so that the XLA path
+    (`strip_masks`) and the Mosaic GPU forward's in-kernel staging (lane vectors, a scalar tile)
+    compute the same bits."""
+    mx, my, a, b, c, o, _, _, _, _, tau_min, tau, det_lo, unbounded = cols
+    dt = mx.dtype
     u = jnp.finfo(dt).eps / 2
-    t = bins.tile
-    tx, ty = t % tiles_x, t // tiles_x
-    tau = pg.tau_pad
     if config.hoist:
-        origin = tile_origin(tx, ty, config, dt)
-        corner = jnp.stack([tx * TILE, ty * TILE], -1).astype(dt)
-        reach = jnp.maximum(jnp.abs(corner + 0.5 - origin), jnp.abs(corner + TILE - 0.5 - origin))
-        err = hoist.error_bound(pg.mean2d, pg.conic, jnp.log(pg.opacity), origin, reach[:, 0],
-                                reach[:, 1], 16 * u)
-        tau = jnp.maximum(tau, pg.tau * (1 + 4 * u) + 128 * u + 2 * err)
-    mask = strip_mask(pg.mean2d, pg.conic, tau, pg.det_lo, tx, ty)
-    mask = jnp.where(pg.unbounded, FULL_MASK, mask)
+        ox, oy = tile_origin_axis(tx, config, dt), tile_origin_axis(ty, config, dt)
+        cx, cy = (tx * TILE).astype(dt), (ty * TILE).astype(dt)
+        reach_x = jnp.maximum(jnp.abs(cx + 0.5 - ox), jnp.abs(cx + TILE - 0.5 - ox))
+        reach_y = jnp.maximum(jnp.abs(cy + 0.5 - oy), jnp.abs(cy + TILE - 0.5 - oy))
+        err = hoist.error_bound_terms(a, b, c, mx - ox, my - oy, jnp.log(o), reach_x, reach_y,
+                                      16 * u)
+        tau = jnp.maximum(tau, tau_min * (1 + 4 * u) + 128 * u + 2 * err)
+    mask = strip_mask(mx, my, a, b, c, tau, det_lo, tx, ty)
+    return jnp.where(unbounded > 0.5, FULL_MASK, mask)
+
+
+def strip_masks(pg: PairGaussians, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """Strip masks of every pair (`strip_mask_columns`; 0 for padding pairs)."""
+    t = bins.tile
+    mask = strip_mask_columns(columns(pg), t % tiles_x, t // tiles_x, config)
     return jnp.where(t < bins.tile_start.shape[0], mask, 0)
+
+
+def record_columns(cols, tx, ty, config: RasterConfig, mask=None):
+    """The 12 columns of the Local-GS kernels' pair record of Gaussians `cols` in tiles (tx, ty)
+    (lgs_jax.backends.kernel_steps): hoisted, V (Eq. 8) relative to the tile's origin and ln o;
+    the difference form, μ, the conic, o and 0; then rgb, z and the strip mask as a float
+    (`mask`: int32, None for 0). On columns, as `strip_mask_columns`."""
+    mx, my, a, b, c, o, red, green, blue, z = cols[:10]
+    if config.hoist:
+        dt = mx.dtype
+        ox, oy = tile_origin_axis(tx, config, dt), tile_origin_axis(ty, config, dt)
+        log_o = jnp.log(o)
+        head = list(hoist.hoist_terms(a, b, c, mx - ox, my - oy, log_o)) + [log_o]
+    else:
+        head = [mx, my, a, b, c, o, jnp.zeros_like(o)]
+    bits = jnp.zeros_like(z) if mask is None else mask.astype(z.dtype)
+    return head + [red, green, blue, z, bits]
 
 
 def hoisted_vectors(pg: PairGaussians, bins: TileBins, tiles_x: int, config: RasterConfig):
     """What each pair stages (capacity, 7): the hoisted V (Eq. 8) relative to its tile's origin,
-    then ln o (the clamp of ln α)."""
-    origin = _pair_origins(bins, tiles_x, config, pg.mean2d.dtype)
-    log_o = jnp.log(pg.opacity)
-    return jnp.concatenate([hoist.hoist(pg.mean2d, pg.conic, log_o, origin), log_o[:, None]], -1)
+    then ln o (the clamp of ln α): `record_columns`' first seven."""
+    t = bins.tile
+    return jnp.stack(record_columns(columns(pg), t % tiles_x, t // tiles_x, config)[:7], -1)
 
 
 def chain_hoisted_rows(pg: PairGaussians, bins: TileBins, rows, tiles_x: int,

@@ -70,7 +70,7 @@ class RenderStats:
       pairs_required: tile–Gaussian pairs the scene needs (saturates at 2^31 − 1).
       strip_pairs: strip–Gaussian pairs processed (`tiles` and `pallas` backends; 8·pairs
         without warp culling, so strip_pairs / (8·pairs) is the share of work the strip masks
-        keep).
+        keep; −1 where not counted: `KernelConfig.mosaic_pair_source` "gaussians").
       capacity: size of the pair buffer used.
       overflow: pairs_required > capacity (the image lacks the farthest pairs).
       backend: name of the backend that rendered (static).

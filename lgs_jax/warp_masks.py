@@ -27,14 +27,15 @@ from .layout import STRIPS, TILE
 FULL_MASK = (1 << STRIPS) - 1
 
 
-def tight_box(conic, tau, det, x0, x1):
-    """(ỹ_min, ỹ_max, empty) of the ellipse q <= τ over the column x̃ ∈ [x̃0, x̃1] (Eq. 14–19).
+def tight_box(a, b, c, tau, det, x0, x1):
+    """(ỹ_min, ỹ_max, empty) of the ellipse q <= τ, conic (a, b, c), over the column
+    x̃ ∈ [x̃0, x̃1] (Eq. 14–19).
 
-    All arguments broadcast; `det` must be a positive lower bound of ac − b². The result is padded
+    All arguments broadcast (columns, not stacked arrays: the Mosaic GPU forward evaluates this
+    on lane vectors); `det` must be a positive lower bound of ac − b². The result is padded
     outward for the rounding of this computation, in the arrays' dtype.
     """
-    u = jnp.finfo(conic.dtype).eps / 2
-    a, b, c = conic[..., 0], conic[..., 1], conic[..., 2]
+    u = jnp.finfo(a.dtype).eps / 2
     rx = jnp.sqrt(tau * c / det) * (1 + 8 * u)
     d_y = jnp.sqrt(tau * a / det) * (1 + 8 * u)  # Eq. 16
     x0c, x1c = jnp.maximum(x0, -rx), jnp.minimum(x1, rx)
@@ -55,21 +56,34 @@ def tight_box(conic, tau, det, x0, x1):
     return jnp.maximum(y_min, -d_y), jnp.minimum(y_max, d_y), empty
 
 
-def strip_mask(mean2d, conic, tau, det, tile_x, tile_y):
-    """8-bit strip masks (Eq. 20–21) for Gaussians in tiles (tile_x, tile_y) (int32, broadcast)."""
-    dt = conic.dtype
+def _floor(x):
+    """floor(x) as int32 for |x| < 2^31, by truncation and one comparison (Mosaic GPU lowers
+    neither floor nor ceil); exactly jnp.floor(x).astype(int32)."""
+    i = x.astype(jnp.int32)
+    return i - jnp.where(x < i.astype(x.dtype), 1, 0)
+
+
+def _ceil(x):
+    """ceil(x) as int32 for |x| < 2^31, as `_floor`."""
+    i = x.astype(jnp.int32)
+    return i + jnp.where(x > i.astype(x.dtype), 1, 0)
+
+
+def strip_mask(mx, my, a, b, c, tau, det, tile_x, tile_y):
+    """8-bit strip masks (Eq. 20–21) for Gaussians centred at (mx, my) with conic (a, b, c) in
+    tiles (tile_x, tile_y) (int32; all arguments broadcast)."""
+    dt = a.dtype
     u = jnp.finfo(dt).eps / 2
-    mx, my = mean2d[..., 0], mean2d[..., 1]
     left = (tile_x * TILE).astype(dt) + 0.5  # pixel-centre columns of the tile
     right = left + (TILE - 1)
     slack_x = 4 * u * (jnp.abs(left) + TILE + jnp.abs(mx))
-    y_min, y_max, empty = tight_box(conic, tau, det, left - mx - slack_x, right - mx + slack_x)
+    y_min, y_max, empty = tight_box(a, b, c, tau, det, left - mx - slack_x, right - mx + slack_x)
     top = (tile_y * TILE).astype(dt)
     slack_y = 8 * u * (jnp.abs(my) + jnp.maximum(jnp.abs(y_min), jnp.abs(y_max)) + 1.0)
     lo = jnp.clip(my + y_min - 0.5 - slack_y - top, -1.0, TILE)  # tile-local rows
     hi = jnp.clip(my + y_max - 0.5 + slack_y - top, -1.0, TILE)
-    r0 = jnp.maximum(jnp.ceil(lo), 0).astype(jnp.int32)
-    r1 = jnp.minimum(jnp.floor(hi), TILE - 1).astype(jnp.int32)
+    r0 = jnp.maximum(_ceil(lo), 0)
+    r1 = jnp.minimum(_floor(hi), TILE - 1)
     w0, w1 = r0 >> 1, r1 >> 1
     mask = ((1 << (w1 - w0 + 1)) - 1) << w0  # Eq. 21
     return jnp.where(empty | (r0 > r1), 0, mask).astype(jnp.int32)

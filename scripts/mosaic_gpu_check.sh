@@ -5,7 +5,7 @@
 # carry/wheels); logs and CSV to $OUT.
 set -uo pipefail
 . "$(dirname "$0")/gpu_env.sh"
-timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 tests/backends/test_pallas.py \
+timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 tests/backends/test_pallas.py tests/backends/test_mosaic_staging.py \
   -m 'slow or not slow' -k "mosaic or fast or kernel_equals" 2>&1 | tee "$out/mosaic_gpu_tests.log" | tail -4
 echo "tests exit: ${PIPESTATUS[0]}"
 d=carry/data

@@ -29,7 +29,7 @@ def test_tight_box_cases(case, column):
     x0, x1 = column
     assert {"A": peak < x0, "B": peak > x1, "C": x0 <= peak <= x1}[case]
     lo, hi, empty = (np.asarray(v) for v in
-                     tight_box(conic, tau, a * c - b * b, x0, x1))
+                     tight_box(a, b, c, tau, a * c - b * b, x0, x1))
     want_lo, want_hi = _dense_y_range(conic, tau, x0, x1)
     assert not empty
     assert lo <= want_lo and hi >= want_hi  # conservative
@@ -41,4 +41,4 @@ def test_tight_box_cases(case, column):
 def test_tight_box_misses_a_column_outside_the_ellipse():
     conic = np.array([0.05, 0.0, 0.05])
     tau = 2.0  # x-extent ±√40 ≈ 6.3
-    assert bool(tight_box(conic, tau, 0.0025, 7.0, 20.0)[2])
+    assert bool(tight_box(*np.float32(conic), tau, 0.0025, 7.0, 20.0)[2])

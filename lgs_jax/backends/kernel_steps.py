@@ -45,17 +45,12 @@ def gaussian_rows(p: Projected):
 def pair_records(pg: pairs.PairGaussians, bins: TileBins, tiles_x: int, config: RasterConfig,
                  masks=None):
     """(capacity, REC) pair records of the Local-GS kernel (module docstring), in pair order,
-    from the pairs' Gaussian fields (`pairs.gather`): the hoisted vector is built once per
-    (tile, Gaussian) pair, as the paper stages it per tile, not once per strip. `masks`: the
-    pairs' strip masks (0 in the last column if None)."""
-    if config.hoist:
-        head = pairs.hoisted_vectors(pg, bins, tiles_x, config)  # (capacity, 7): V, ln o
-    else:
-        head = jnp.concatenate([pg.mean2d, pg.conic, pg.opacity[:, None],
-                                jnp.zeros_like(pg.opacity[:, None])], -1)
-    bits = jnp.zeros_like(pg.depth) if masks is None else masks.astype(pg.depth.dtype)
-    tail = jnp.concatenate([pg.rgb, pg.depth[:, None], bits[:, None]], -1)
-    return jnp.concatenate([head, tail], -1)
+    from the pairs' Gaussian fields (`pairs.gather`; `pairs.record_columns`): the hoisted vector
+    is built once per (tile, Gaussian) pair, as the paper stages it per tile, not once per strip.
+    `masks`: the pairs' strip masks (0 in the last column if None)."""
+    t = bins.tile
+    return jnp.stack(pairs.record_columns(pairs.columns(pg), t % tiles_x, t // tiles_x, config,
+                                          masks), -1)
 
 
 def lane_coordinates(tile, k, tiles_x: int, config: RasterConfig, dt):

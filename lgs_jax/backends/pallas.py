@@ -89,10 +89,17 @@ class Plan:
     def for_gradients(self) -> Plan:
         """The plan of the forward whose residuals the backward kernel uses (and of that
         backward): with kernel="auto", the forward of the backward's implementation, and the
-        backend's own kernel where a forward-only render would be `routed`."""
-        if self.config.kernel != "auto":
-            return self
-        return dataclasses.replace(self, forward=self.backward,
+        backend's own kernel where a forward-only render would be `routed`; and with a Triton
+        backward, records built in XLA (`tuning.mosaic_pair_source` "records"), which it
+        reads."""
+        config = self.config
+        if config.tuning.mosaic_pair_source != "records" and self.backward != "mosaic":
+            # A Triton backward reads records: the forward reads the same ones.
+            tuning = dataclasses.replace(config.tuning, mosaic_pair_source="records")
+            config = dataclasses.replace(config, tuning=tuning)
+        if config.kernel != "auto":
+            return dataclasses.replace(self, config=config)
+        return dataclasses.replace(self, config=config, forward=self.backward,
                                    vanilla=self.vanilla and not self.routed, routed=False)
 
 
@@ -154,24 +161,43 @@ def _vanilla_model(config: RasterConfig) -> RasterConfig:
     return dataclasses.replace(config, hoist=False, warp_cull=False)
 
 
-def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
-    """(kernel data, strip–Gaussian pairs, (masks, records) for the backward)."""
-    config = plan_.config
-    valid_pair = bins.tile < bins.tile_start.shape[0]
+def _records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """(strip masks or None, pair records, strip–Gaussian pairs) of the Local-GS kernels, built
+    in XLA (`pairs`, `kernel_steps.pair_records`)."""
     pg = pairs.gather(p, bins.gauss)
+    if not config.warp_cull:
+        valid_pair = bins.tile < bins.tile_start.shape[0]
+        strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
+        return None, kernel_steps.pair_records(pg, bins, tiles_x, config), strip_pairs
+    masks = pairs.strip_masks(pg, bins, tiles_x, config)
+    strip_pairs = jnp.sum(lax.population_count(masks), dtype=jnp.int32)
+    return masks, kernel_steps.pair_records(pg, bins, tiles_x, config, masks), strip_pairs
+
+
+def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
+    """(forward kernel data, strip–Gaussian pairs, what the backward kernel reads).
+
+    With `tuning.mosaic_pair_source` "gaussians" the Mosaic GPU kernels build their records
+    themselves from the pairs' Gaussian ids and `pairs.gaussian_table`
+    (lgs_jax.backends.mosaic_staging): the Local-GS forward gets (ids, table) and reports the
+    strip pairs as not counted (−1), and a Mosaic GPU backward reads (ids, table) too, so no
+    per-pair record is built in XLA. Otherwise (masks, records) from `_records` (the vanilla
+    forward reads Gaussian rows by id; its backward, records of `_vanilla_model`)."""
+    config = plan_.config
+    model = _vanilla_model(config) if plan_.vanilla else config
+    gaussians = config.tuning.mosaic_pair_source == "gaussians"
+    staged = (bins.gauss, pairs.gaussian_table(p)) if gaussians else None
+    forward_staged = gaussians and not plan_.vanilla and plan_.forward == "mosaic"
+    backward_staged = gaussians and plan_.backward == "mosaic"
+    if forward_staged and backward_staged:
+        return staged, jnp.int32(-1), staged
+    masks, records, strip_pairs = _records(p, bins, tiles_x, model)
+    saved = staged if backward_staged else (masks, records)
+    if forward_staged:
+        return staged, jnp.int32(-1), saved
     if plan_.vanilla:
-        strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
-        records = kernel_steps.pair_records(pg, bins, tiles_x, _vanilla_model(config))
-        return (bins.gauss, kernel_steps.gaussian_rows(p)), strip_pairs, (None, records)
-    if config.warp_cull:
-        masks = pairs.strip_masks(pg, bins, tiles_x, config)
-        strip_pairs = jnp.sum(lax.population_count(masks), dtype=jnp.int32)
-    else:
-        masks = jnp.zeros((1,), jnp.int32)
-        strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
-    records = kernel_steps.pair_records(pg, bins, tiles_x, config,
-                                        masks if config.warp_cull else None)
-    return (masks, records), strip_pairs, (masks if config.warp_cull else None, records)
+        return (bins.gauss, kernel_steps.gaussian_rows(p)), strip_pairs, saved
+    return (jnp.zeros((1,), jnp.int32) if masks is None else masks, records), strip_pairs, saved
 
 
 def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan):

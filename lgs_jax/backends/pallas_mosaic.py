@@ -61,7 +61,7 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from ..config import RasterConfig
 from ..layout import STRIP_PIXELS, TILE_PIXELS
 from . import kernel_steps as ks
-from . import mosaic_rows
+from . import mosaic_rows, mosaic_staging
 
 
 def _ranges(bins):
@@ -103,9 +103,12 @@ def staged(config: RasterConfig, dt) -> bool:
 
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
-                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int):
+                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
+                   interpret: bool):
     """The Local-GS forward for one warpgroup; `refs` = the six outputs, then, when `staged`,
-    the shared-memory record buffers and their barriers."""
+    the shared-memory record buffers and their barriers. With `tuning.mosaic_pair_source`
+    "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids, `pairs.gaussian_table`) and
+    the scratch is lgs_jax.backends.mosaic_staging's."""
     out_refs, scratch = refs[:6], refs[6:]
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
@@ -121,7 +124,11 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
             hit = hit & ((mask_word & bit) != 0)
         return alpha, hit, rec[7:10], rec[10]
 
-    if scratch:
+    if config.tuning.mosaic_pair_source == "gaussians":
+        fetch, pair_alpha, stage = mosaic_staging.forward_source(
+            mask_ref, rec_ref, scratch[0], start, end, tile, tiles_x, evaluate, config,
+            last_pair, interpret)
+    elif scratch:
         fetch, pair_alpha, stage = _smem_records(rec_ref, *scratch, start, end, evaluate, config)
     else:
         def fetch(j):
@@ -189,15 +196,19 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
 
 def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, tiles_x: int,
             order, bins, data, dt):
-    """Run the vanilla (data = (Gaussian ids, rows)) or Local-GS (data = (masks, records))
+    """Run the vanilla (data = (Gaussian ids, rows)) or Local-GS (data = (masks, records), or
+    (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians")
     forward kernel on a (n_tiles, 256 / pixels) grid of one-warpgroup blocks; outputs
     (n_tiles, 256) each: r, g, b, T, D and the stop pair."""
     n_tiles = bins.tile_start.shape[0]
-    kernel = functools.partial(vanilla_kernel if vanilla else localgs_kernel, config=config,
-                               tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
-                               pixels=pixels)
+    common = dict(config=config, tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
+                  pixels=pixels)
+    kernel = (functools.partial(vanilla_kernel, **common) if vanilla else
+              functools.partial(localgs_kernel, **common, interpret=interpret))
     scratch = ()
-    if not vanilla and staged(config, dt):
+    if not vanilla and config.tuning.mosaic_pair_source == "gaussians":
+        scratch = mosaic_staging.scratch(dt)
+    elif not vanilla and staged(config, dt):
         chunk = config.tuning.mosaic_chunk
         scratch = (plgpu.SMEM((2, chunk, ks.REC), dt), plgpu.Barrier(num_barriers=2))
     out = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), dt)
@@ -210,7 +221,8 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
 
 def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_ref, stop_ref,
                     g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch,
-                    config: RasterConfig, tiles_x: int, pixels: int, reduction: str):
+                    config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
+                    last_pair: int, interpret: bool):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, s] =
     (pair j's gradient summed over this block's pixels, its tile) at the pair's emission slot
     s = slot_ref[j] (backends.gaussian_grads reads them there), for the pairs before the
@@ -219,7 +231,10 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the shared-memory record buffers
     and their barriers (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`;
     the loop carries which exchange buffer is next). Each pair's strip mask and slot are loaded
-    one pair ahead (the skip branch waits on them)."""
+    one pair ahead (the skip branch waits on them). With `tuning.mosaic_pair_source`
+    "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids, `pairs.gaussian_table`),
+    the records and masks are built per chunk in shared memory (`mosaic_staging`, its buffers
+    first in `scratch`) and a pair's mask is read there once its chunk is built."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -234,18 +249,13 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     n = len(scratch) - len(mosaic_rows.scratch(reduction, dt))  # the records' scratch first
     store_row, zero_row = mosaic_rows.writers(reduction, rows_ref, wg, tile, pixels,
                                               *scratch[n:])
-    if n:
-        record, begin = _smem_records_backward(rec_ref, *scratch[:n], start, last,
-                                               config.tuning.mosaic_chunk)
-    else:
-        def record(j):
-            return [rec_ref[j, c] for c in range(ks.REC - 1)]
-
-        begin = None
+    record, mask_of, begin = _backward_records(rec_ref, mask_ref, scratch[:n], tile, tiles_x,
+                                               start, last, config, last_pair, interpret)
 
     def ahead(j):  # pair j's (strip mask, emission slot)
         jj = jnp.maximum(j, 0)
-        return mask_ref[jj] if config.warp_cull else jnp.int32(0), slot_ref[jj]
+        ahead_mask = config.warp_cull and mask_of is None
+        return mask_ref[jj] if ahead_mask else jnp.int32(0), slot_ref[jj]
 
     def skip(j, mask_word, s, carry, parity):  # a zero row, the carry unchanged
         del j, mask_word
@@ -262,6 +272,8 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
         j = last - 1 - i
         if begin is not None:
             begin(i, j)
+        if config.warp_cull and mask_of is not None:
+            mask_word = mask_of(j)
         following = ahead(j - 1)
         if config.warp_cull:  # a pair none of this block's strips takes: zero row, same carry
             carry, parity = lax.cond((mask_word & mine) != 0, step, skip, j, mask_word, s, carry,
@@ -279,6 +291,22 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
         return c
 
     lax.fori_loop(0, end - last, after, jnp.int32(0))
+
+
+def _backward_records(rec_ref, mask_ref, scratch, tile, tiles_x: int, start, last,
+                      config: RasterConfig, last_pair: int, interpret: bool):
+    """The backward walk's (record(j), mask(j) or None, begin(i, j) or None): records built in
+    the kernel from Gaussians (`mosaic_staging.backward_source`; mask_ref holds the pairs'
+    Gaussian ids and rec_ref the table), staged by TMA (`_smem_records_backward`, when
+    `scratch` holds its buffers) or read from global memory."""
+    if config.tuning.mosaic_pair_source == "gaussians":
+        return mosaic_staging.backward_source(mask_ref, rec_ref, scratch[0], tile, tiles_x,
+                                              config, last_pair, interpret)
+    if scratch:
+        record, begin = _smem_records_backward(rec_ref, *scratch, start, last,
+                                               config.tuning.mosaic_chunk)
+        return record, None, begin
+    return (lambda j: [rec_ref[j, c] for c in range(ks.REC - 1)]), None, None
 
 
 def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
@@ -321,16 +349,20 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each real pair
     (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
     padding slots are left unwritten (no Gaussian's slots reach them). `lane_rows` = the
-    per-tile final T, stop pairs and cotangents (r, g, b, T, D). `reduction`:
+    per-tile final T, stop pairs and cotangents (r, g, b, T, D). (masks, records): the pairs'
+    (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians".
+    `reduction`:
     `mosaic_rows.resolve`'s (by default "transposed" on the GPU, "terms" in interpret mode)."""
     reduction = mosaic_rows.resolve(reduction, interpret)
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
-                               reduction=reduction)
+                               reduction=reduction, last_pair=capacity - 1, interpret=interpret)
     out = jax.ShapeDtypeStruct((n, capacity, ks.ROW_WIDTH), dt)
     scratch = ()
-    if staged(config, dt):
+    if config.tuning.mosaic_pair_source == "gaussians":
+        scratch = mosaic_staging.scratch(dt)
+    elif staged(config, dt):
         scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
                    plgpu.Barrier(num_barriers=2))
     scratch += mosaic_rows.scratch(reduction, dt)

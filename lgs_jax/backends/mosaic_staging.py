@@ -1,0 +1,151 @@
+"""The Local-GS Mosaic GPU forward's pair records built inside the kernel (the paper's staging,
+Sec. III-B: V hoisted per tile into shared memory from per-Gaussian data), instead of read from
+records XLA wrote for every pair (`tuning.mosaic_pair_source = "gaussians"`).
+
+Per chunk of LANES = 128 pairs of a tile's list, lane t of the block's warpgroup
+  1. loads pair (base + t)'s Gaussian id and that Gaussian's `pairs.gaussian_table` row
+     (`gather`: inline Mosaic GPU code, one load per thread at its own address, which Pallas
+     cannot express; in interpret mode, which cannot run inline code, array gathers give the
+     same lane vectors),
+  2. computes the pair record on the lane vectors, the strip mask included, with the functions
+     the XLA path uses (`pairs.record_columns`, `pairs.strip_mask_columns`; the tile is the
+     block's, a scalar), and
+  3. stores it to shared memory, column by column, in one of two buffers (chunk c in c % 2),
+     followed by one warpgroup barrier,
+and the pair loop reads the records there as scalars, as it reads TMA-staged records. Two
+buffers and one barrier per chunk suffice: a buffer is written again two chunks later, after
+every thread passed the barrier of the chunk in between, which follows its reads.
+
+No per-pair buffer in global memory and no per-pair XLA pass (the records, and the Gaussian rows
+gathered per pair to build them, are 48 + 56 bytes per pair: 1.2 + 1.4 GB at 10M Gaussians at
+4K). Records past the list's end (the last chunk's tail) are computed from clamped ids and never
+read. Same arithmetic as the XLA records (the same functions); bit for bit in interpret mode.
+Float32 and float64 (no TMA involved).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from jax.experimental import pallas as pl
+from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
+from jax.experimental.mosaic.gpu import utils as mgpu_utils
+from jax.experimental.pallas import mosaic_gpu as plgpu
+from jaxlib.mlir import ir
+from jaxlib.mlir.dialects import arith, memref, vector
+
+from .. import pairs
+from ..config import RasterConfig
+from . import kernel_steps as ks
+
+LANES = 128  # pairs per staged chunk: one per thread of the warpgroup
+_STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
+
+
+def scratch(dt) -> tuple:
+    """Shared memory: the two record buffers (2, REC, LANES)."""
+    return (plgpu.SMEM((2, ks.REC, LANES), dt),)
+
+
+def gather(gauss_ref, table_ref, base, last_pair: int, interpret: bool):
+    """`pairs.TABLE_COLUMNS` (LANES,) lane vectors: lane t holds column c of the table row of
+    Gaussian gauss_ref[min(base + t, last_pair)]. On the GPU inline Mosaic GPU code (two
+    dependent loads per thread: the id, then the row); in interpret mode, which runs neither
+    inline code nor per-lane loads from refs, whole-ref loads and array gathers (the same
+    values)."""
+    columns = pairs.TABLE_COLUMNS
+    if interpret:
+        pair = jnp.minimum(base + jnp.arange(LANES, dtype=jnp.int32), last_pair)
+        rows = table_ref[...][gauss_ref[...][pair]]
+        return [rows[:, c] for c in range(columns)]
+    dt = table_ref.dtype
+
+    @plgpu.inline_mgpu(
+        arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(())),
+        return_type=tuple(plgpu.ShapeDtypeStruct((LANES,), dt, layout=_STRIDED)
+                          for _ in range(columns)))
+    def load(_, ids, table, first):
+        index, i32 = ir.IndexType.get(), ir.IntegerType.get_signless(32)
+        tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
+        pair = arith.minsi(arith.addi(first.registers.item(), tid),
+                           mgpu_utils.c(last_pair, i32))
+        row = arith.index_cast(index, memref.load(ids, [arith.index_cast(index, pair)]))
+        out = []
+        for c in range(columns):
+            x = memref.load(table, [row, arith.constant(index, c)])
+            out.append(mgpu_fa.FragmentedArray(
+                _registers=np.array([vector.broadcast(ir.VectorType.get((1,), x.type), x)],
+                                    dtype=object),
+                _layout=mgpu_fa.WGStridedFragLayout((LANES,), 1), _is_signed=None))
+        return tuple(out)
+
+    return list(load(gauss_ref, table_ref, base))
+
+
+@plgpu.inline_mgpu()
+def _barrier(_):
+    """A warpgroup barrier (bar.sync over the block's 128 threads)."""
+    mgpu_utils.warpgroup_barrier()
+
+
+def stage(buffer, gauss_ref, table_ref, base, tile, tiles_x: int, config: RasterConfig,
+          last_pair: int, interpret: bool):
+    """Build the records of pairs [base, base + LANES) (`tile`'s, where the caller reads them)
+    into `buffer` (REC, LANES) of shared memory, then a warpgroup barrier (module docstring)."""
+    tx, ty = tile % tiles_x, tile // tiles_x
+    cols = gather(gauss_ref, table_ref, base, last_pair, interpret)
+    mask = pairs.strip_mask_columns(cols, tx, ty, config) if config.warp_cull else None
+    for c, v in enumerate(pairs.record_columns(cols, tx, ty, config, mask)):
+        buffer[c, :] = v
+    if not interpret:
+        _barrier()
+
+
+def forward_source(gauss_ref, table_ref, smem, start, end, tile, tiles_x: int, evaluate,
+                   config: RasterConfig, last_pair: int, interpret: bool):
+    """`kernel_steps.staged_loop`'s (fetch, pair_alpha, stage) for the pairs [start, end) of
+    `tile`, walked forward: chunk c = pairs [start + c·LANES, start + (c + 1)·LANES) built into
+    smem[c % 2] at its first group (LANES is a multiple of the loop's group);
+    `evaluate(rec, mask_word)` as the other sources of the Local-GS kernel."""
+    del end
+
+    def begin(j):
+        i = j - start
+
+        @pl.when(i % LANES == 0)
+        def _():
+            stage(smem.at[(i // LANES) % 2], gauss_ref, table_ref, j, tile, tiles_x, config,
+                  last_pair, interpret)
+
+    def pair_alpha(j):
+        i = j - start
+        buffer = smem.at[(i // LANES) % 2]
+        rec = [buffer[c, i % LANES] for c in range(ks.REC)]
+        return evaluate(rec, rec[ks.REC - 1].astype(jnp.int32))
+
+    return (lambda j: j), pair_alpha, (begin, lambda j: None)
+
+
+def backward_source(gauss_ref, table_ref, smem, tile, tiles_x: int, config: RasterConfig,
+                    last_pair: int, interpret: bool):
+    """(record(j), mask(j), begin(i, j)) of the backward walk (step i at pair j, downward):
+    chunks aligned to multiples of LANES (chunk q = pairs [q·LANES, (q + 1)·LANES)) built into
+    smem[q % 2] at the walk's first pair and wherever it enters a chunk; record(j) the REC
+    values of pair j, mask(j) its strip mask (int32)."""
+    def begin(i, j):
+        q = j // LANES
+
+        @pl.when((i == 0) | (j % LANES == LANES - 1))
+        def _():
+            stage(smem.at[q % 2], gauss_ref, table_ref, q * LANES, tile, tiles_x, config,
+                  last_pair, interpret)
+
+    def record(j):
+        buffer = smem.at[(j // LANES) % 2]
+        return [buffer[c, j % LANES] for c in range(ks.REC)]
+
+    def mask(j):
+        return smem[(j // LANES) % 2, ks.REC - 1, j % LANES].astype(jnp.int32)
+
+    return record, mask, begin

@@ -1,0 +1,143 @@
+"""lgs_jax.backends.mosaic_staging: the Local-GS Mosaic GPU forward building its pair records in
+the kernel from per-Gaussian rows (`KernelConfig.mosaic_pair_source="gaussians"`) against the
+records XLA builds ("records"). In interpret mode the images are bit for bit the same (the
+same functions compute the records); on the GPU the kernel's arithmetic is Mosaic GPU's, so
+within the float32 tolerance of the other kernel comparisons. The scenes are dense enough that
+tile lists cross the 128-pair chunks (asserted), with faint and huge Gaussians so that pixels
+do not stop before the second chunk."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import lgs_jax
+from lgs_jax import binning
+from lgs_jax.backends import mosaic_staging, pallas
+from lgs_jax.projection import project
+from tests import scenes
+from tests.compare import F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_render_close
+
+C = lgs_jax.RasterConfig
+K = lgs_jax.KernelConfig
+ON_GPU = jax.default_backend() == "gpu"
+DENSE = ("huge_far", "faint", "needle", "normal", "tiny", "invalid", "behind")
+N_DENSE = 400
+CAPACITY = 4096
+CONFIGS = {"local_gs": C(), "difference": C(hoist=False), "no_cull": C(warp_cull=False),
+           "center": C(origin="center"), "global": C(local_coords=False), "gsplat": C("gsplat")}
+
+
+def _render(g, cam, config, source, pixels):
+    config = dataclasses.replace(config, kernel="mosaic", tuning=K(
+        mosaic_pair_source=source, mosaic_forward_pixels=pixels))
+    return lgs_jax.render(g, cam, background=np.asarray(scenes.BACKGROUND, g.means.dtype),
+                          backend="pallas", config=config, capacity=CAPACITY)
+
+
+@pytest.mark.parametrize("name,dtype,pixels", [
+    ("local_gs", np.float32, 256),
+    pytest.param("difference", np.float32, 128, marks=pytest.mark.slow),
+    pytest.param("global", np.float64, 256, marks=pytest.mark.slow)] + [
+    pytest.param(name, np.float32, 256, marks=pytest.mark.skipif(
+        not ON_GPU, reason="CI time: the switches' records are the XLA path's functions"))
+    for name in ("no_cull", "center", "gsplat")])
+@settings(max_examples=1)  # interpret mode: one block at a time, about 20 s per render
+@given(seed=st.integers(0, 2**32 - 1))
+def test_records_built_in_the_kernel_equal_the_xla_records(name, dtype, pixels, seed):
+    g = scenes.cast(scenes.scene(seed, kinds=DENSE, n=N_DENSE), dtype)
+    cam = scenes.camera(dtype=dtype)
+    bins = binning.bin_gaussians(project(g, cam), scenes.W, scenes.H, CAPACITY)
+    assert not bins.overflow
+    assert int(np.max(bins.tile_end - bins.tile_start)) > mosaic_staging.LANES
+    want = _render(g, cam, CONFIGS[name], "records", pixels)
+    got = _render(g, cam, CONFIGS[name], "gaussians", pixels)
+    assert got.stats.kernel == "localgs-mosaic"
+    assert int(got.stats.strip_pairs) == -1  # not counted
+    for field in ("image", "alpha", "depth"):
+        a, b = getattr(got, field), getattr(want, field)
+        if not ON_GPU:
+            np.testing.assert_array_equal(a, b, err_msg=field)
+        elif dtype == np.float64:
+            np.testing.assert_allclose(a, b, rtol=0, atol=F64_ATOL, err_msg=field)
+        else:  # the records' arithmetic compiled by Mosaic GPU, not XLA: ulps apart
+            assert_render_close(a, b, atol=F32_ATOL, max_flip_share=F32_FLIP_SHARE,
+                                flip_atol=2.0, what=field)
+
+
+@pytest.mark.parametrize("name,n,pixels", [
+    ("local_gs", scenes.N, 128),
+    pytest.param("difference", N_DENSE, 256, marks=pytest.mark.slow)])
+@settings(max_examples=1)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_gradients_with_records_built_in_the_kernels_equal_the_xla_records(name, n, pixels,
+                                                                           seed):
+    """Forward and backward kernels both building their records from Gaussians give the
+    gradients of XLA's records: bit for bit in interpret mode (on the GPU within the float32
+    gradient tolerance: the Mosaic GPU arithmetic of the records). The dense scene's walks
+    enter chunks part-way and cross chunk boundaries downward."""
+    dtype = np.float32
+    g = scenes.cast(scenes.scene(seed, kinds=DENSE if n == N_DENSE else scenes.KINDS, n=n),
+                    dtype)
+    cam = scenes.camera(dtype=dtype)
+    w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
+    grads = {}
+    for source in ("records", "gaussians"):
+        config = dataclasses.replace(CONFIGS[name], kernel="mosaic", tuning=K(
+            mosaic_pair_source=source, mosaic_forward_pixels=pixels,
+            mosaic_backward_pixels=pixels))
+        loss = lambda g, config=config: jax.numpy.sum(lgs_jax.render(
+            g, cam, background=np.asarray(scenes.BACKGROUND, dtype), backend="pallas",
+            config=config, capacity=CAPACITY).image * w.astype(dtype))
+        grads[source] = jax.tree.leaves(jax.grad(loss)(g))
+    for got, want in zip(grads["gaussians"], grads["records"]):
+        if ON_GPU:
+            np.testing.assert_allclose(got, want, rtol=2e-3, atol=2e-3 * np.abs(want).max())
+        else:
+            np.testing.assert_array_equal(got, want)
+
+
+def test_plans_under_differentiation():
+    """A Mosaic GPU backward builds its records from Gaussians too, so the forward under
+    differentiation keeps the setting; a Triton backward reads XLA's records, and so does the
+    forward before it (`Plan.for_gradients`)."""
+    mosaic = C(kernel="mosaic", tuning=K(mosaic_pair_source="gaussians"))
+    assert pallas.plan(mosaic, False, 6).for_gradients().config == mosaic
+    mixed = C(tuning=K(interpret=False, auto_backward="triton", mosaic_pair_source="gaussians"))
+    plan = pallas.plan(mixed, False, 6)
+    assert (plan.forward, plan.backward) == ("mosaic", "triton")
+    assert plan.for_gradients().forward == "triton"
+    assert plan.for_gradients().config.tuning.mosaic_pair_source == "records"
+
+
+@pytest.mark.parametrize("dtype", [np.float32, pytest.param(np.float64, marks=pytest.mark.slow)])
+def test_in_kernel_staging_lowers_for_the_gpu(dtype, monkeypatch):
+    """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
+    lane-vector strip masks without floor or ceil, shared-memory stores, the barrier), float32
+    and float64. Not what
+    the GPU compiler's LLVM translation may still reject: the tests above run the kernels on a
+    GPU."""
+    from jax._src.pallas.triton import gpu_info  # gaussian_grads is a Triton kernel
+
+    monkeypatch.setattr(gpu_info, "get_gpu_info",
+                        lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
+    config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_pair_source="gaussians"))
+    g = scenes.cast(scenes.scene(0), dtype)
+    image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
+                                        capacity=scenes.CAPACITY).image
+    grad = jax.value_and_grad(lambda g, c: jax.numpy.sum(image(g, c) ** 2))
+    lower = lambda f: jax.jit(f).trace(g, scenes.camera(dtype=dtype)).lower(
+        lowering_platforms=("cuda",)).as_text()
+    assert "mosaic_gpu" in lower(image)
+    assert lower(grad).count("mosaic_gpu") >= 2  # the staging forward and backward kernels
+
+
+@pytest.mark.parametrize("tuning,match", [
+    (dict(mosaic_pair_source="pairs"), "tuning.mosaic_pair_source"),
+    (dict(mosaic_pair_source="gaussians", mosaic_unroll_localgs=6, mosaic_chunk=60),
+     "tuning.mosaic_unroll_localgs")])
+def test_bad_pair_source_settings_raise(tuning, match):
+    with pytest.raises(ValueError, match=match):
+        K(**tuning)
