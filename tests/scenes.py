@@ -162,10 +162,13 @@ def _kernel_forward(g, cam, config):
 def _kernel_and_walk_rows(p, bins, cam, state, stop_at, saved, cot, config):
     """The backward kernel's pair rows and the plain-jnp walk's, from the same residuals."""
     from lgs_jax.backends import pallas, tiles
+    from lgs_jax.layout import tile_grid
 
     plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
     got = pallas._gradients(p, bins, cam.width, cam.height, plan, state.trans, stop_at, saved, cot)
-    masks, records, _ = saved
+    # The walk reads XLA's masks and records (the kernel's `saved` may be the Gaussian ids and
+    # table it builds them from: KernelConfig.mosaic_pair_source).
+    masks, records, _ = pallas._records(p, bins, tile_grid(cam.width, cam.height)[0], config)
     want = tiles._gradients(p, bins, cam.width, cam.height, config, state.trans, stop_at,
                             (masks, records[:, :7] if config.hoist else None), cot)
     return got, want

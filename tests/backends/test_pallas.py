@@ -163,7 +163,8 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
     cam = scenes.camera(dtype=dtype)
     outs = {}
     for layout in ((0, 128), (chunk, pixels)):
-        config = C(kernel="mosaic", tuning=K(mosaic_chunk=layout[0], mosaic_unroll_localgs=8,
+        config = C(kernel="mosaic", tuning=K(mosaic_pair_source="records",
+                                             mosaic_chunk=layout[0], mosaic_unroll_localgs=8,
                                              mosaic_forward_pixels=layout[1]))
         outs[layout] = scenes.render(g, cam, backend, config)
         background = scenes.render(empty, cam, backend, config).image
@@ -187,7 +188,8 @@ def test_mosaic_backward_staging_is_bit_for_bit(backend, pixels, seed):
     w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
     grads = []
     for chunk in (0, 8):
-        config = C(kernel="mosaic", tuning=K(mosaic_chunk=chunk, mosaic_backward_pixels=pixels))
+        config = C(kernel="mosaic", tuning=K(mosaic_pair_source="records", mosaic_chunk=chunk,
+                                             mosaic_backward_pixels=pixels))
         loss = lambda g, config=config: jax.numpy.sum(
             scenes.render(g, cam, backend, config).image * w.astype(np.float32))
         grads.append(jax.tree.leaves(jax.grad(loss)(g)))
@@ -411,8 +413,9 @@ LOWER_SLOW = {
                          + [pytest.param(*v, id=k, marks=SLOW) for k, v in LOWER_SLOW.items()])
 def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkeypatch):
     """Every kernel variant, forward and backward, lowers through the Pallas Triton lowering
-    (to Triton IR, for an H100) or the Mosaic GPU lowering (records read from global memory,
-    or staged in shared memory by TMA: `chunk`; blocks of `pixels`), so CI catches what the GPU
+    (to Triton IR, for an H100) or the Mosaic GPU lowering (records built in XLA, read from
+    global memory or staged in shared memory by TMA: `chunk`; blocks of `pixels`; records
+    built in the kernels: tests/backends/test_mosaic_staging.py), so CI catches what the GPU
     would reject at lowering time (e.g. Mosaic GPU's missing bool-vector negation, or a float64
     TMA copy)."""
     from jax._src.pallas.triton import gpu_info
@@ -420,7 +423,8 @@ def test_kernels_lower_for_the_gpu(backend, config, chunk, pixels, dtype, monkey
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
     config = dataclasses.replace(config, tuning=K(
-        interpret=False, mosaic_chunk=chunk, mosaic_forward_pixels=pixels,
+        interpret=False, mosaic_pair_source="records", mosaic_chunk=chunk,
+        mosaic_forward_pixels=pixels,
         mosaic_backward_pixels=pixels))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend=backend, config=config,
