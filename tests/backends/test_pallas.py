@@ -74,7 +74,9 @@ def test_localgs_kernel_equals_reference_float32(name, seed):
     tiles = scenes.render(g, cam, "tiles", config)
     assert_render_close(out.image, tiles.image, atol=F32_ATOL, max_flip_share=F32_FLIP_SHARE,
                         flip_atol=2.0)
-    assert int(out.stats.strip_pairs) == int(tiles.stats.strip_pairs)
+    # The Mosaic GPU kernel ("auto" on a GPU) builds its masks itself and does not count them.
+    counted = out.stats.kernel != "localgs-mosaic"
+    assert int(out.stats.strip_pairs) == (int(tiles.stats.strip_pairs) if counted else -1)
 
 
 @pytest.mark.parametrize("convention,dtype", [
