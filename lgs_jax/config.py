@@ -41,13 +41,13 @@ class KernelConfig:
         interpreter (jitted XLA loops) is orders of magnitude faster than Mosaic GPU's
         simulation of a GPU; the two are bit for bit the same there.
       vanilla_from_pairs: a forward-only `pallas` render runs the vanilla kernel when
-        its pair buffer (`capacity`) holds at least this many pairs (kernel "auto" only): there
-        the Local-GS per-pair preparation in XLA costs more than its kernel saves (H200, pair
-        buffers sized by `pair_capacity`: vanilla 8.39 against Local-GS 9.72 ms at 24M pairs,
-        a tie at 10M, Local-GS 17% faster at 3.4M; BENCHMARKS.md §7). Images agree to float32
-        rounding (both are exact; the kernels evaluate α in different forms). Under
-        differentiation the Local-GS forward and backward still run (the routed backward has
-        not been measured). None: never.
+        its pair buffer (`capacity`) holds at least this many pairs (kernel "auto" only). Set
+        when the Local-GS records were built in XLA, which cost more there than the kernel
+        saved (H200: vanilla 8.39 against Local-GS 9.72 ms at 24M pairs); with the records
+        built in the kernels (`mosaic_pair_source`) the two tie there (7.23 against 7.11 ms,
+        memory 1072 against 1211 MiB; BENCHMARKS.md §7). Images agree to float32 rounding
+        (both are exact; the kernels evaluate α in different forms). Under differentiation the
+        Local-GS forward and backward still run. None: never.
       interpret: run the Pallas kernels in interpret mode (True), lower them for the GPU (False:
         on a machine without one only tracing and lowering work, which tests use to check that
         every kernel lowers), or decide by the platform (None: interpret unless JAX's default

@@ -3,7 +3,9 @@ lgs_jax.backends.pallas_mosaic): the record layouts, α per record, the blend st
 and the backward step. Written on lane vectors (one value per pixel a thread holds) and scalars
 loaded from refs, so both Pallas lowerings compile the same functions.
 
-Record layouts, built in XLA before the kernels run:
+Record layouts, built in XLA before the kernels run (`pair_records`), or by the Mosaic GPU
+kernels themselves from per-Gaussian rows (lgs_jax.backends.mosaic_staging; the same
+`pairs.record_columns`):
   pair record (Local-GS kernel, `pair_records`, one row per pair in pair order, no indirection):
     hoisted: V (Eq. 8, 6 values) relative to the pair's tile origin, ln o, rgb, z, strip mask;
     difference form: μx, μy, a, b, c, o, 0, rgb, z, strip mask.

@@ -10,8 +10,9 @@ masks, same hoisted arithmetic, same blending semantics, same backward walk) and
 lgs_jax.backends.reference (per-pixel semantics).
 
 `pallas` runs the Local-GS kernel (Sec. III; except a forward-only render whose pair buffer
-reaches `KernelConfig.vanilla_from_pairs`, which runs the vanilla kernel, faster there): a
-hoisted 6-vector V per (tile, Gaussian) pair (Eq. 8, `kernel_steps.pair_records`), ln α as
+reaches `KernelConfig.vanilla_from_pairs`, which runs the vanilla kernel: a tie there): a
+hoisted 6-vector V per (tile, Gaussian) pair (Eq. 8; built in the Mosaic GPU kernels,
+lgs_jax.backends.mosaic_staging, or in XLA, `kernel_steps.pair_records`), ln α as
 V·[x'², x'y', y'², x', y', 1] per pixel (Eq. 10), the strip masks as warp-uniform predicates
 or branches (Sec. III-C), exact or fast (Sec. III-D) blending. `pallas_vanilla` runs the original 3DGS rasterizer (difference form, per-pixel
 termination, a tile-wide early exit); it ignores the Local-GS switches (it is the baseline the

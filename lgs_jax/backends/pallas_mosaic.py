@@ -24,8 +24,15 @@ block's strips is still computed there. Branching around a staged group with no 
 of the block's strips measured slower than predicating (BENCHMARKS.md §6), so the kernel stages
 `tuning.mosaic_unroll_localgs` pairs per iteration and lets the lane predicates do the culling.
 
-Staging (`tuning.mosaic_chunk` > 0; float32 only: TMA has no 64-bit float type). The Local-GS
-kernel stages the tile's pair records in shared memory: chunk records per TMA copy,
+Pair records. By default (`tuning.mosaic_pair_source="gaussians"`) the Local-GS forward and
+the backward build them inside the kernel, per chunk of 128 pairs, from the pairs' Gaussian ids
+and per-Gaussian rows (lgs_jax.backends.mosaic_staging: an inline per-lane gather, the records
+and strip masks on lane vectors, shared memory), with no per-pair buffer in global memory. With
+"records" they read records XLA built (`kernel_steps.pair_records`), which they stage as
+follows.
+
+Staging of XLA's records (`tuning.mosaic_chunk` > 0; float32 only: TMA has no 64-bit float
+type). The Local-GS kernel stages the tile's pair records in shared memory: chunk records per TMA copy,
 double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only where the
 list reaches it, and the block waits for the one in flight before it exits), the strip mask read
 from the record's last column. Bit for bit the unstaged kernel's output.
