@@ -61,7 +61,9 @@ def reduction_share(g, cam, repeat: int):
     transposing butterfly (`transposed`, records staged (chunk 64) or read from global memory
     (chunk 0)), and 1 reduction per pair (a bound); how far each variant's rows are from the
     first's."""
-    config = lgs_jax.RasterConfig()
+    # XLA's records, whose TMA staging the variants switch (the default builds them in the
+    # kernel: KernelConfig.mosaic_pair_source)
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(mosaic_pair_source="records"))
     w, h = cam.width, cam.height
     tiles_x, tiles_y = tile_grid(w, h)
     cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)

@@ -102,11 +102,13 @@ def _strip_bits(wg, pixels: int):
 
 
 def staged(config: RasterConfig, dt) -> bool:
-    """Whether the Local-GS kernel stages records of dtype `dt` in shared memory: a chunk is set
-    and the records are float32 (TMA has no 64-bit float type: Mosaic GPU raises "unsupported
-    TMA dtype f64" when compiling for the GPU; interpret mode has no TMA and would not
-    notice)."""
-    return config.tuning.mosaic_chunk > 0 and jnp.dtype(dt) == jnp.float32
+    """Whether the kernels stage XLA's records of dtype `dt` in shared memory by TMA: records
+    built in XLA (`tuning.mosaic_pair_source`), a chunk set, and float32 records (TMA has no
+    64-bit float type: Mosaic GPU raises "unsupported TMA dtype f64" when compiling for the
+    GPU; interpret mode has no TMA and would not notice)."""
+    t = config.tuning
+    from_xla = t.mosaic_pair_source == "records"
+    return from_xla and t.mosaic_chunk > 0 and jnp.dtype(dt) == jnp.float32
 
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,

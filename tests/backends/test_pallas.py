@@ -159,7 +159,10 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
     (no pair anywhere) renders the background. float64 records are never staged (no 64-bit
     float TMA)."""
     dtype = np.float32
-    assert not pallas_mosaic.staged(C(), np.float64) and pallas_mosaic.staged(C(), np.float32)
+    xla_records = C(tuning=K(mosaic_pair_source="records"))
+    assert not pallas_mosaic.staged(xla_records, np.float64)
+    assert pallas_mosaic.staged(xla_records, np.float32)
+    assert not pallas_mosaic.staged(C(), np.float32)  # records built in the kernels instead
     g = scenes.cast(scenes.scene(seed), dtype)
     empty = scenes.cast(scenes.scene(seed, kinds=("behind", "invalid")), dtype)
     cam = scenes.camera(dtype=dtype)
