@@ -1,6 +1,7 @@
-"""The Local-GS Mosaic GPU forward's pair records built inside the kernel (the paper's staging,
-Sec. III-B: V hoisted per tile into shared memory from per-Gaussian data), instead of read from
-records XLA wrote for every pair (`tuning.mosaic_pair_source = "gaussians"`).
+"""The pair records of the Mosaic GPU kernels (the Local-GS forward and the backward) built
+inside them (the paper's staging, Sec. III-B: V hoisted per tile into shared memory from
+per-Gaussian data), instead of read from records XLA wrote for every pair
+(`tuning.mosaic_pair_source = "gaussians"`, the default).
 
 Per chunk of LANES = 128 pairs of a tile's list, lane t of the block's warpgroup
   1. loads pair (base + t)'s Gaussian id and that Gaussian's `pairs.gaussian_table` row
@@ -12,7 +13,9 @@ Per chunk of LANES = 128 pairs of a tile's list, lane t of the block's warpgroup
      block's, a scalar), and
   3. stores it to shared memory, column by column, in one of two buffers (chunk c in c % 2),
      followed by one warpgroup barrier,
-and the pair loop reads the records there as scalars, as it reads TMA-staged records. Two
+and the pair loop reads the records there as scalars, as it reads TMA-staged records (the
+forward's chunks start at the tile's first pair, `forward_source`; the backward walks down
+through chunks aligned to multiples of LANES, `backward_source`). Two
 buffers and one barrier per chunk suffice: a buffer is written again two chunks later, after
 every thread passed the barrier of the chunk in between, which follows its reads.
 
