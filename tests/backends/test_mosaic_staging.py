@@ -2,9 +2,10 @@
 the kernel from per-Gaussian rows (`KernelConfig.mosaic_pair_source="gaussians"`) against the
 records XLA builds ("records"). In interpret mode the images are bit for bit the same (the
 same functions compute the records); on the GPU the kernel's arithmetic is Mosaic GPU's, so
-within the float32 tolerance of the other kernel comparisons. The scenes are dense enough that
-tile lists cross the 128-pair chunks (asserted), with faint and huge Gaussians so that pixels
-do not stop before the second chunk."""
+within the float32 tolerance of the other kernel comparisons. The scenes put 640 Gaussians of
+the adversarial kinds on one 16x16 tile, whose list (about 290 pairs) crosses the 128-pair
+chunks (asserted), with faint and huge Gaussians so that pixels do not stop before the later
+chunks."""
 
 import dataclasses
 
@@ -24,7 +25,8 @@ C = lgs_jax.RasterConfig
 K = lgs_jax.KernelConfig
 ON_GPU = jax.default_backend() == "gpu"
 DENSE = ("huge_far", "faint", "needle", "normal", "tiny", "invalid", "behind")
-N_DENSE = 400
+N_DENSE = 640
+TILE_CAMERA = dict(width=16, height=16)  # one tile: every pair in one list
 CAPACITY = 4096
 CONFIGS = {"local_gs": C(), "difference": C(hoist=False), "no_cull": C(warp_cull=False),
            "center": C(origin="center"), "global": C(local_coords=False), "gsplat": C("gsplat")}
@@ -38,8 +40,8 @@ def _render(g, cam, config, source, pixels):
 
 
 GPU_ONLY = pytest.mark.skipif(not ON_GPU, reason=(
-    "CI time: in interpret mode test_mosaic_kernels_equal_triton_kernels covers these forms on "
-    "lists within one chunk"))
+    "CI time: in interpret mode the Mosaic GPU tests of test_pallas.py cover this case on lists "
+    "within one chunk"))
 
 
 @pytest.mark.parametrize("name,dtype,pixels", [("local_gs", np.float32, 256)] + [
@@ -50,8 +52,8 @@ GPU_ONLY = pytest.mark.skipif(not ON_GPU, reason=(
 @given(seed=st.integers(0, 2**32 - 1))
 def test_records_built_in_the_kernel_equal_the_xla_records(name, dtype, pixels, seed):
     g = scenes.cast(scenes.scene(seed, kinds=DENSE, n=N_DENSE), dtype)
-    cam = scenes.camera(dtype=dtype)
-    bins = binning.bin_gaussians(project(g, cam), scenes.W, scenes.H, CAPACITY)
+    cam = scenes.camera(dtype=dtype, **TILE_CAMERA)
+    bins = binning.bin_gaussians(project(g, cam), cam.width, cam.height, CAPACITY)
     assert not bins.overflow
     assert int(np.max(bins.tile_end - bins.tile_start)) > mosaic_staging.LANES
     want = _render(g, cam, CONFIGS[name], "records", pixels)
@@ -82,7 +84,7 @@ def test_gradients_with_records_built_in_the_kernels_equal_the_xla_records(name,
     test_backward_kernel_equals_the_tiles_walk covers the default Mosaic GPU backward.)"""
     dtype = np.float32
     g = scenes.cast(scenes.scene(seed, kinds=DENSE, n=N_DENSE), dtype)
-    cam = scenes.camera(dtype=dtype)
+    cam = scenes.camera(dtype=dtype, **TILE_CAMERA)
     w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
     grads = {}
     for source in ("records", "gaussians"):

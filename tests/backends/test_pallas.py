@@ -180,11 +180,13 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
                                       getattr(outs[0, 128], field))
 
 
+@pytest.mark.skipif(not ON_GPU, reason="CI time: TMA staging of XLA's records is not the "
+                    "default (KernelConfig.mosaic_pair_source); interpret mode has no TMA")
 @pytest.mark.parametrize("backend,pixels", [("pallas", 128)])
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_mosaic_backward_staging_is_bit_for_bit(backend, pixels, seed):
-    """The Mosaic GPU backward kernel with its float32 records staged in shared memory, in
+    """The Mosaic GPU backward kernel with its float32 XLA records staged in shared memory, in
     chunks of 8 so that every tile's walk crosses several (chunks entered part-way, the copy
     of the chunk below started at each boundary), gives the gradients of records read from
     global memory bit for bit."""
@@ -362,7 +364,7 @@ def _backward_cases():
 
 
 @pytest.mark.parametrize("name,kernel,pixels,dtype", _backward_cases())
-@settings(max_examples=3)  # interpret mode: the kernels run serially, one program at a time
+@settings(max_examples=2)  # interpret mode: the kernels run serially, one program at a time
 @given(seed=st.integers(0, 2**32 - 1))
 def test_backward_kernel_equals_the_tiles_walk(name, kernel, seed, dtype, pixels):
     """The backward kernel (Triton: a program per tile; Mosaic GPU: a warpgroup per tile or
