@@ -399,17 +399,15 @@ LOWER = {  # id -> (backend, config, mosaic_chunk, pixels per block, dtype); "au
     "localgs-staged-f64": ("pallas", M, 64, 256, F64),
     "vanilla-half": ("pallas_vanilla", M, 0, 128, F32),
 }
+# Kernel "auto" lowers Mosaic GPU here (interpret=False), the same programs as kernel="mosaic";
+# the switches that only change constants (origin, convention) add no primitive and are left out.
 LOWER_SLOW = {
     "localgs": ("pallas", C(), 0, 256, F32),
-    "localgs-baseline": ("pallas", C(kernel="mosaic", hoist=False, warp_cull=False), 0, 256, F32),
     "localgs-staged-half": ("pallas", M, 64, 128, F32),
-    **{f"localgs-{name}": ("pallas", c, 0, 256, F32) for name, c in LOCALGS.items()
-       if name != "local_gs"},
+    **{f"localgs-{name}": ("pallas", LOCALGS[name], 0, 256, F32)
+       for name in ("no_cull", "difference", "baseline", "global")},
     "localgs-fast": ("pallas", C(blend="fast"), 0, 256, F32),
-    "localgs-mosaic": ("pallas", M, 0, 256, F32),
-    "localgs-mosaic-fast": ("pallas", C(kernel="mosaic", blend="fast"), 0, 256, F32),
     "vanilla": ("pallas_vanilla", C(), 0, 256, F32),
-    "vanilla-mosaic": ("pallas_vanilla", M, 0, 256, F32),
     "localgs-staged": ("pallas", M, 64, 256, F32),
     "localgs-half": ("pallas", M, 0, 128, F32),
 }
