@@ -83,8 +83,8 @@ def _pair_origins(bins: TileBins, tiles_x: int, config: RasterConfig, dtype):
 def strip_mask_columns(cols, tx, ty, config: RasterConfig):
     """Strip masks (int32) of Gaussians `cols` (`gaussian_table` columns) in tiles (tx, ty),
     FULL_MASK for those the binning could not bound. Written on columns, so that the XLA path
-    (`strip_masks`) and the Mosaic GPU forward's in-kernel staging (lane vectors, a scalar tile)
-    compute the same bits."""
+    (`strip_masks`) and the Mosaic GPU kernels' in-kernel staging (lane vectors, a scalar tile;
+    lgs_jax.backends.mosaic_staging) compute the same bits."""
     mx, my, a, b, c, o, _, _, _, _, tau_min, tau, det_lo, unbounded = cols
     dt = mx.dtype
     u = jnp.finfo(dt).eps / 2

@@ -32,10 +32,10 @@ and strip masks on lane vectors, shared memory), with no per-pair buffer in glob
 follows.
 
 Staging of XLA's records (`tuning.mosaic_chunk` > 0; float32 only: TMA has no 64-bit float
-type). The Local-GS kernel stages the tile's pair records in shared memory: chunk records per TMA copy,
-double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only where the
-list reaches it, and the block waits for the one in flight before it exits), the strip mask read
-from the record's last column. Bit for bit the unstaged kernel's output.
+type). The Local-GS kernel stages the tile's pair records in shared memory: chunk records per
+TMA copy, double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only
+where the list reaches it, and the block waits for the one in flight before it exits), the
+strip mask read from the record's last column. Bit for bit the unstaged kernel's output.
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
