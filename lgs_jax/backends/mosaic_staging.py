@@ -105,6 +105,12 @@ def stage(buffer, gauss_ref, table_ref, base, tile, tiles_x: int, config: Raster
         _barrier()
 
 
+def _read(smem, k, columns=range(ks.REC)):
+    """Columns `columns` of the record at position k of a walk's chunks (chunk k // LANES, in
+    buffer (k // LANES) % 2, lane k % LANES), as scalars."""
+    return [smem[(k // LANES) % 2, c, k % LANES] for c in columns]
+
+
 def forward_source(gauss_ref, table_ref, smem, start, end, tile, tiles_x: int, evaluate,
                    config: RasterConfig, last_pair: int, interpret: bool):
     """`kernel_steps.staged_loop`'s (fetch, pair_alpha, stage) for the pairs [start, end) of
@@ -122,9 +128,7 @@ def forward_source(gauss_ref, table_ref, smem, start, end, tile, tiles_x: int, e
                   last_pair, interpret)
 
     def pair_alpha(j):
-        i = j - start
-        buffer = smem.at[(i // LANES) % 2]
-        rec = [buffer[c, i % LANES] for c in range(ks.REC)]
+        rec = _read(smem, j - start)
         return evaluate(rec, rec[ks.REC - 1].astype(jnp.int32))
 
     return (lambda j: j), pair_alpha, (begin, lambda j: None)
@@ -144,11 +148,7 @@ def backward_source(gauss_ref, table_ref, smem, tile, tiles_x: int, config: Rast
             stage(smem.at[q % 2], gauss_ref, table_ref, q * LANES, tile, tiles_x, config,
                   last_pair, interpret)
 
-    def record(j):
-        buffer = smem.at[(j // LANES) % 2]
-        return [buffer[c, j % LANES] for c in range(ks.REC)]
-
     def mask(j):
-        return smem[(j // LANES) % 2, ks.REC - 1, j % LANES].astype(jnp.int32)
+        return _read(smem, j, [ks.REC - 1])[0].astype(jnp.int32)
 
-    return record, mask, begin
+    return (lambda j: _read(smem, j)), mask, begin
