@@ -61,11 +61,10 @@ ROWS = {
     "auto": ("pallas", C("gsplat")),  # what users get: vanilla from 2^24 pairs (KernelConfig)
     "localgs": ("pallas", C("gsplat", tuning=LOCAL)),
     "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
-    # the Mosaic GPU kernels building their pair records from Gaussians (KernelConfig)
-    "localgs:staged": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                      mosaic_pair_source="gaussians"))),
-    "localgs:staged:fast": ("pallas", C("gsplat", blend="fast", tuning=K(
-        vanilla_from_pairs=None, mosaic_pair_source="gaussians"))),
+    # the Mosaic GPU kernels reading pair records XLA built (KernelConfig.mosaic_pair_source;
+    # "localgs" builds them in the kernels, the default since Dec 1)
+    "localgs:records": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                       mosaic_pair_source="records"))),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
@@ -74,6 +73,7 @@ ROWS = {
         mosaic_forward_pixels=128, mosaic_backward_pixels=128, vanilla_from_pairs=None))),
     "localgs:px256": ("pallas", C("gsplat", tuning=K(
         mosaic_forward_pixels=256, mosaic_backward_pixels=256, vanilla_from_pairs=None))),
+    "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(mosaic_forward_pixels=128))),
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""

@@ -1,7 +1,12 @@
-"""Runs the Pallas rasterization of guitar 1280x720 a few times, for Nsight Compute:
+"""Runs the Pallas rasterization of one scene once per backend, for Nsight Compute:
 
-    ncu -k regex:kernel python scripts/ncu_localgs.py [DATA]     (DATA: default carry/data)
+    ncu -k regex:'localgs|vanilla' [--set full] python scripts/ncu_localgs.py [DATA]
+        [--scene guitar_720p] [--backends pallas,pallas_vanilla] [--kernel auto]
+
+DATA: default carry/data; scenes are `benchmarks.common.SCENES` names. Each backend's render is
+compiled and run once, so each kernel is launched (and profiled) once.
 """
+import argparse
 import os
 import sys
 
@@ -10,10 +15,21 @@ import jax
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lgs_jax  # noqa: E402
 from benchmarks.common import load_scene  # noqa: E402
+from lgs_jax import binning  # noqa: E402
+from lgs_jax.projection import project  # noqa: E402
 
-g, cam = load_scene("guitar_720p", sys.argv[1] if len(sys.argv) > 1 else "carry/data")
+ap = argparse.ArgumentParser(description=__doc__)
+ap.add_argument("data", nargs="?", default="carry/data")
+ap.add_argument("--scene", default="guitar_720p")
+ap.add_argument("--backends", default="pallas,pallas_vanilla")
+ap.add_argument("--kernel", default="auto", help="RasterConfig.kernel (\"mosaic\": Local-GS even "
+                "where \"auto\" routes a large pair buffer to the vanilla kernel)")
+args = ap.parse_args()
+g, cam = load_scene(args.scene, args.data)
 g = jax.device_put(g)
-for backend in ("pallas", "pallas_vanilla"):
-    f = jax.jit(lambda g, c: lgs_jax.render(g, c, backend=backend, capacity=2**19).image)
-    for _ in range(3):
-        jax.block_until_ready(f(g, cam))
+p = jax.jit(project)(g, cam)
+cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, cam.width, cam.height)))
+for backend in args.backends.split(","):
+    f = jax.jit(lambda g, c, b=backend: lgs_jax.render(
+        g, c, backend=b, config=lgs_jax.RasterConfig(kernel=args.kernel), capacity=cap).image)
+    jax.block_until_ready(f(g, cam))

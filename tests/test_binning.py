@@ -16,7 +16,7 @@ import lgs_jax
 from lgs_jax import binning
 from lgs_jax.composite import gaussian_alpha
 from lgs_jax.config import ALPHA_MIN
-from lgs_jax.projection import Projected, project
+from lgs_jax.projection import Projected, depth_order, project
 from tests import scenes
 
 W, H = 64, 48
@@ -145,6 +145,39 @@ def test_tile_ranges_equal_searchsorted(seed):
     ids = np.arange(n_tiles)
     np.testing.assert_array_equal(start, np.searchsorted(tile, ids, side="left"))
     np.testing.assert_array_equal(end, np.searchsorted(tile, ids, side="right"))
+
+
+@given(seed=st.integers(0, 2**32 - 1), cut=st.sampled_from([0.3, 1.0, 2.0]))
+def test_segment_of_slot_equals_searchsorted(seed, cut):
+    """Segments with runs of empty ones (first and last included), a capacity below, at and
+    above the total; slots past the total get the last segment."""
+    rng = np.random.default_rng(seed)
+    counts = rng.choice(np.array([0, 0, 1, 2, 7]), 40) * (rng.random(40) < 0.7)
+    ends = np.cumsum(counts)
+    capacity = max(1, int(cut * ends[-1]))
+    got = binning.segment_of_slot(jnp.asarray(ends - counts, jnp.int32),
+                                  jnp.asarray(counts, jnp.int32), capacity)
+    slots = np.arange(capacity)
+    want = np.where(slots < ends[-1], np.searchsorted(ends, slots, side="right"), 39)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@given(seed=st.integers(0, 2**32 - 1))
+def test_depth_order_is_the_stable_order_of_depths(dtype, seed):
+    """`projection.float_sort_key` orders like the floats: ties (−0 and +0 too) by index,
+    negatives, the smallest normal, infinities and invalid Gaussians (last). (XLA flushes
+    subnormals to zero on CPUs and GPUs, in its float sort as in the key.)"""
+    rng = np.random.default_rng(seed)
+    tiny = np.finfo(dtype).smallest_normal
+    values = np.array([-0.0, 0.0, tiny, -tiny, 1.0, 1.0 + np.finfo(dtype).eps, -3.5, 7e30,
+                       np.finfo(dtype).max, np.inf], dtype)
+    depth = rng.choice(values, 64)
+    valid = rng.random(64) < 0.8
+    p = Projected(mean2d=None, cov2d=None, conic=None, depth=jnp.asarray(depth),
+                  opacity=None, rgb=None, valid=jnp.asarray(valid), invalid=None)
+    key = np.where(valid, depth + dtype(0), np.inf)  # −0 + 0 = +0
+    np.testing.assert_array_equal(depth_order(p), np.argsort(key, kind="stable"))
 
 
 @pytest.mark.parametrize("n_tiles", [12, binning.SORT16_TILES, binning.SORT16_TILES + 1])

@@ -14,7 +14,7 @@ import dataclasses
 import jax
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax.backends import mosaic_rows, pallas, pallas_mosaic
@@ -84,6 +84,7 @@ def test_localgs_kernel_equals_reference_float32(name, seed):
     pytest.param("3dgs", np.float64, marks=SLOW), pytest.param("gsplat", np.float32, marks=SLOW)])
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
+@example(seed=1711)  # H200: alpha 2.3e-5 from the reference's in 5 pixels
 def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     """The vanilla kernel is the reference's arithmetic in the reference's order."""
     g = scenes.cast(scenes.scene(seed), dtype)
@@ -92,11 +93,12 @@ def test_vanilla_kernel_equals_reference(convention, dtype, seed):
     out = scenes.render(g, cam, "pallas_vanilla", C(convention))
     assert out.stats.kernel == f"vanilla-{AUTO}"
     for field in ("image", "alpha", "depth"):
-        # float32: 1e-5 of the field's scale (depth is in scene units). On the GPU the Mosaic
-        # kernel's exp and multiply-adds round differently from XLA's (H100, measured: depth
-        # 5.8e-6 of scale, image 3.9e-6); interpret mode matches to 1e-6.
+        # float32: 1e-5 of the field's scale (depth is in scene units), 5e-5 on the GPU, where
+        # the Mosaic kernel's exp and multiply-adds round differently from XLA's (H100: depth
+        # 5.8e-6 of scale, image 3.9e-6; H200, seed 1711: alpha 2.3e-5 in 5 pixels of 960,
+        # where long lists accumulate it); interpret mode matches to 1e-6.
         scale = max(1.0, float(np.abs(np.asarray(getattr(ref, field))).max()))
-        atol = F64_ATOL if dtype == np.float64 else 1e-5 * scale
+        atol = F64_ATOL if dtype == np.float64 else (5e-5 if ON_GPU else 1e-5) * scale
         assert_render_close(getattr(out, field), getattr(ref, field), atol=atol,
                             max_flip_share=0.0 if dtype == np.float64 else 0.005,
                             flip_atol=2.0, what=field)
@@ -253,14 +255,14 @@ def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
 
 
 def test_routed_render_is_vanillas_image_and_localgs_gradients():
-    """Routed end to end (interpret mode, threshold 1): the image is `pallas_vanilla`'s bit for
-    bit and names its kernel; the gradients are the unrouted `pallas` gradients bit for bit."""
+    """Routed end to end (threshold 1): the image is `pallas_vanilla`'s bit for bit and names
+    its kernel; the gradients are the unrouted `pallas` gradients bit for bit."""
     g = scenes.cast(scenes.scene(7), np.float32)
     cam = scenes.camera()
     routed = C(tuning=K(vanilla_from_pairs=1))
     out = scenes.render(g, cam, "pallas", routed)
     ref = scenes.render(g, cam, "pallas_vanilla", routed)
-    assert out.stats.kernel == "vanilla-triton"
+    assert out.stats.kernel == f"vanilla-{AUTO}"
     np.testing.assert_array_equal(out.image, ref.image)
     w = jax.random.uniform(jax.random.key(2), out.image.shape)
     grad = lambda cf: jax.grad(lambda g: (scenes.render(g, cam, "pallas", cf).image
