@@ -1,0 +1,79 @@
+"""How much of a frame's rasterization is one tile's serial walk (GPU experiment):
+
+    python scripts/tile_walks.py [--data DIR] [--scenes guitar_x16_1080p,guitar_x64_1080p,...]
+
+Per scene: the tile lists' lengths (percentiles), the pairs each block walks before all its
+pixels stopped (`RasterResult.stop`: the forward's own stop pairs; blocks are half tiles below
+`mosaic_whole_tile_from` tiles, whole tiles above), and a schedule model of the forward kernel:
+blocks taken longest list first (`pallas._longest_first`) onto R resident blocks (132 SMs x 5,
+ncu's occupancy of the Local-GS kernel), each costing its walked pairs. Printed: the model's
+makespan over the ideal (all walked pairs / R) and the longest single block over the ideal, a
+lower bound of the makespan whatever the order. The `tiles` backend on a CPU (same stops).
+"""
+import argparse
+import heapq
+import os
+import sys
+
+import jax
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import lgs_jax  # noqa: E402
+from benchmarks.common import add_data_argument, load_scene  # noqa: E402
+from lgs_jax import binning  # noqa: E402
+from lgs_jax.backends import REGISTRY, pallas  # noqa: E402
+from lgs_jax.projection import project  # noqa: E402
+
+RESIDENT = 132 * 5
+
+
+def walks(g, cam):
+    w, h = cam.width, cam.height
+    p = jax.jit(project)(g, cam)
+    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    gpu = jax.default_backend() == "gpu"
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
+    n_tiles = bins.tile_start.shape[0]
+    backend = pallas.LOCALGS if gpu else REGISTRY["tiles"]
+    res = jax.jit(lambda p, b: backend.rasterize(p, b, w, h, config))(p, bins)
+    pixels = pallas.plan(config, False, n_tiles).forward_pixels if gpu else 128
+    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
+    walked = (np.asarray(res.stop) - start[:, None]).reshape(n_tiles, 256 // pixels, pixels)
+    return end - start, walked.max(-1), 256 // pixels
+
+
+def schedule(lengths, walked, per_tile):
+    order = np.argsort(-lengths, kind="stable")
+    heap = [0] * RESIDENT
+    for t in order:
+        for c in walked[t]:
+            heapq.heapreplace(heap, heap[0] + int(c))
+    return max(heap)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_data_argument(ap)
+    ap.add_argument("--scenes", default="guitar_x16_1080p,guitar_x64_1080p,guitar_x110_4k")
+    args = ap.parse_args()
+    print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
+    for scene in args.scenes.split(","):
+        g, cam = load_scene(scene, args.data)
+        lengths, walked, per_tile = walks(jax.device_put(g), cam)
+        ideal = walked.sum() / RESIDENT
+        q = np.percentile(lengths, [50, 90, 99, 100])
+        print(f"{scene}: {lengths.sum() / 1e6:.2f}M pairs in {lengths.size} tiles (list "
+              f"p50/p90/p99/max {q[0]:.0f}/{q[1]:.0f}/{q[2]:.0f}/{q[3]:.0f}); {per_tile} "
+              f"block(s) per tile walk {walked.sum() / 1e6:.2f}M block-pairs "
+              f"({walked.sum() / (per_tile * lengths.sum()):.1%} of their lists), longest "
+              f"{walked.max()}; longest-first makespan / ideal "
+              f"{schedule(lengths, walked, per_tile) / ideal:.2f}, longest block / ideal "
+              f"{walked.max() / ideal:.2f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
