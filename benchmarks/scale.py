@@ -20,7 +20,8 @@ stop test), so the images can be compared: PSNR against gsplat's image.
 Forward rows: per stage (`project`, `emit` = pair emission, `sort` = tile sort and ranges;
 gsplat: projection + SH, `isect_tiles`, `isect_offset_encode`), the rasterization stage alone
 (`raster`: from projected and binned inputs, per-pair preparation included; gsplat's
-`rasterize_to_pixels`; `pair_prep`: the Local-GS strip masks and pair records alone), and end
+`rasterize_to_pixels`; `pair_prep`, on the rows whose raster builds records in XLA (Triton, or
+`localgs:records`): the Local-GS strip masks and pair records alone), and end
 to end (`e2e`: one jitted `render` / one `gsplat.rasterization` call). Memory: ours is XLA's
 compiled memory analysis of the e2e program (temporaries + outputs, not the arguments), gsplat's
 the peak torch allocates during the call above what it held before (its inputs), in MiB.
@@ -45,7 +46,7 @@ import numpy as np
 
 import lgs_jax
 from lgs_jax import binning, pairs
-from lgs_jax.backends import REGISTRY, kernel_steps
+from lgs_jax.backends import REGISTRY, kernel_steps, pallas
 from lgs_jax.layout import tile_grid
 from lgs_jax.projection import project
 from lgs_jax.render import next_pow2
@@ -74,6 +75,8 @@ ROWS = {
     "localgs:px256": ("pallas", C("gsplat", tuning=K(
         mosaic_forward_pixels=256, mosaic_backward_pixels=256, vanilla_from_pairs=None))),
     "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(mosaic_forward_pixels=128))),
+    "localgs:bwd256": ("pallas", C("gsplat", tuning=K(mosaic_backward_pixels=256,
+                                                      vanilla_from_pairs=None))),
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""
@@ -85,6 +88,15 @@ def row_setup(name: str, n_pairs: int):
     backend, config = ROWS[name.removesuffix(POW2)]
     cap = next_pow2(n_pairs) if name.endswith(POW2) else lgs_jax.pair_capacity(n_pairs)
     return backend, config, cap
+
+
+def builds_records_in_xla(backend: str, config, n_tiles: int, cap: int) -> bool:
+    """Whether the row's raster includes the XLA per-pair preparation `pair_prep` times: a
+    Local-GS forward on Triton, or on Mosaic GPU reading XLA's records
+    (`KernelConfig.mosaic_pair_source`)."""
+    plan = pallas.plan(config, backend == "pallas_vanilla", n_tiles, cap)
+    return not plan.vanilla and (plan.forward == "triton"
+                                 or config.tuning.mosaic_pair_source == "records")
 
 
 def count_pairs(g, cam) -> int:
@@ -109,11 +121,12 @@ def ours_forward(g, cam, rows):
 
     prep = jax.jit(pair_prep)
     fns = {f"ours:{k}": lambda f=f: jax.block_until_ready(f()) for k, f in stages.items()}
-    fns["ours:pair_prep"] = lambda: jax.block_until_ready(prep(p, bins))
     images, memory, caps = {}, {}, {}
     for name in rows:
         backend, config, cap = row_setup(name, n_pairs)
         caps[name] = cap
+        if builds_records_in_xla(backend, config, bins.tile_start.shape[0], cap):
+            fns["ours:pair_prep"] = lambda: jax.block_until_ready(prep(p, bins))
         rasterize = REGISTRY[backend].rasterize
         e2e = jax.jit(lambda g, c, b=backend, cf=config, cap=cap: lgs_jax.render(
             g, c, backend=b, config=cf, capacity=cap).image)
@@ -187,12 +200,15 @@ def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
         fns.update(peer[0])
     ms = median_ms(fns, repeat)
     base = dict(scene=scene, gaussians=g.num, width=cam.width, height=cam.height)
+    n_tiles = int(np.prod(tile_grid(cam.width, cam.height)))
     out = []
     for name in rows:
         r = dict(base, row=name, pairs=n_pairs, capacity=caps[name], project_ms=ms["ours:project"],
                  emit_ms=ms["ours:emit"], sort_ms=ms["ours:sort"],
-                 pair_prep_ms=ms["ours:pair_prep"], raster_ms=ms[f"{name}:raster"],
-                 e2e_ms=ms[f"{name}:e2e"], memory_mib=memory[name])
+                 raster_ms=ms[f"{name}:raster"], e2e_ms=ms[f"{name}:e2e"],
+                 memory_mib=memory[name])
+        if builds_records_in_xla(*row_setup(name, n_pairs)[:2], n_tiles, caps[name]):
+            r["pair_prep_ms"] = ms["ours:pair_prep"]
         if peer:
             r.update(psnr_vs_gsplat=psnr(images[name], peer[1]),
                      e2e_vs_gsplat=r["e2e_ms"] / ms["gsplat:e2e"],
