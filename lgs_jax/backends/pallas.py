@@ -162,14 +162,17 @@ def _vanilla_model(config: RasterConfig) -> RasterConfig:
     return dataclasses.replace(config, hoist=False, warp_cull=False)
 
 
+def _every_strip(bins: TileBins):
+    """Strip–Gaussian pairs without warp culling: every strip of every real pair's tile."""
+    return STRIPS * jnp.sum(bins.tile < bins.tile_start.shape[0], dtype=jnp.int32)
+
+
 def _records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
     """(strip masks or None, pair records, strip–Gaussian pairs) of the Local-GS kernels, built
     in XLA (`pairs`, `kernel_steps.pair_records`)."""
     pg = pairs.gather(p, bins.gauss)
     if not config.warp_cull:
-        valid_pair = bins.tile < bins.tile_start.shape[0]
-        strip_pairs = STRIPS * jnp.sum(valid_pair, dtype=jnp.int32)
-        return None, kernel_steps.pair_records(pg, bins, tiles_x, config), strip_pairs
+        return None, kernel_steps.pair_records(pg, bins, tiles_x, config), _every_strip(bins)
     masks = pairs.strip_masks(pg, bins, tiles_x, config)
     strip_pairs = jnp.sum(lax.population_count(masks), dtype=jnp.int32)
     return masks, kernel_steps.pair_records(pg, bins, tiles_x, config, masks), strip_pairs
@@ -183,7 +186,8 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     (lgs_jax.backends.mosaic_staging): the Local-GS forward gets (ids, table) and reports the
     strip pairs as not counted (−1), and a Mosaic GPU backward reads (ids, table) too, so no
     per-pair record is built in XLA. Otherwise (masks, records) from `_records` (the vanilla
-    forward reads Gaussian rows by id; its backward, records of `_vanilla_model`)."""
+    forward reads Gaussian rows by id; its backward, records of `_vanilla_model`, or (ids,
+    table) on Mosaic GPU; it counts every strip of every pair)."""
     config = plan_.config
     model = _vanilla_model(config) if plan_.vanilla else config
     gaussians = config.tuning.mosaic_pair_source == "gaussians"
@@ -192,12 +196,15 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     backward_staged = gaussians and plan_.backward == "mosaic"
     if forward_staged and backward_staged:
         return staged, jnp.int32(-1), staged
+    vanilla_data = (bins.gauss, kernel_steps.gaussian_rows(p))
+    if plan_.vanilla and backward_staged:
+        return vanilla_data, _every_strip(bins), staged
     masks, records, strip_pairs = _records(p, bins, tiles_x, model)
     saved = staged if backward_staged else (masks, records)
     if forward_staged:
         return staged, jnp.int32(-1), saved
     if plan_.vanilla:
-        return (bins.gauss, kernel_steps.gaussian_rows(p)), strip_pairs, saved
+        return vanilla_data, strip_pairs, saved
     return (jnp.zeros((1,), jnp.int32) if masks is None else masks, records), strip_pairs, saved
 
 
