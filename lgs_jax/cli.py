@@ -226,7 +226,8 @@ def _fit(args) -> int:
                        max_gaussians=args.max_gaussians, downscale=args.downscale,
                        crop=tuple(args.crop) if args.crop else None, seed=args.seed,
                        backend=args.backend, pool_size=args.pool_size, resume=args.resume,
-                       overwrite=args.overwrite)
+                       overwrite=args.overwrite,
+                       compile_ahead=False if args.no_compile_ahead else None)
     print(json.dumps(result, indent=1))
     return 0
 
@@ -310,6 +311,10 @@ def _fit_parser(sub, common) -> None:
                    help="pair buffer size as a multiple of a view's pairs, at the start and at "
                         "each growth (a recompile); larger: fewer recompiles, larger buffers "
                         "(default: 1.5)")
+    f.add_argument("--no-compile-ahead", action="store_true",
+                   help="compile the step for a grown pair buffer only when a step needs it "
+                        "(default on a GPU: compile it in a background thread before; the same "
+                        "results)")
     f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"),
                    help="train and evaluate on this window of every image (quick checks)")
     f.add_argument("--seed", type=int, default=0,

@@ -29,6 +29,7 @@ from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2, pair_capacity
 from . import checkpoint, report
+from .ahead import Stepper, signature
 from .data import RunData, prepare, views_for_step
 from .init import start_gaussians
 from .losses import PADDINGS
@@ -125,20 +126,32 @@ def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
     return report.heldout_metrics(images, rd.test_images)
 
 
-def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say):
+def _stepper(setup: Setup, compile_ahead: bool) -> Stepper:
+    """`train_step` of this run behind an `ahead.Stepper`."""
+    return Stepper(lambda a, c: train_step(*a, setup=setup, capacity=c),
+                   lambda a, c: train_step.lower(*a, setup=setup, capacity=c),
+                   setup.settings.pair_headroom, compile_ahead)
+
+
+def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say,
+              stepper: Stepper, clock):
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
     idx = jnp.asarray(views_for_step(st.step, setup.settings.batch, rd.train_images.shape[0],
                                      seed))
     while True:
-        new = train_step(st.pool, st.opt_state, st.strategy_state, rd.train_cams,
-                         rd.train_images, idx, background, st.step, key, setup=setup,
-                         capacity=st.capacity)
+        args = (st.pool, st.opt_state, st.strategy_state, rd.train_cams, rd.train_images, idx,
+                background, st.step, key)
+        sig = signature(args)
+        new = stepper.run(args, st.capacity, sig)
+        stepper.prepare(args, st.capacity, sig)
         m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
         if not m["overflow"]:
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
-        st.capacity = pair_capacity(m["pairs"], setup.settings.pair_headroom)
-        say(f"step {st.step + 1}: pair capacity grown to {st.capacity} (one recompile)")
+        st.capacity, waited, ahead = stepper.grow(m["pairs"], sig)
+        clock.waited(waited)
+        say(f"step {st.step + 1}: pair capacity grown to {st.capacity} "
+            + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)"))
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
@@ -155,12 +168,16 @@ def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
     return count
 
 
-def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, clock):
+def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, clock,
+          compile_ahead: bool):
     """Steps st.step .. setup.steps (module docstring); returns the seconds spent in steps
     (their compilation, timed by `clock`, included)."""
     progress, s = report.Progress(st.step, setup.steps), setup.settings
     key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
+    if compile_ahead is None:
+        compile_ahead = jax.default_backend() == "gpu"
+    stepper = _stepper(setup, compile_ahead)
     busy = 0.0
     try:
         with open(os.path.join(out, "metrics.jsonl"), "a", buffering=1) as f:
@@ -168,7 +185,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
             while st.step < setup.steps:
                 t0 = time.perf_counter()
                 with clock:
-                    m = _one_step(setup, st, rd, seed, key, background, say)
+                    m = _one_step(setup, st, rd, seed, key, background, say, stepper, clock)
                     if setup.strategy.refine_due(st.step):
                         m["count"] = _refine(setup, st, key, cap, say, record)
                 if not m["ok"]:
@@ -187,6 +204,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
                     _save(out, setup, st, seed)
     finally:
         progress.close()
+        stepper.close()
     return busy
 
 
@@ -230,7 +248,8 @@ def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -
 def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         settings: Settings = Settings(), max_gaussians: int = 1_000_000, downscale: int = 1,
         crop=None, seed: int = 0, backend: str | None = None, pool_size: int | None = None,
-        resume: bool = False, overwrite: bool = False, log=print) -> dict:
+        resume: bool = False, overwrite: bool = False, compile_ahead: bool | None = None,
+        log=print) -> dict:
     """Train on `data` (a dataset folder or a `Dataset`) for `steps` steps into run directory
     `out`; returns the final metrics (also in OUT/result.json).
 
@@ -241,10 +260,15 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     window of every image. backend: a differentiable backend of `render` (default `pallas` on
     GPUs, `tiles` elsewhere). `out` must be new or empty unless `resume` (continue from its
     checkpoint, bit-identically) or `overwrite` (delete its previous run's files first).
+    compile_ahead: compile the step for the next pair capacity in a background thread while
+    training (`ahead.py`; the same results, fewer waits on compiles as the pairs grow); None
+    (default): where the step runs on a GPU, so that the compile takes host cores the step does
+    not use (on a CPU it competes with the step for them).
     Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
     and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
     time of the steps and refinements, their compilation included, evaluations and checkpoints
-    not; None when no step ran) and compile_seconds (of that, the time spent compiling).
+    not; None when no step ran) and compile_seconds (of that, the time spent compiling or
+    waiting for a compile ahead; compiles ahead that finish in time cost the run nothing).
     """
     _check_args(steps, max_gaussians, settings)
     rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
@@ -256,7 +280,7 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         st = _fresh(setup, rd, seed, max_gaussians, pool_size, log)
     start, t0, clock = st.step, time.perf_counter(), report.CompileClock()
     with clock.listening():
-        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock)
+        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock, compile_ahead)
     return _finish(out, setup, st, rd, start, busy, time.perf_counter() - t0, log,
                    clock.seconds)
 

@@ -7,6 +7,7 @@ import json
 import math
 import os
 import threading
+import time
 
 import jax
 import numpy as np
@@ -55,15 +56,24 @@ class Progress:
 
 class CompileClock:
     """Seconds JAX spends compiling (tracing, lowering, compiling or loading compiled code: its
-    "/jax/core/compile/" monitoring events) inside `with clock:` blocks, overlaps counted once.
-    Use it as a context manager around the whole run too: `clock.listening()`."""
+    "/jax/core/compile/" monitoring events) inside `with clock:` blocks, in the thread that
+    entered them (compiles in other threads do not hold the run up), plus the waits for such
+    compiles (`waited`); overlaps counted once. Use it as a context manager around the whole run
+    too: `clock.listening()`."""
 
     def __init__(self):
-        self._spans, self._on = [], False
+        self._spans, self._on, self._thread = [], False, None
 
     def _listen(self, event, start, end, **_):
-        if self._on and event.startswith("/jax/core/compile/"):
+        if (self._on and event.startswith("/jax/core/compile/")
+                and threading.get_ident() == self._thread):
             self._spans.append((start, end))
+
+    def waited(self, seconds: float) -> None:
+        """Count `seconds` just spent waiting for a compile in another thread."""
+        if self._on and seconds > 0:
+            end = time.time()
+            self._spans.append((end - seconds, end))
 
     @contextlib.contextmanager
     def listening(self):
@@ -75,7 +85,7 @@ class CompileClock:
             jax.monitoring.unregister_event_time_span_listener(self._listen)
 
     def __enter__(self):
-        self._on = True
+        self._on, self._thread = True, threading.get_ident()
         return self
 
     def __exit__(self, *exc):

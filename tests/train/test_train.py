@@ -18,7 +18,7 @@ from skimage.metrics import structural_similarity
 
 import lgs_jax
 from lgs_jax import cli, train
-from lgs_jax.train import data as train_data, init, report
+from lgs_jax.train import ahead, data as train_data, init, report
 
 
 def test_ssim_equals_scikit_image():
@@ -168,6 +168,53 @@ def test_resume_is_bit_identical(skull, tmp_path):
     assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
 
 
+def test_compiling_ahead_changes_no_bit(skull, tmp_path):
+    """`fit` compiles the step for the next pair capacity in a background thread (the default
+    on GPUs) and takes it when the pairs grow past the capacity (at step 10 here); without it the
+    step is compiled there. Same bits at the end, though the capacities may differ
+    (`ahead.Stepper` takes the smallest one that holds the pairs): nothing depends on the
+    capacity but drops."""
+    logs = {True: [], False: []}
+    for on, log in logs.items():
+        _fit(skull, tmp_path / str(on), log=log.append, compile_ahead=on)
+    assert any("grown" in m and "(compiled ahead;" in m for m in logs[True]), logs[True]
+    assert any("grown" in m and "(one recompile)" in m for m in logs[False]), logs[False]
+    a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in ("True", "False"))
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+class _Lowered:
+    def __init__(self, capacity, fail=False):
+        self.capacity, self.fail = capacity, fail
+
+    def compile(self):
+        if self.fail:
+            raise RuntimeError("no")
+        return lambda *args: ("executable", self.capacity)
+
+
+@pytest.mark.parametrize("pairs,same_shapes,fail,want", [
+    (1100, True, False, ("executable", 2048)),  # the prepared capacity holds the pairs: taken
+    (2100, True, False, None),  # it does not: the jitted step at pair_capacity(2100, 1.5)
+    (1100, False, False, None),  # the pool grew since: the jitted step
+    (1100, True, True, None),  # its compile failed: the jitted step
+])
+def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(pairs, same_shapes, fail,
+                                                                  want):
+    stepper = ahead.Stepper(lambda a, c: ("jit", c), lambda a, c: _Lowered(c, fail), 1.5)
+    args = (jnp.zeros(3), 7)
+    sig = ahead.signature(args)
+    assert stepper.run(args, 1024, sig) == ("jit", 1024)
+    stepper.prepare(args, 1024, sig)  # pair_capacity(1025, 1.5) = 2048
+    other = sig if same_shapes else ahead.signature((jnp.zeros(4), 7))
+    capacity, waited, taken = stepper.grow(pairs, other)
+    assert taken == (want is not None) and waited >= 0
+    assert capacity == (2048 if taken else lgs_jax.pair_capacity(pairs, 1.5))
+    assert stepper.run(args, capacity, other) == (want or ("jit", capacity))
+    stepper.close()
+
+
 def test_a_non_finite_step_is_skipped_and_reported(skull, tmp_path):
     """A NaN in one training image: every step on that view changes nothing and is reported;
     the others train, and the parameters written stay finite."""
@@ -231,8 +278,9 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert cli.main(base + ["--downscale", "4", "--opacity-reset", "--steps", "7"]) == 0
     assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
-    assert cli.main(base + ["--convention", "gsplat"]) == 0
-    assert seen["settings"].convention == "gsplat"
+    assert seen["compile_ahead"] is None  # fit's default: on a GPU
+    assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead"]) == 0
+    assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
 
 
 def test_run_dir_rules(tmp_path):
