@@ -8,7 +8,9 @@ pixels stopped (`RasterResult.stop`: the forward's own stop pairs; blocks are ha
 blocks taken longest list first (`pallas._longest_first`) onto R resident blocks (132 SMs x 5,
 ncu's occupancy of the Local-GS kernel), each costing its walked pairs. Printed: the model's
 makespan over the ideal (all walked pairs / R) and the longest single block over the ideal, a
-lower bound of the makespan whatever the order. The `tiles` backend on a CPU (same stops).
+lower bound of the makespan whatever the order; then, per `--split` length, the bounds of
+`split_model` (long lists split across blocks) relative to that makespan. The `tiles` backend on
+a CPU (same stops).
 """
 import argparse
 import heapq
@@ -53,11 +55,43 @@ def schedule(lengths, walked, per_tile):
     return max(heap)
 
 
+def makespan(costs) -> int:
+    """Longest-first greedy schedule of `costs` onto RESIDENT blocks."""
+    heap = [0] * RESIDENT
+    for c in sorted(costs, reverse=True):
+        heapq.heapreplace(heap, heap[0] + int(c))
+    return max(heap)
+
+
+def split_model(lengths, walked, seg: int) -> tuple[int, int]:
+    """(low, high) makespan with lists longer than `seg` split into segments of `seg` pairs,
+    two passes (BENCHMARKS.md §7 "Dec 2"): pass 1 walks each segment from T = 1 (whole segments
+    before the block's stop; the stop's segment and those after cost between 0 and their
+    length: the two bounds), then pass 2 walks each segment up to the stop from its entering T.
+    Lists within one segment run pass 2 only, as now."""
+    pass1_lo, pass1_hi, pass2 = [], [], []
+    for n, ws in zip(lengths, walked):
+        for w in ws:
+            if n <= seg:
+                pass2.append(w)
+                continue
+            for s0 in range(0, n, seg):
+                size = min(seg, n - s0)
+                before = s0 + size <= w
+                pass1_lo.append(size if before else 0)
+                pass1_hi.append(size)
+                pass2.append(min(size, max(w - s0, 0)))
+    p2 = makespan(pass2)
+    return makespan(pass1_lo) + p2, makespan(pass1_hi) + p2
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     add_data_argument(ap)
     ap.add_argument("--scenes", default="guitar_x16_1080p,guitar_x64_1080p,guitar_x110_4k")
+    ap.add_argument("--split", type=int, nargs="*", default=[1024, 2048, 4096],
+                    help="segment lengths to model (split_model)")
     args = ap.parse_args()
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     for scene in args.scenes.split(","):
@@ -72,6 +106,11 @@ def main() -> int:
               f"{walked.max()}; longest-first makespan / ideal "
               f"{schedule(lengths, walked, per_tile) / ideal:.2f}, longest block / ideal "
               f"{walked.max() / ideal:.2f}", flush=True)
+        now = schedule(lengths, walked, per_tile)
+        for seg in args.split:
+            lo, hi = split_model(lengths, walked, seg)
+            print(f"  lists split every {seg} pairs: makespan {lo / now:.2f}–{hi / now:.2f} "
+                  f"of now", flush=True)
     return 0
 
 
