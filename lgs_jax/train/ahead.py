@@ -67,8 +67,10 @@ class Stepper:
         if self._threads is None:
             return
         following = pair_capacity(capacity + 1, self._headroom)
-        if self._job is not None and self._job[:2] == (following, sig):
-            return
+        if self._job is not None:
+            if self._job[:2] == (following, sig):
+                return
+            self._job[2].cancel()  # not started yet (else it finishes, unused)
         abstract = _abstract(args)
         self._job = (following, sig, self._threads.submit(
             lambda: self._lower(abstract, following).compile()))
