@@ -85,6 +85,8 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--run-dir", help="our runs' directories, checkpoints included (large; "
                                       "default: a temporary folder)")
     ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--no-compile-ahead", action="store_true",
+                    help="our trainer without compiling ahead of pair-capacity growths")
     ap.add_argument("--no-ours", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
@@ -130,7 +132,8 @@ def run_ours(args, scene: str) -> dict:
     out = os.path.join(args.run_dir or tempfile.mkdtemp(prefix="lgs_bench_"), f"{scene}_ours")
     result = train.fit(d, args.steps, out, strategy=strategy, settings=settings,
                        max_gaussians=cap, seed=args.seed, overwrite=True, backend=args.backend,
-                       pool_size=cap if args.strategy == "mcmc" else None)
+                       pool_size=cap if args.strategy == "mcmc" else None,
+                       compile_ahead=False if args.no_compile_ahead else None)
     rows = report.read_metrics(os.path.join(out, "metrics.jsonl"))
     count = {r["step"]: r["gaussians"] for r in rows if "gaussians" in r and "step" in r}
     curve = [dict(step=r["step"], psnr=r["heldout_psnr"], ssim=r["heldout_ssim"],
