@@ -131,6 +131,9 @@ class TileBins:
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
       n_unbounded: int32 Gaussians binned to every tile because rounding could not bound them.
+      row_capacity: rows of the Pallas backward's per-pair gradient buffer (static): None for a
+        row per pair at its emission slot (capacity rows), else rows only for the pairs some
+        pixel of their tile reached, this many (backends.gaussian_grads.walked_rows).
     """
 
     gauss: Any
@@ -143,6 +146,7 @@ class TileBins:
     pairs_required: Any
     overflow: Any
     n_unbounded: Any
+    row_capacity: int | None = dataclasses.field(default=None, metadata=dict(static=True))
 
 
 def total_pairs(counts):
@@ -271,12 +275,15 @@ def sort_pairs(tile, gauss, n_tiles: int):
     return (tile, gauss[slot], slot) + tile_ranges(tile, n_tiles)
 
 
-def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
+def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
+                  row_capacity: int | None = None) -> TileBins:
     """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
-    pairs are emitted in depth order and the tile sort is stable."""
+    pairs are emitted in depth order and the tile sort is stable. `row_capacity`: the
+    backward's row buffer (`TileBins.row_capacity`)."""
     tiles_x, tiles_y = tile_grid(width, height)
     e = emit_pairs(p, width, height, capacity)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
                     first=e.first, count=e.count, pairs_required=e.total,
-                    overflow=e.total > capacity, n_unbounded=e.n_unbounded)
+                    overflow=e.total > capacity, n_unbounded=e.n_unbounded,
+                    row_capacity=row_capacity)

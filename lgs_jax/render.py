@@ -11,6 +11,10 @@ at most 12.5% waste). Under
 `jit`/`vmap` the caller passes `capacity` and reads `stats.overflow` / `stats.pairs_required`
 (`render_growing` does that loop). An eager call never returns a truncated image: it raises
 `CapacityError`.
+
+Row capacity: the Pallas backward stores a gradient row per pair and block of a tile, by default
+for every pair; `row_capacity` sizes that buffer for the pairs some pixel reached
+(`stats.pairs_walked`) instead, reported in `stats.row_overflow` the same way.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import numpy as np
 
 from . import binning
 from .backends import REGISTRY, RasterResult
+from .backends.interface import pairs_walked
 from .composite import PixelState, finish
 from .config import RasterConfig
 from .layout import tiles_to_image
@@ -73,6 +78,11 @@ class RenderStats:
         keep; −1 where not counted: `KernelConfig.mosaic_pair_source` "gaussians").
       capacity: size of the pair buffer used.
       overflow: pairs_required > capacity (the image lacks the farthest pairs).
+      pairs_walked: pairs some pixel of their tile reached (each tile's pairs up to its
+        pixels' latest stop; 0 for backends without pairs): the rows the Pallas backward needs
+        with a `row_capacity` (render's argument).
+      row_overflow: pairs_walked > row_capacity (the Pallas backward's gradients lack the
+        rows past it; the image is complete). False without a row_capacity.
       backend: name of the backend that rendered (static).
       kernel: the Pallas forward kernel that ran ("localgs-triton", "localgs-mosaic",
         "vanilla-triton", "vanilla-mosaic"; "" for the XLA
@@ -89,6 +99,8 @@ class RenderStats:
     strip_pairs: Any
     capacity: Any
     overflow: Any
+    pairs_walked: Any
+    row_overflow: Any
     backend: str = dataclasses.field(metadata=dict(static=True))
     kernel: str = dataclasses.field(default="", metadata=dict(static=True))
     interpreted: bool = dataclasses.field(default=False, metadata=dict(static=True))
@@ -154,7 +166,12 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
     i32 = functools.partial(jnp.sum, dtype=jnp.int32)
     zero = jnp.int32(0)
     strip_pairs = result.strip_pairs
+    walked = zero
+    if bins is not None and result.stop is not None:
+        walked = pairs_walked(result.stop, bins.tile_start, bins.tile_end)
+    rows = bins.row_capacity if bins is not None else None
     return RenderStats(
+        pairs_walked=walked, row_overflow=jnp.bool_(False) if rows is None else walked > rows,
         n_valid=i32(p.valid), n_invalid=i32(p.invalid), n_transparent=i32(~p.valid & ~p.invalid),
         n_unbounded=bins.n_unbounded if bins else zero,
         pairs_required=bins.pairs_required if bins else zero,
@@ -163,15 +180,16 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
         backend=backend, kernel=result.kernel, interpreted=result.interpreted)
 
 
-@functools.partial(jax.jit, static_argnames=("backend", "config", "capacity"))
+@functools.partial(jax.jit, static_argnames=("backend", "config", "capacity", "row_capacity"))
 def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
-            capacity: int, screen_offsets=None) -> RenderOutput:
+            capacity: int, row_capacity: int | None, screen_offsets=None) -> RenderOutput:
     width, height = cam.width, cam.height
     p = project(g, cam)
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
-    bins = binning.bin_gaussians(p, width, height, capacity) if spec.binned else None
+    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity) if spec.binned
+            else None)
     result = spec.rasterize(p, bins, width, height, config)
     state = PixelState(color=result.color, trans=result.trans, depth=result.depth, done=None)
     state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)
@@ -194,7 +212,8 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
     kernel, interpreted = REGISTRY[backend].describe(config)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
                         pairs_required=zero, strip_pairs=zero, capacity=zero,
-                        overflow=jnp.bool_(False), backend=backend, kernel=kernel,
+                        overflow=jnp.bool_(False), pairs_walked=zero,
+                        row_overflow=jnp.bool_(False), backend=backend, kernel=kernel,
                         interpreted=interpreted)
     return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
@@ -203,7 +222,7 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
 
 def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: str | None = None,
            config: RasterConfig | None = None, capacity: int | None = None,
-           screen_offsets=None) -> RenderOutput:
+           row_capacity: int | None = None, screen_offsets=None) -> RenderOutput:
     """Render `gaussians` through `camera` (conventions.md is the contract every backend meets).
 
     Args:
@@ -219,6 +238,13 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
       config: a `RasterConfig` (static), default `RasterConfig()`.
       capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up
         with `pair_capacity`. Under jit/vmap pass an int and check `stats.overflow`.
+      row_capacity: rows of the Pallas backends' backward buffer of per-pair gradients (48
+        bytes per row and block of a tile; the memory of a gradient at scale). None: a row for
+        every pair (capacity rows; nothing can overflow). An int: rows only for the pairs
+        some pixel reached (`stats.pairs_walked`, typically 15–30% of the pairs at 1M–10M
+        Gaussians), this many; the same gradients to the bit while `stats.row_overflow` is
+        False. Size it from an earlier render's `stats.pairs_walked` (`pair_capacity` of it
+        leaves headroom) and check `stats.row_overflow`. Other backends ignore it.
       screen_offsets: optional (N, 2) added to the projected means (pixels). Pass zeros and
         differentiate with respect to it to get ∂L/∂mean2d per Gaussian, the screen-space
         gradient densification strategies accumulate (with `visible`); binning sees the offset
@@ -244,6 +270,10 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if capacity is not None and (not isinstance(capacity, (int, np.integer))
                                  or not 0 < capacity <= binning.MAX_PAIRS):
         raise ValueError(f"capacity: expected an int in [1, 2^31 - 1] or None, got {capacity!r}")
+    if row_capacity is not None and (not isinstance(row_capacity, (int, np.integer))
+                                     or not 0 < row_capacity <= binning.MAX_PAIRS):
+        raise ValueError("row_capacity: expected an int in [1, 2^31 - 1] or None, got "
+                         f"{row_capacity!r}")
     if gaussians.num == 0:
         return _empty_render(camera, background, dt, backend, config)
     traced = _is_traced((gaussians, camera, background))
@@ -261,7 +291,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if screen_offsets is not None and np.shape(screen_offsets) != (gaussians.num, 2):
         raise ValueError(f"screen_offsets: expected shape ({gaussians.num}, 2), got "
                          f"{np.shape(screen_offsets)}")
-    out = _render(gaussians, camera, background, backend, config, int(capacity), screen_offsets)
+    rows = None if row_capacity is None or not REGISTRY[backend].binned else int(row_capacity)
+    out = _render(gaussians, camera, background, backend, config, int(capacity), rows,
+                  screen_offsets)
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):
         raise CapacityError(int(out.stats.pairs_required), int(capacity))
     return out

@@ -40,7 +40,7 @@ sys.path.insert(0, ROOT)
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
 from lgs_jax import binning  # noqa: E402
-from lgs_jax.backends import kernel_steps, pallas, pallas_mosaic  # noqa: E402
+from lgs_jax.backends import gaussian_grads, kernel_steps, pallas, pallas_mosaic  # noqa: E402
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import project  # noqa: E402
 
@@ -80,7 +80,8 @@ def reduction_share(g, cam, repeat: int):
         cf = dataclasses.replace(config, tuning=dataclasses.replace(config.tuning,
                                                                     mosaic_chunk=chunk))
         f = jax.jit(lambda b, m, r, o, lr: pallas_mosaic.backward_rows(
-            cf, False, plan.backward_pixels, tiles_x, o, b, m, r, lr, jnp.float32,
+            cf, False, plan.backward_pixels, tiles_x, o, b, gaussian_grads.slot_rows(b), m, r,
+            lr, jnp.float32,
             reduction=reduction))
         jax.block_until_ready(f(*args))  # compiled now, with backward_step as it is now
         return f

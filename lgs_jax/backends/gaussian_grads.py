@@ -20,6 +20,14 @@ no chained copy, no permutation, no segmented scan (the XLA path the `tiles` bac
 pairs.chain_hoisted_rows then backends.backward.per_gaussian_sum: the same values, summed in
 another association).
 
+Where the rows are (`RowLayout`): by default at the pairs' emission slots, a row per pair and
+block (`slot_rows`: capacity rows, those of pairs no pixel reached zero). With
+`TileBins.row_capacity` only the pairs some pixel of their tile reached get rows
+(`walked_rows`): the walked pairs (73–85% of the pairs are not, at 1.5M–10M Gaussians,
+BENCHMARKS.md §7), numbered in emission-slot order, so a Gaussian's rows are still
+consecutive and summed in the same order: the same gradients to the bit (a zero row adds +0)
+from a buffer of row_capacity rows instead of capacity.
+
 `sums` is the Pallas Triton kernel (one program per `LANES` Gaussians, looping to the longest
 count among them; per-lane gathers of rows, which Mosaic GPU's Pallas cannot express);
 `reference` the same arithmetic in jnp over all Gaussians at once (tests).
@@ -27,7 +35,9 @@ count among them; per-lane gathers of rows, which Mosaic GPU's Pallas cannot exp
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -41,10 +51,66 @@ from ..config import RasterConfig
 from ..layout import tile_origin_axis
 from ..projection import Projected
 from . import kernel_steps as ks
+from .interface import tile_last
 
 LANES = 32  # Gaussians per program (one warp): a program loops to its lanes' longest count;
 # 128 lanes took 2.70 ms at 10M/4K, 32 lanes 1.53 (BENCHMARKS.md §7)
 COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class RowLayout:
+    """Where the backward kernels write pair rows and where `sums` reads them.
+
+    Attributes:
+      at: (capacity,) int32 row of pair j (list order, as `TileBins.gauss`); pairs without a
+        row (and rows past the buffer: an overflow) point at the spare last row, never read.
+      end: (n_tiles,) int32 pairs [tile_start, end) of each tile get rows, the others none.
+      first, count: (N,) int32 each Gaussian's rows [first, first + count), in slot order.
+      size: rows in the buffer (static), the spare included where there is one.
+    """
+
+    at: Any
+    end: Any
+    first: Any
+    count: Any
+    size: int = dataclasses.field(metadata=dict(static=True))
+
+
+def slot_rows(bins: TileBins) -> RowLayout:
+    """A row per pair at its emission slot (`TileBins.slot`; capacity rows)."""
+    return RowLayout(at=bins.slot, end=bins.tile_end, first=bins.first, count=bins.count,
+                     size=bins.gauss.shape[0])
+
+
+def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
+    """Rows for the walked pairs only (`interface.tile_last` of the forward's `stop`),
+    numbered by an exclusive running count over emission slots (a Gaussian's walked slots get
+    consecutive rows), `row_capacity` of them and a spare: rows from row_capacity on (more
+    walked pairs than rows, which the render's `stats.row_overflow` reports) go to the spare,
+    and `count` stops at row_capacity, so nothing is written or read out of bounds."""
+    capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
+    last = tile_last(stop, bins.tile_start, bins.tile_end)
+    real = bins.tile < n_tiles
+    walked = real & (jnp.arange(capacity, dtype=jnp.int32)
+                     < last[jnp.where(real, bins.tile, 0)])
+    by_slot = jnp.zeros((capacity,), jnp.int32).at[bins.slot].set(
+        walked.astype(jnp.int32), unique_indices=True)
+    before = jnp.concatenate([jnp.zeros((1,), jnp.int32), jnp.cumsum(by_slot)])  # (capacity + 1,)
+    at = jnp.where(walked, jnp.minimum(before[bins.slot], row_capacity), row_capacity)
+    first = jnp.minimum(bins.first, capacity)
+    row_first = jnp.minimum(before[first], row_capacity)
+    row_end = jnp.minimum(before[jnp.minimum(first + bins.count, capacity)], row_capacity)
+    return RowLayout(at=at, end=last, first=row_first, count=row_end - row_first,
+                     size=row_capacity + 1)
+
+
+def rows_of(bins: TileBins, stop) -> RowLayout:
+    """The layout `bins.row_capacity` asks for (`slot_rows` or `walked_rows`)."""
+    if bins.row_capacity is None:
+        return slot_rows(bins)
+    return walked_rows(bins, stop, bins.row_capacity)
 
 
 def _pair_terms(vals, tile, fields, tiles_x: int, config: RasterConfig):
@@ -108,10 +174,10 @@ def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, ou
         out_ref[g, col] = v  # rows n and up: padding (distinct rows, dropped)
 
 
-def sums(rows, bins: TileBins, p: Projected, tiles_x: int, config: RasterConfig,
+def sums(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConfig,
          interpret: bool, lanes: int = LANES):
-    """(N, COLUMNS) per-Gaussian gradients from the backward kernels' emission-order rows
-    (blocks, capacity, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel with
+    """(N, COLUMNS) per-Gaussian gradients from the backward kernels' rows (blocks,
+    layout.size, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
     its lanes' longest count, so fewer lanes idle less where counts vary)."""
     if lanes % 32:
@@ -125,14 +191,14 @@ def sums(rows, bins: TileBins, p: Projected, tiles_x: int, config: RasterConfig,
         grid=(programs,), interpret=interpret,
         compiler_params=plt.CompilerParams(num_warps=lanes // 32, num_stages=1),
         name="gaussian_grads",
-    )(bins.first, bins.count, *_fields(p), rows)
+    )(layout.first, layout.count, *_fields(p), rows)
     return out[:n]
 
 
-def reference(rows, bins: TileBins, p: Projected, tiles_x: int, config: RasterConfig):
+def reference(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConfig):
     """`sums` in jnp: every Gaussian at once, the same walk over its slots and the same
     arithmetic (`_walk`; tests compare the kernel with it in interpret mode)."""
     mean, conic, opacity = _fields(p)
     fields = (mean[:, 0], mean[:, 1], conic[:, 0], conic[:, 1], conic[:, 2])
-    return jnp.stack(_walk(rows, rows.shape[0], bins.first, bins.count, fields, opacity,
+    return jnp.stack(_walk(rows, rows.shape[0], layout.first, layout.count, fields, opacity,
                            tiles_x, config), -1)

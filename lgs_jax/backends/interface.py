@@ -76,3 +76,16 @@ class Backend:
 def stop_within(stop, tile_end):
     """Stop records clipped to each tile's end (the one sentinel of `RasterResult.stop`)."""
     return jnp.minimum(stop, tile_end[:, None])
+
+
+def tile_last(stop, tile_start, tile_end):
+    """(n_tiles,) the end of each tile's walked pairs [tile_start, last): the latest stop pair
+    of its pixels, within its range. Pairs at or after it were blended by no pixel (each
+    pixel's stop is the first pair it did not blend because it was done)."""
+    return jnp.clip(jnp.max(stop, axis=1), tile_start, tile_end)
+
+
+def pairs_walked(stop, tile_start, tile_end):
+    """Σ over tiles of their walked pairs (`tile_last`): the rows the Pallas backward writes
+    with a `TileBins.row_capacity` (backends.gaussian_grads.walked_rows)."""
+    return jnp.sum(tile_last(stop, tile_start, tile_end) - tile_start, dtype=jnp.int32)

@@ -26,8 +26,10 @@ Backward (both backends): the backward kernel walks each tile's pairs back to fr
 last pair any pixel blended, with the forward's own α arithmetic (hoisted V·B clamped at ln o, or
 the difference form: the vanilla forward's backward is the Local-GS backward with hoist and
 warp_cull off) and strip masks: the walk of lgs_jax.backends.backward, one pair per step. Each
-pair's gradient, summed over its tile's pixels, is stored as a row at the pair's emission slot
-(one writer per row, no atomics), where each Gaussian's pairs are consecutive; a second kernel
+pair's gradient, summed over its tile's pixels, is stored as a row at the pair's emission slot,
+or with `TileBins.row_capacity` in a buffer of rows for the walked pairs only, numbered in slot
+order (gaussian_grads.RowLayout; one writer per row, no atomics): each Gaussian's rows are
+consecutive; a second kernel
 (lgs_jax.backends.gaussian_grads) chains each Gaussian's rows through Eq. 8 (hoisted form) and
 sums them, one lane per Gaussian in slot order: deterministic, and no per-pair XLA pass.
 
@@ -239,13 +241,15 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
     lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans,
                  g_depth)
+    layout = gaussian_grads.rows_of(bins, stop_at)
     if plan_.backward == "mosaic":
         rows = pallas_mosaic.backward_rows(config, plan_.interpret, plan_.backward_pixels,
-                                           tiles_x, order, bins, masks, records, lane_rows, dt)
+                                           tiles_x, order, bins, layout, masks, records,
+                                           lane_rows, dt)
     else:
-        rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, masks,
-                                           records, lane_rows, dt)
-    return gaussian_grads.sums(rows, bins, p, tiles_x, config, plan_.interpret)
+        rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, layout,
+                                           masks, records, lane_rows, dt)
+    return gaussian_grads.sums(rows, layout, p, tiles_x, config, plan_.interpret)
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):

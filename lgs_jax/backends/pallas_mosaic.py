@@ -50,7 +50,7 @@ exchange across the warps, one barrier per pair, one coalesced store of the row;
 which cannot run inline code, sums each term with `jnp.sum`). A pair none of the block's strips
 takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged groups, a
 backward step is long enough for the branch to pay. Each block writes its own row per pair at
-the pair's emission slot (zero where its pixels had stopped; lgs_jax.backends.gaussian_grads
+the pair's row (its emission slot, or its walked row: gaussian_grads.RowLayout) (zero where its pixels had stopped; lgs_jax.backends.gaussian_grads
 adds a tile's blocks and sums each Gaussian's rows): one writer per row, no atomics, a fixed
 summation order, deterministic.
 """
@@ -71,10 +71,11 @@ from . import kernel_steps as ks
 from . import mosaic_rows, mosaic_staging
 
 
-def _ranges(bins):
-    """(n_tiles, 2) [start, end) per tile as one fresh buffer: Mosaic GPU requires 256-byte
-    aligned operands, and XLA may pass `tile_end` (a slice of the ranges scan) at an offset."""
-    return jnp.stack([bins.tile_start, bins.tile_end], -1)
+def _ranges(*columns):
+    """(n_tiles, len(columns)) per-tile values (e.g. [start, end)) as one fresh buffer: Mosaic
+    GPU requires 256-byte aligned operands, and XLA may pass `tile_end` (a slice of the ranges
+    scan) at an offset."""
+    return jnp.stack(columns, -1)
 
 
 def _interpret_params(interpret: bool):
@@ -225,19 +226,20 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
     return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
                         grid=(n_tiles, TILE_PIXELS // pixels), grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
-                        kernel_name=kernel.func.__name__)(order, _ranges(bins), *data)
+                        kernel_name=kernel.func.__name__)(
+        order, _ranges(bins.tile_start, bins.tile_end), *data)
 
 
-def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_ref, stop_ref,
+def backward_kernel(order_ref, ranges_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref,
                     g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch,
                     config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
                     last_pair: int, interpret: bool):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, s] =
-    (pair j's gradient summed over this block's pixels, its tile) at the pair's emission slot
-    s = slot_ref[j] (backends.gaussian_grads reads them there), for the pairs before the
-    block's last stop pair, and zero rows for the tile's pairs after it: every real pair's row
-    is written once per block (the tile in every one), as `reduction` says
-    (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the shared-memory record buffers
+    (pair j's gradient summed over this block's pixels, its tile) at the pair's row
+    s = row_ref[j] (`gaussian_grads.RowLayout.at`; backends.gaussian_grads reads them there),
+    for the pairs before the block's last stop pair, and zero rows for the tile's pairs after
+    it up to the layout's end (ranges_ref = tile start, end, rows' end): every row is written
+    once per block (the tile in every one), as `reduction` says (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the shared-memory record buffers
     and their barriers (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`;
     the loop carries which exchange buffer is next). Each pair's strip mask and slot are loaded
     one pair ahead (the skip branch waits on them). With `tuning.mosaic_pair_source`
@@ -261,10 +263,10 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
     record, mask_of, begin = _backward_records(rec_ref, mask_ref, scratch[:n], tile, tiles_x,
                                                start, last, config, last_pair, interpret)
 
-    def ahead(j):  # pair j's (strip mask, emission slot)
+    def ahead(j):  # pair j's (strip mask, row)
         jj = jnp.maximum(j, 0)
         ahead_mask = config.warp_cull and mask_of is None
-        return mask_ref[jj] if ahead_mask else jnp.int32(0), slot_ref[jj]
+        return mask_ref[jj] if ahead_mask else jnp.int32(0), row_ref[jj]
 
     def skip(j, mask_word, s, carry, parity):  # a zero row, the carry unchanged
         del j, mask_word
@@ -296,10 +298,10 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, slot_ref, rec_ref, trans_re
                   (ahead(last - 1), (trans, zero, zero, zero, zero), jnp.int32(0)))
 
     def after(i, c):  # pairs no pixel of this block reached
-        zero_row(slot_ref[last + i])
+        zero_row(row_ref[last + i])
         return c
 
-    lax.fori_loop(0, end - last, after, jnp.int32(0))
+    lax.fori_loop(0, jnp.maximum(ranges_ref[tile, 2] - last, 0), after, jnp.int32(0))
 
 
 def _backward_records(rec_ref, mask_ref, scratch, tile, tiles_x: int, start, last,
@@ -353,11 +355,11 @@ def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
 
 
 def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, order, bins,
-                  masks, records, lane_rows, dt, reduction: str | None = None):
-    """(blocks per tile, capacity, ROW_WIDTH) pair rows in emission order from
-    `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each real pair
-    (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
-    padding slots are left unwritten (no Gaussian's slots reach them). `lane_rows` = the
+                  layout, masks, records, lane_rows, dt, reduction: str | None = None):
+    """(blocks per tile, layout.size, ROW_WIDTH) pair rows (`gaussian_grads.RowLayout`) from
+    `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each pair with a
+    row (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
+    rows no pair has are left unwritten (no Gaussian's rows reach them). `lane_rows` = the
     per-tile final T, stop pairs and cotangents (r, g, b, T, D). (masks, records): the pairs'
     (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians".
     `reduction`:
@@ -367,7 +369,7 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                reduction=reduction, last_pair=capacity - 1, interpret=interpret)
-    out = jax.ShapeDtypeStruct((n, capacity, ks.ROW_WIDTH), dt)
+    out = jax.ShapeDtypeStruct((n, layout.size, ks.ROW_WIDTH), dt)
     scratch = ()
     if config.tuning.mosaic_pair_source == "gaussians":
         scratch = mosaic_staging.scratch(dt)
@@ -379,4 +381,5 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
                         grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
                         kernel_name="localgs_backward_mosaic")(
-        order, _ranges(bins), masks, bins.slot, records, *lane_rows)
+        order, _ranges(bins.tile_start, bins.tile_end, layout.end), masks, layout.at, records,
+        *lane_rows)

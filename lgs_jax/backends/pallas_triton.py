@@ -18,8 +18,8 @@ every pixel is done.
 Backward (`backward_kernel`): one program per tile, 256 lanes (8 warps), walking the tile's pairs
 back to front from the last pair any pixel blended (`kernel_steps.backward_step`). Per pair, the
 per-pixel gradient terms are reduced over the tile in one (256, 16) column reduction and stored
-with the tile as the row at the pair's emission slot (backends.gaussian_grads sums them per
-Gaussian there): each pair belongs to one tile, so every row has one writer (no atomics; rows
+with the tile as the pair's row (its emission slot, or its walked row: gaussian_grads.RowLayout;
+backends.gaussian_grads sums them per Gaussian there): each pair belongs to one tile, so every row has one writer (no atomics; rows
 of pairs never visited stay zero, through an aliased zero buffer).
 """
 
@@ -117,12 +117,13 @@ def _columns(values, lanes: int, dt):
     return jnp.sum(m, axis=0)
 
 
-def backward_kernel(order_ref, start_ref, end_ref, mask_ref, slot_ref, rec_ref, trans_ref,
+def backward_kernel(order_ref, start_ref, end_ref, mask_ref, row_ref, rec_ref, trans_ref,
                     stop_ref, g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, _zeros_ref, rows_ref,
                     *, config: RasterConfig, tiles_x: int):
-    """One tile's backward walk (`kernel_steps.backward_step`): rows_ref[slot_ref[j]] = (pair
-    j's gradient summed over the tile's pixels, its tile) at the pair's emission slot, for
-    every pair some pixel blended (the others keep their zero row)."""
+    """One tile's backward walk (`kernel_steps.backward_step`): rows_ref[row_ref[j]] = (pair
+    j's gradient summed over the tile's pixels, its tile) at the pair's row
+    (`gaussian_grads.RowLayout.at`), for every pair some pixel blended (the others keep their
+    zero row)."""
     dt = rec_ref.dtype
     tile = order_ref[pl.program_id(0)]
     trans, stop_at = trans_ref[tile, :], stop_ref[tile, :]
@@ -138,7 +139,7 @@ def backward_kernel(order_ref, start_ref, end_ref, mask_ref, slot_ref, rec_ref, 
         values, carry = ks.backward_step(j, rec, mask_ref[j] if config.warp_cull else None, lane,
                                          carry, config)
         row = _columns(values, TILE_PIXELS, dt)
-        rows_ref[slot_ref[j], :] = jnp.where(lax.iota(jnp.int32, GRAD_COLUMNS) == ks.TILE_COLUMN,
+        rows_ref[row_ref[j], :] = jnp.where(lax.iota(jnp.int32, GRAD_COLUMNS) == ks.TILE_COLUMN,
                                              tile.astype(dt), row)
         return carry
 
@@ -146,18 +147,20 @@ def backward_kernel(order_ref, start_ref, end_ref, mask_ref, slot_ref, rec_ref, 
     lax.fori_loop(0, jnp.maximum(last - start, 0), body, (trans, zero, zero, zero, zero))
 
 
-def backward_rows(config: RasterConfig, interpret: bool, tiles_x: int, order, bins, masks,
-                  records, lane_rows, dt):
-    """(1, capacity, GRAD_COLUMNS) pair rows of the backward kernel in emission order
-    (GRAD_VALUES gradient values, then the tile: backends.gaussian_grads); `lane_rows` = the
-    per-tile (n_tiles, 256) final T, stop pairs and cotangents (r, g, b, T, D)."""
+def backward_rows(config: RasterConfig, interpret: bool, tiles_x: int, order, bins, layout,
+                  masks, records, lane_rows, dt):
+    """(1, layout.size, GRAD_COLUMNS) pair rows of the backward kernel
+    (`gaussian_grads.RowLayout`; GRAD_VALUES gradient values, then the tile:
+    backends.gaussian_grads); `lane_rows` = the per-tile (n_tiles, 256) final T, stop pairs and
+    cotangents (r, g, b, T, D). A tile's walk ends at its last stop pair, which is the
+    layout's end with walked rows (`gaussian_grads.walked_rows`)."""
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x)
-    zeros = jnp.zeros((bins.gauss.shape[0], GRAD_COLUMNS), dt)
+    zeros = jnp.zeros((layout.size, GRAD_COLUMNS), dt)
     rows = pl.pallas_call(
         kernel, out_shape=jax.ShapeDtypeStruct(zeros.shape, dt),
         grid=(bins.tile_start.shape[0],),
         input_output_aliases={13: 0},  # unvisited and padding pairs keep their zero row
         compiler_params=_compiler_params(8), interpret=interpret,
         name="localgs_backward",
-    )(order, bins.tile_start, bins.tile_end, masks, bins.slot, records, *lane_rows, zeros)
+    )(order, bins.tile_start, bins.tile_end, masks, layout.at, records, *lane_rows, zeros)
     return rows[None]

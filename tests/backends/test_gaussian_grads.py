@@ -30,8 +30,9 @@ def _projected_bins(g, cam, capacity):
 @functools.partial(jax.jit, static_argnums=(3,))
 def _three_ways(rows, bins, p, config):
     """(kernel, jnp twin, XLA path) per-Gaussian gradients of emission-order `rows`."""
-    kernel = gaussian_grads.sums(rows, bins, p, TILES_X, config, interpret=True)
-    twin = gaussian_grads.reference(rows, bins, p, TILES_X, config)
+    layout = gaussian_grads.slot_rows(bins)
+    kernel = gaussian_grads.sums(rows, layout, p, TILES_X, config, interpret=True)
+    twin = gaussian_grads.reference(rows, layout, p, TILES_X, config)
     sorted_rows = jnp.sum(rows[:, bins.slot, :ks.GRAD_VALUES], 0)  # the blocks added
     if config.hoist:
         per_pair = pairs.chain_hoisted_rows(pairs.gather(p, bins.gauss), bins, sorted_rows,
