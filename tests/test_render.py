@@ -147,6 +147,7 @@ def test_bad_cameras_raise_naming_the_argument(scene32, change, match):
 @pytest.mark.parametrize("kwargs,match", [
     (dict(background=np.zeros(4)), "background"), (dict(backend="cuda"), "backend"),
     (dict(capacity=0), "capacity"), (dict(capacity=2.5), "capacity"),
+    (dict(row_capacity=0), "row_capacity"), (dict(row_capacity=64.0), "row_capacity"),
     (dict(config="3dgs"), "config"),
 ])
 def test_bad_arguments_raise(scene32, kwargs, match):

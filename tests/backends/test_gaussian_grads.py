@@ -1,7 +1,10 @@
 """lgs_jax.backends.gaussian_grads: the Pallas backward's per-Gaussian chain and sum of the
 emission-order pair rows, against its jnp twin (bit for bit, interpret mode) and against the
-XLA path of the `tiles` backend (pairs.chain_hoisted_rows + backward.per_gaussian_sum)."""
+XLA path of the `tiles` backend (pairs.chain_hoisted_rows + backward.per_gaussian_sum); the
+walked-rows layout (`walked_rows`) against numpy, and gradients through it (`render`'s
+`row_capacity`) against those of a row per pair, bit for bit."""
 
+import dataclasses
 import functools
 
 import jax
@@ -10,6 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+import lgs_jax
 from lgs_jax import binning, pairs
 from lgs_jax.backends import backward, gaussian_grads, kernel_steps as ks
 from lgs_jax.config import RasterConfig as C
@@ -48,6 +52,7 @@ CONFIGS = {"hoisted": C(), "center": C(origin="center"), "global": C(local_coord
 
 
 SLOW = pytest.mark.slow
+FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")  # Gaussians' leaf order
 
 
 @pytest.mark.parametrize("name,capacity,blocks", [
@@ -75,3 +80,88 @@ def test_kernel_equals_its_twin_and_the_xla_path_float64(name, capacity, blocks,
     scale = np.max(np.abs(xla), 0) + 1e-300
     np.testing.assert_allclose(kernel / scale, xla / scale, rtol=0, atol=1e-12)
     assert np.any(kernel != 0)
+
+
+@settings(max_examples=10)
+@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), spare=st.integers(-30, 5))
+def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, share, spare):
+    """Random stop pairs (a tile walks a random share of its list): a pair has a row iff it lies
+    before its tile's latest stop; the rows of the walked pairs are 0, 1, ... in emission-slot
+    order (so each Gaussian's are consecutive, [first, first + count)); with fewer rows than
+    walked pairs (`spare` < 0) the pairs past them point at the spare row and the Gaussians'
+    ranges stop at it."""
+    g = scenes.cast(scenes.scene(seed), np.float64)
+    _, bins = _projected_bins(g, scenes.camera(W, H), 1024)
+    rng = np.random.default_rng(seed)
+    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
+    walk = np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
+    stop = start[:, None] + rng.integers(0, walk[:, None] + 1, size=(start.size, 256))
+    stop[:, 0] = start + walk  # the latest stop of each tile
+    last = start + walk
+    tile, slot = np.asarray(bins.tile), np.asarray(bins.slot)
+    walked = (tile < start.size) & (np.arange(tile.size) < last[np.minimum(tile, start.size - 1)])
+    rows = max(int(walked.sum()) + spare, 1)
+    layout = jax.jit(gaussian_grads.walked_rows, static_argnums=2)(bins, stop, rows)
+    assert layout.size == rows + 1
+    np.testing.assert_array_equal(layout.end, last)
+    by_slot = np.zeros(tile.size, bool)
+    by_slot[slot[walked]] = True
+    number = np.cumsum(by_slot) - by_slot  # walked pairs numbered in slot order
+    want = np.where(walked, np.minimum(number[slot], rows), rows)
+    np.testing.assert_array_equal(layout.at, want)
+    first, count = np.asarray(bins.first), np.asarray(bins.count)
+    for i in range(first.size):
+        mine = np.flatnonzero(by_slot[first[i]:first[i] + count[i]]) + first[i]
+        got = np.arange(layout.first[i], layout.first[i] + layout.count[i])
+        np.testing.assert_array_equal(got, np.minimum(number[mine], rows)[number[mine] < rows])
+
+
+def _saturating(seed: int, n: int):
+    """Adversarial Gaussians behind and among a wall of large, nearly opaque ones (every other
+    Gaussian): most pixels stop well before the end of their tile's list."""
+    g = scenes.scene(seed, kinds=("normal", "needle", "tiny", "opaque", "invalid"), n=n)
+    rng = np.random.default_rng(seed)
+    wall = np.arange(n) % 2 == 0
+    means, log_scales, logit = (np.array(x) for x in (g.means, g.log_scales, g.logit_opacities))
+    means[wall] = np.stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-0.5, 0.5, n),
+                            rng.uniform(2.0, 4.0, n)], -1)[wall]
+    log_scales[wall] = rng.uniform(-0.5, 0.5, (n, 3))[wall]
+    logit[wall] = rng.uniform(2, 6, n)[wall]
+    return scenes.cast(dataclasses.replace(g, means=means, log_scales=log_scales,
+                                           logit_opacities=logit), np.float32)
+
+
+@pytest.mark.parametrize("kernel,pixels", [("triton", None),
+                                           pytest.param("mosaic", 128, marks=pytest.mark.slow)])
+@settings(max_examples=1)  # interpret mode
+@given(seed=st.integers(0, 2**32 - 1))
+def test_walked_rows_give_the_gradients_of_a_row_per_pair_to_the_bit(kernel, pixels, seed):
+    """`render(row_capacity=stats.pairs_walked)`: the Pallas backward with rows for the walked
+    pairs only gives the gradients of a row per pair, bit for bit, on a scene where most pairs
+    are not walked (asserted); one row fewer is reported (`stats.row_overflow`), never NaN,
+    and leaves the image unchanged."""
+    g, cam = _saturating(seed, 200), scenes.camera(32, 32)
+    w = np.random.default_rng(seed).normal(size=(32, 32, 3)).astype(np.float32)
+    config = C(kernel=kernel, tuning=lgs_jax.KernelConfig(mosaic_forward_pixels=pixels,
+                                                          mosaic_backward_pixels=pixels))
+
+    @functools.partial(jax.jit, static_argnums=1)
+    def grads(g, rows):
+        def loss(g):
+            out = lgs_jax.render(g, cam, backend="pallas", config=config, capacity=2048,
+                                 row_capacity=rows)
+            return jnp.sum(out.image * w), out
+        return jax.grad(loss, has_aux=True)(g)
+
+    every, out = grads(g, None)
+    walked = int(out.stats.pairs_walked)
+    assert 0 < walked < int(out.stats.pairs_required) / 2  # the layout has pairs to leave out
+    assert not bool(out.stats.row_overflow)
+    got, out_walked = grads(g, walked)
+    assert not bool(out_walked.stats.row_overflow)
+    for name, a, b in zip(FIELDS, jax.tree.leaves(got), jax.tree.leaves(every)):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    short, out_short = grads(g, walked - 1)
+    assert bool(out_short.stats.row_overflow)
+    np.testing.assert_array_equal(out_short.image, out.image)
+    assert all(np.all(np.isfinite(x)) for x in jax.tree.leaves(short))
