@@ -8,8 +8,10 @@ each round.
 Rows (`ROWS`) name a backend and config; every row's pair buffer is `lgs_jax.pair_capacity` of
 the view's pairs, or with the suffix `@pow2` (e.g. `--rows localgs,localgs@pow2`) the power of
 two above them, the policy before `pair_capacity`: the same row at both sizes measures what the
-pair capacity costs in one run. The shared stages below (`project`, `emit`, `sort`,
-`pair_prep`) are timed once, at the `pair_capacity` size.
+pair capacity costs in one run. With --grad, the suffix `@walked` gives the backward rows for
+the walked pairs only (`render`'s `row_capacity`, sized from an eager forward). The shared
+stages below (`project`, `emit`, `sort`, `pair_prep`) are timed once, at the `pair_capacity`
+size.
 
 Scenes (`SCENES`): guitar (91k) and lego_sh3 (60k) as they are, densified copies of guitar
 (lgs_jax.synthetic.densified: x16 1.5M, x64 5.8M, x110 10M) and lego_sh3 (x16 1M), and
@@ -80,12 +82,16 @@ ROWS = {
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""
+WALKED = "@walked"
+"""Row-name suffix (--grad): the backward's rows for the walked pairs only, `render`'s
+`row_capacity` = `pair_capacity` of an eager forward's `stats.pairs_walked` (as the pair
+capacity is sized from a count of the pairs)."""
 
 
 def row_setup(name: str, n_pairs: int):
-    """(backend, config, pair capacity) of row `name` (a `ROWS` key, optionally + `POW2`) for a
-    view of `n_pairs` tile–Gaussian pairs."""
-    backend, config = ROWS[name.removesuffix(POW2)]
+    """(backend, config, pair capacity) of row `name` (a `ROWS` key, optionally + `POW2` or
+    `WALKED`) for a view of `n_pairs` tile–Gaussian pairs."""
+    backend, config = ROWS[name.removesuffix(POW2).removesuffix(WALKED)]
     cap = next_pow2(n_pairs) if name.endswith(POW2) else lgs_jax.pair_capacity(n_pairs)
     return backend, config, cap
 
@@ -230,16 +236,27 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     fns, extra = {}, {}
     for name in rows:
         backend, config, cap = row_setup(name, n_pairs)
-        image = lambda g, b=backend, cf=config, cap=cap: lgs_jax.render(
-            g, cam, backend=b, config=cf, capacity=cap).image
+        row_cap = None
+        if name.endswith(WALKED):
+            walked = lgs_jax.render(g, cam, backend=backend, config=config,
+                                    capacity=cap).stats.pairs_walked
+            row_cap = lgs_jax.pair_capacity(int(walked))
+        render = lambda g, b=backend, cf=config, cap=cap, rc=row_cap: lgs_jax.render(
+            g, cam, backend=b, config=cf, capacity=cap, row_capacity=rc)
         # w is an argument: closed over, XLA would constant-fold the image-sized weights into
         # the backward (minutes of compilation at 4K).
-        f = jax.jit(jax.value_and_grad(lambda g, w, image=image: jnp.sum(image(g) * w)))
-        first, again = f(g, weights)[1], f(g, weights)[1]
+        f = jax.jit(jax.value_and_grad(
+            lambda g, w, render=render: (lambda o: (jnp.sum(o.image * w),
+                                                    o.stats.row_overflow))(render(g)),
+            has_aux=True))
+        (_, overflow), first = f(g, weights)
+        again = f(g, weights)[1]
         same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
                                                                  jax.tree.leaves(again)))
-        extra[name] = dict(capacity=cap, memory_mib=compiled_mib(f, g, weights),
-                           bitwise_repeatable=same)
+        if bool(overflow):
+            print(f"{scene} {name}: row capacity {row_cap} overflowed", file=sys.stderr)
+        extra[name] = dict(capacity=cap, row_capacity=row_cap,
+                           memory_mib=compiled_mib(f, g, weights), bitwise_repeatable=same)
         fns[name] = lambda f=f: jax.block_until_ready(f(g, weights))
     if with_gsplat:
         step = gsplat_grad_step(g, cam, weights)
@@ -296,6 +313,8 @@ def _format(r) -> str:
               f"gsplat" if "fwd_bwd_vs_gsplat" in r else "")
         same = {True: " bitwise", False: " NOT BITWISE"}.get(r.get("bitwise_repeatable"), "")
         cap = f" cap {r['capacity'] / 1e6:6.2f}M" if "capacity" in r else ""
+        if r.get("row_capacity"):
+            cap += f" rows {r['row_capacity'] / 1e6:6.2f}M"
         return (f"{head} fwd+bwd {r['fwd_bwd_ms']:8.2f} ms mem {r['memory_mib']:8.0f} MiB{cap}"
                 f"{vs}{same}")
     vs = (f" | {r['e2e_vs_gsplat']:5.2f}x time {r['memory_vs_gsplat']:5.2f}x memory of gsplat, "
@@ -321,9 +340,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     rows = args.rows.split(",")
     for name in rows:
-        if name.removesuffix(POW2) not in ROWS:
+        if name.removesuffix(POW2).removesuffix(WALKED) not in ROWS:
             ap.error(f"--rows: unknown row {name!r} (known: {', '.join(ROWS)}, each optionally "
-                     f"with the suffix {POW2})")
+                     f"with the suffix {POW2}, or with --grad {WALKED})")
+        if name.endswith(WALKED) and not args.grad:
+            ap.error(f"--rows: {name!r}: the suffix {WALKED} sizes the backward (--grad)")
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     results = []
     for scene in args.scenes.split(","):
