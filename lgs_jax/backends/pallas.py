@@ -14,9 +14,10 @@ reaches `KernelConfig.vanilla_from_pairs`, which runs the vanilla kernel: a tie 
 hoisted 6-vector V per (tile, Gaussian) pair (Eq. 8; built in the Mosaic GPU kernels,
 lgs_jax.backends.mosaic_staging, or in XLA, `kernel_steps.pair_records`), ln α as
 V·[x'², x'y', y'², x', y', 1] per pixel (Eq. 10), the strip masks as warp-uniform predicates
-or branches (Sec. III-C), exact or fast (Sec. III-D) blending. `pallas_vanilla` runs the original 3DGS rasterizer (difference form, per-pixel
-termination, a tile-wide early exit); it ignores the Local-GS switches (it is the baseline the
-paper measures against) but honours `convention` and `blend`.
+or branches (Sec. III-C), exact or fast (Sec. III-D) blending. `pallas_vanilla` runs the
+original 3DGS rasterizer (difference form, per-pixel termination, a tile-wide early exit); it
+ignores the Local-GS switches (it is the baseline the paper measures against) but honours
+`convention` and `blend`.
 
 Programs run tiles in order of decreasing list length (longest-first scheduling: the slowest
 programs start first and short ones fill in behind them; each writes its own output row). Both

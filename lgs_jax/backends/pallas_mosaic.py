@@ -41,18 +41,18 @@ Arithmetic and blending are exactly those of the Triton kernels (the same functi
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
 multiply-add contraction differ by ulps); both record per-pixel stop pairs for the backward.
 
-Backward. The same blocks walk the tile's pairs back to front from the last pair any of their
-pixels blended (`kernel_steps.backward_step`), float32 records staged in shared memory as in the
-forward (chunks aligned to multiples of the chunk size, copied downward), and reduce each pair's
-11 gradient terms over their pixels with a transposing butterfly (lgs_jax.backends.mosaic_rows,
-inline Mosaic GPU code: 13 shuffles per thread where one warp reduction per term takes 55, one
-exchange across the warps, one barrier per pair, one coalesced store of the row; interpret mode,
-which cannot run inline code, sums each term with `jnp.sum`). A pair none of the block's strips
-takes (mask bits clear) is skipped by one uniform branch: unlike the forward's staged groups, a
-backward step is long enough for the branch to pay. Each block writes its own row per pair at
-the pair's row (its emission slot, or its walked row: gaussian_grads.RowLayout) (zero where its pixels had stopped; lgs_jax.backends.gaussian_grads
-adds a tile's blocks and sums each Gaussian's rows): one writer per row, no atomics, a fixed
-summation order, deterministic.
+Backward. The same blocks walk the tile's pairs back to front from the last pair any of their pixels
+blended (`kernel_steps.backward_step`), float32 records staged in shared memory as in the forward
+(chunks aligned to multiples of the chunk size, copied downward), and reduce each pair's 11 gradient
+terms over their pixels with a transposing butterfly (lgs_jax.backends.mosaic_rows, inline Mosaic
+GPU code: 13 shuffles per thread where one warp reduction per term takes 55, one exchange across the
+warps, one barrier per pair, one coalesced store of the row; interpret mode, which cannot run inline
+code, sums each term with `jnp.sum`). A pair none of the block's strips takes (mask bits clear) is
+skipped by one uniform branch: unlike the forward's staged groups, a backward step is long enough
+for the branch to pay. Each block writes its own row per pair at the pair's row (its emission slot,
+or its walked row: gaussian_grads.RowLayout) (zero where its pixels had stopped;
+lgs_jax.backends.gaussian_grads adds a tile's blocks and sums each Gaussian's rows): one writer per
+row, no atomics, a fixed summation order, deterministic.
 """
 
 from __future__ import annotations
@@ -235,17 +235,18 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, row_ref, rec_ref, trans_ref
                     config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
                     last_pair: int, interpret: bool):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, s] =
-    (pair j's gradient summed over this block's pixels, its tile) at the pair's row
-    s = row_ref[j] (`gaussian_grads.RowLayout.at`; backends.gaussian_grads reads them there),
-    for the pairs before the block's last stop pair, and zero rows for the tile's pairs after
-    it up to the layout's end (ranges_ref = tile start, end, rows' end): every row is written
-    once per block (the tile in every one), as `reduction` says (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the shared-memory record buffers
-    and their barriers (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`;
-    the loop carries which exchange buffer is next). Each pair's strip mask and slot are loaded
-    one pair ahead (the skip branch waits on them). With `tuning.mosaic_pair_source`
-    "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids, `pairs.gaussian_table`),
-    the records and masks are built per chunk in shared memory (`mosaic_staging`, its buffers
-    first in `scratch`) and a pair's mask is read there once its chunk is built."""
+    (pair j's gradient summed over this block's pixels, its tile) at the pair's row s = row_ref[j]
+    (`gaussian_grads.RowLayout.at`; backends.gaussian_grads reads them there), for the pairs before
+    the block's last stop pair, and zero rows for the tile's pairs after it up to the layout's end
+    (ranges_ref = tile start, end, rows' end): every row is written once per block (the tile in
+    every one), as `reduction` says (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the
+    shared-memory record buffers and their barriers (`_smem_records_backward`), then the reduction's
+    (`mosaic_rows.scratch`; the loop carries which exchange buffer is next). Each pair's strip mask
+    and row are loaded one pair ahead (the skip branch waits on them). With
+    `tuning.mosaic_pair_source` "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids,
+    `pairs.gaussian_table`), the records and masks are built per chunk in shared memory
+    (`mosaic_staging`, its buffers first in `scratch`) and a pair's mask is read there once its
+    chunk is built."""
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
