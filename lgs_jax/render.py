@@ -82,7 +82,8 @@ class RenderStats:
         pixels' latest stop; 0 for backends without pairs): the rows the Pallas backward needs
         with a `row_capacity` (render's argument).
       row_overflow: pairs_walked > row_capacity (the Pallas backward's gradients lack the
-        rows past it; the image is complete). False without a row_capacity.
+        rows past it; the image is complete). False without a row_capacity, and for backends
+        that store no pair rows (they ignore it).
       backend: name of the backend that rendered (static).
       kernel: the Pallas forward kernel that ran ("localgs-triton", "localgs-mosaic",
         "vanilla-triton", "vanilla-mosaic"; "" for the XLA
@@ -291,7 +292,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if screen_offsets is not None and np.shape(screen_offsets) != (gaussians.num, 2):
         raise ValueError(f"screen_offsets: expected shape ({gaussians.num}, 2), got "
                          f"{np.shape(screen_offsets)}")
-    rows = None if row_capacity is None or not REGISTRY[backend].binned else int(row_capacity)
+    rows = int(row_capacity) if row_capacity is not None and REGISTRY[backend].pair_rows else None
     out = _render(gaussians, camera, background, backend, config, int(capacity), rows,
                   screen_offsets)
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):

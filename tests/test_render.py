@@ -53,6 +53,19 @@ def test_eager_overflow_raises_with_required_size(scene32):
     assert err.value.required > 4
 
 
+def test_row_capacity_is_reported_only_where_the_backward_stores_pair_rows(scene32):
+    """`tiles` stores no pair rows: row_capacity changes nothing and never overflows; the
+    walked pairs are counted either way, at most the pairs."""
+    cam = scenes.camera()
+    plain = lgs_jax.render(scene32, cam, backend="tiles")
+    small = lgs_jax.render(scene32, cam, backend="tiles", row_capacity=1)
+    np.testing.assert_array_equal(small.image, plain.image)
+    assert not bool(small.stats.row_overflow)
+    walked = int(small.stats.pairs_walked)
+    assert walked == int(plain.stats.pairs_walked)
+    assert 0 < walked <= int(plain.stats.pairs_required)
+
+
 def test_render_growing_settles_on_enough_capacity(scene32):
     f = jax.jit(lambda g, c, capacity: lgs_jax.render(g, c, capacity=capacity),
                 static_argnames="capacity")

@@ -65,12 +65,15 @@ class Backend:
       binned: whether it needs the tile–Gaussian pairs (False: `bins` is None).
       describe: config -> (kernel name, interpreted), what `rasterize` would report, for renders
         that run no backend (an empty scene).
+      pair_rows: its backward stores per-pair gradient rows (the Pallas backends), sized by
+        `TileBins.row_capacity`.
     """
 
     name: str
     rasterize: Callable[..., RasterResult]
     binned: bool = True
     describe: Callable[[Any], tuple[str, bool]] = no_kernel
+    pair_rows: bool = False
 
 
 def stop_within(stop, tile_end):

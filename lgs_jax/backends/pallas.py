@@ -270,6 +270,6 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
                         kernel=plan_.kernel_name, interpreted=plan_.interpret)
 
 
-LOCALGS = Backend("pallas", rasterize, describe=describe(False))
+LOCALGS = Backend("pallas", rasterize, describe=describe(False), pair_rows=True)
 VANILLA = Backend("pallas_vanilla", lambda *args: rasterize(*args, vanilla=True),
-                  describe=describe(True))
+                  describe=describe(True), pair_rows=True)
