@@ -10,7 +10,9 @@ ncu's occupancy of the Local-GS kernel), each costing its walked pairs. Printed:
 makespan over the ideal (all walked pairs / R) and the longest single block over the ideal, a
 lower bound of the makespan whatever the order; then, per `--split` length, the bounds of
 `split_model` (long lists split across blocks) relative to that makespan. The `tiles` backend on
-a CPU (same stops).
+a CPU (same stops). Also printed: the pairs some block of their tile walked (`render`'s
+`stats.pairs_walked`) and the backward's row buffers (48 bytes per row and block) for them and
+for every pair.
 """
 import argparse
 import heapq
@@ -106,6 +108,11 @@ def main() -> int:
               f"{walked.max()}; longest-first makespan / ideal "
               f"{schedule(lengths, walked, per_tile) / ideal:.2f}, longest block / ideal "
               f"{walked.max() / ideal:.2f}", flush=True)
+        union = int(walked.max(1).sum())  # = render's stats.pairs_walked
+        print(f"  pairs walked by some block of their tile {union / 1e6:.2f}M "
+              f"({union / lengths.sum():.1%}): the backward's rows with a row_capacity, "
+              f"{per_tile} x {union * 48 / 2**20:.0f} MiB against {per_tile} x "
+              f"{lengths.sum() * 48 / 2**20:.0f} MiB at the pairs", flush=True)
         now = schedule(lengths, walked, per_tile)
         for seg in args.split:
             lo, hi = split_model(lengths, walked, seg)
