@@ -74,6 +74,13 @@ class KernelConfig:
         H200, same process as gsplat 1.5.3 (BENCHMARKS.md §7): forward 7.11 against 8.83 ms
         and 1211 against 2309 MiB at 10M Gaussians at 4K, forward+backward 18.63 against
         20.46 ms; equal within 0.04 ms on the 0.06M–0.09M scenes.
+      mosaic_backward_segment: split each tile's backward walk into blocks of at most this many
+        pairs (a multiple of mosaic_unroll_localgs), each entering with the transmittance,
+        colour and depth the Local-GS Mosaic GPU forward stored at that pair
+        (lgs_jax.backends.backward_segments); None: one block walks the whole list. The
+        gradients match the unsplit walk's within float32 rounding (the sums behind a segment
+        are C − C_hi, not a running sum). Experimental: not yet measured on a GPU
+        (BENCHMARKS.md §7 has the schedule model that motivates it).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -94,6 +101,7 @@ class KernelConfig:
     mosaic_whole_tile_from: int = 8192
     mosaic_chunk: int = 64
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
+    mosaic_backward_segment: int | None = None
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -114,6 +122,12 @@ class KernelConfig:
         if self.mosaic_pair_source == "gaussians" and 128 % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_unroll_localgs: must divide the 128 pairs of a "
                              f"chunk staged from Gaussians, got {self.mosaic_unroll_localgs}")
+        if self.mosaic_backward_segment is not None:
+            _check_int("tuning.mosaic_backward_segment", self.mosaic_backward_segment, 1)
+            if self.mosaic_backward_segment % self.mosaic_unroll_localgs:
+                raise ValueError(f"tuning.mosaic_backward_segment: {self.mosaic_backward_segment}"
+                                 f" is not a multiple of mosaic_unroll_localgs="
+                                 f"{self.mosaic_unroll_localgs}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
                              f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")

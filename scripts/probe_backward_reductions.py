@@ -40,7 +40,8 @@ sys.path.insert(0, ROOT)
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
 from lgs_jax import binning  # noqa: E402
-from lgs_jax.backends import gaussian_grads, kernel_steps, pallas, pallas_mosaic  # noqa: E402
+from lgs_jax.backends import (backward_segments, gaussian_grads, kernel_steps,  # noqa: E402
+                              pallas, pallas_mosaic)
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import project  # noqa: E402
 
@@ -71,7 +72,7 @@ def reduction_share(g, cam, repeat: int):
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
     plan = pallas.plan(config, False, tiles_x * tiles_y)
     state, stop, _, saved = jax.jit(lambda p, b: pallas._forward(p, b, w, h, plan))(p, bins)
-    masks, records, order = saved
+    masks, records, order, _ = saved
     rng = np.random.default_rng(0)
     cot = [jnp.asarray(rng.normal(size=state.trans.shape).astype(np.float32)) for _ in range(5)]
     args = (bins, masks, records, order, (state.trans, stop, *cot))
@@ -79,10 +80,14 @@ def reduction_share(g, cam, repeat: int):
     def rows_fn(chunk: int, reduction: str):
         cf = dataclasses.replace(config, tuning=dataclasses.replace(config.tuning,
                                                                     mosaic_chunk=chunk))
-        f = jax.jit(lambda b, m, r, o, lr: pallas_mosaic.backward_rows(
-            cf, False, plan.backward_pixels, tiles_x, o, b, gaussian_grads.slot_rows(b), m, r,
-            lr, jnp.float32,
-            reduction=reduction))
+        def rows(b, m, r, o, lr):
+            layout = gaussian_grads.slot_rows(b)
+            return pallas_mosaic.backward_rows(
+                cf, False, plan.backward_pixels, tiles_x,
+                backward_segments.whole_tiles(o, b, layout.end), b, layout, m, r, lr,
+                jnp.float32, reduction=reduction)
+
+        f = jax.jit(rows)
         jax.block_until_ready(f(*args))  # compiled now, with backward_step as it is now
         return f
 

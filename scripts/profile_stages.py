@@ -30,7 +30,8 @@ sys.path.insert(0, ROOT)
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
-from lgs_jax.backends import backward, gaussian_grads, kernel_steps, pallas, pallas_mosaic  # noqa: E402
+from lgs_jax.backends import (backward, backward_segments, gaussian_grads,  # noqa: E402
+                              kernel_steps, pallas, pallas_mosaic)
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import depth_order, project  # noqa: E402
 
@@ -68,9 +69,11 @@ def profile(g, cam, repeat: int):
 
     def rows_of(b, t, s, sv, c):
         lane_rows = (t, s, c[0][..., 0], c[0][..., 1], c[0][..., 2], c[1], c[2])
+        layout = gaussian_grads.slot_rows(b)
+        segments = backward_segments.whole_tiles(sv[2], b, layout.end)
         return pallas_mosaic.backward_rows(C, bplan.interpret, bplan.backward_pixels, tiles_x,
-                                           sv[2], b, gaussian_grads.slot_rows(b), sv[0], sv[1],
-                                           lane_rows, jnp.float32)
+                                           segments, b, layout, sv[0], sv[1], lane_rows,
+                                           jnp.float32)
 
     kernel_rows = j(rows_of)
     emission_rows = kernel_rows(bins, state.trans, stop, saved, cot)

@@ -3,6 +3,7 @@ hypothesis run compiles each function once)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import jax
@@ -93,6 +94,22 @@ def scene(seed: int, kinds=KINDS, n=N, sh_bases=4, dtype=np.float64) -> lgs_jax.
     return lgs_jax.Gaussians(means=means.astype(dtype), quats=quats.astype(dtype),
                              log_scales=log_scales.astype(dtype),
                              logit_opacities=logit.astype(dtype), sh=sh.astype(dtype))
+
+
+def saturating(seed: int, n: int, dtype) -> lgs_jax.Gaussians:
+    """Adversarial Gaussians behind and among a wall of large, nearly opaque ones (every other
+    Gaussian): on a 32x32 image most pixels stop well before the end of their tile's list, after
+    tens of pairs (the backward's walked rows and segments)."""
+    g = scene(seed, kinds=("normal", "needle", "tiny", "opaque", "invalid"), n=n)
+    rng = np.random.default_rng(seed)
+    wall = np.arange(n) % 2 == 0
+    means, log_scales, logit = (np.array(x) for x in (g.means, g.log_scales, g.logit_opacities))
+    means[wall] = np.stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-0.5, 0.5, n),
+                            rng.uniform(2.0, 4.0, n)], -1)[wall]
+    log_scales[wall] = rng.uniform(-0.5, 0.5, (n, 3))[wall]
+    logit[wall] = rng.uniform(2, 6, n)[wall]
+    return cast(dataclasses.replace(g, means=means, log_scales=log_scales,
+                                    logit_opacities=logit), dtype)
 
 
 def cast(g: lgs_jax.Gaussians, dtype) -> lgs_jax.Gaussians:

@@ -96,7 +96,7 @@ def running(state, config: RasterConfig):
 
 
 def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterConfig, unroll: int,
-                take=None, stage=None):
+                take=None, stage=None, checkpoint=None):
     """Walk pairs [start, end) `unroll` at a time while some lane still blends; returns
     (r, g, b, T, D, stop pair) per lane.
 
@@ -107,8 +107,9 @@ def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCon
     mask bit): pairs without it do not blend, and a group with none is skipped by one
     program-uniform branch. `stage = (begin, finish)` (optional): `begin(j)` runs at the start of
     each iteration (before its pairs are evaluated) and `finish(j)` after the loop, with the first
-    pair not processed. A lane's stop pair is where its stop test fired (exact), else the first
-    pair the loop did not process (`end` or beyond when it ran to the end).
+    pair not processed. `checkpoint(j, state)` (optional) runs at the start of each iteration
+    with the state before pair j. A lane's stop pair is where its stop test fired (exact), else
+    the first pair the loop did not process (`end` or beyond when it ran to the end).
     """
     def cond(carry):
         j, _, st = carry
@@ -116,6 +117,8 @@ def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCon
 
     def body(carry):
         j, cur, st = carry
+        if checkpoint is not None:
+            checkpoint(j, st)
         if stage is not None:
             stage[0](j)
         nxt = [fetch(j + unroll + u) for u in range(unroll)]

@@ -58,7 +58,8 @@ from ..composite import PixelState
 from ..config import RasterConfig
 from ..layout import STRIPS, tile_grid
 from ..projection import Projected
-from . import backward, gaussian_grads, kernel_steps, pallas_mosaic, pallas_triton
+from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
+               pallas_triton)
 from .interface import Backend, RasterResult, stop_within
 
 
@@ -211,22 +212,34 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     return (jnp.zeros((1,), jnp.int32) if masks is None else masks, records), strip_pairs, saved
 
 
-def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan):
+def _segment(plan_: Plan) -> int | None:
+    """The backward's segment length (`KernelConfig.mosaic_backward_segment`) where it applies:
+    a Local-GS Mosaic GPU forward (which stores the checkpoints) and a Mosaic GPU backward."""
+    mosaic = plan_.forward == "mosaic" and plan_.backward == "mosaic" and not plan_.vanilla
+    return plan_.config.tuning.mosaic_backward_segment if mosaic else None
+
+
+def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
+             segment: int | None = None):
     """Per tile (n_tiles, 256): the state, each pixel's stop pair, the strip–Gaussian pairs the
-    kernel had to visit, and (masks, records, tile order) for the backward."""
+    kernel had to visit, and (masks, records, tile order, entry) for the backward; with a
+    `segment`, entry = the final r, g, b, D and the checkpoints of
+    lgs_jax.backends.backward_segments (else ())."""
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
     order = _longest_first(bins)
     data, strip_pairs, saved = _kernel_inputs(p, bins, tiles_x, plan_)
     args = (plan_.vanilla, plan_.config, plan_.interpret)
     if plan_.forward == "mosaic":
-        outs = pallas_mosaic.forward(*args, plan_.forward_pixels, tiles_x, order, bins, data, dt)
+        outs = pallas_mosaic.forward(*args, plan_.forward_pixels, tiles_x, order, bins, data, dt,
+                                     segment=segment)
     else:
         outs = pallas_triton.forward(*args, tiles_x, order, bins, data, dt)
-    r, g, b, t, d, stop_at = outs
+    r, g, b, t, d, stop_at = outs[:6]
+    entry = (r, g, b, d, *outs[6:]) if segment is not None else ()
     state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
                        done=jnp.zeros(t.shape, bool))
-    return state, stop_within(stop_at, bins.tile_end), strip_pairs, saved + (order,)
+    return state, stop_within(stop_at, bins.tile_end), strip_pairs, saved + (order, entry)
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan, trans,
@@ -234,7 +247,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth) from the backward
     kernel's pair rows."""
     plan_ = plan_.for_gradients()
-    masks, records, order = saved
+    masks, records, order, entry = saved
     config = _vanilla_model(plan_.config) if plan_.vanilla else plan_.config
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
@@ -244,9 +257,11 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
                  g_depth)
     layout = gaussian_grads.rows_of(bins, stop_at)
     if plan_.backward == "mosaic":
+        segments = (backward_segments.split(bins, stop_at, layout.end, _segment(plan_)) if entry
+                    else backward_segments.whole_tiles(order, bins, layout.end))
         rows = pallas_mosaic.backward_rows(config, plan_.interpret, plan_.backward_pixels,
-                                           tiles_x, order, bins, layout, masks, records,
-                                           lane_rows, dt)
+                                           tiles_x, segments, bins, layout, masks, records,
+                                           lane_rows, dt, entry)
     else:
         rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, layout,
                                            masks, records, lane_rows, dt)
@@ -254,7 +269,8 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):
-    return _forward(p, bins, width, height, plan_.for_gradients())
+    plan_ = plan_.for_gradients()
+    return _forward(p, bins, width, height, plan_, _segment(plan_))
 
 
 _COMPOSITE = backward.differentiable(_forward, _gradients, _forward_for_gradients)

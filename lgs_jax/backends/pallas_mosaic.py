@@ -68,7 +68,7 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from ..config import RasterConfig
 from ..layout import STRIP_PIXELS, TILE_PIXELS
 from . import kernel_steps as ks
-from . import mosaic_rows, mosaic_staging
+from . import backward_segments, mosaic_rows, mosaic_staging
 
 
 def _ranges(*columns):
@@ -114,12 +114,15 @@ def staged(config: RasterConfig, dt) -> bool:
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
-                   interpret: bool):
-    """The Local-GS forward for one warpgroup; `refs` = the six outputs, then, when `staged`,
-    the shared-memory record buffers and their barriers. With `tuning.mosaic_pair_source`
-    "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids, `pairs.gaussian_table`) and
-    the scratch is lgs_jax.backends.mosaic_staging's."""
-    out_refs, scratch = refs[:6], refs[6:]
+                   interpret: bool, segment: int | None = None):
+    """The Local-GS forward for one warpgroup; `refs` = the six outputs, then, with a
+    `segment`, the five checkpoint outputs (r, g, b, T, D before every pair start + m·segment,
+    m >= 1, at row ranges_ref[tile, 2] + m − 1: lgs_jax.backends.backward_segments), then, when
+    `staged`, the shared-memory record buffers and their barriers. With
+    `tuning.mosaic_pair_source` "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids,
+    `pairs.gaussian_table`) and the scratch is lgs_jax.backends.mosaic_staging's."""
+    n_out = 6 if segment is None else 11
+    out_refs, check_refs, scratch = refs[:6], refs[6:n_out], refs[n_out:]
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -149,9 +152,26 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
             return evaluate([rec_ref[fetched[0], c] for c in range(ks.REC - 1)], fetched[1])
 
         stage = None
+    checkpoint = None
+    if segment is not None:
+        checkpoint = _checkpoint(check_refs, ranges_ref[tile, 2], start, cols, segment)
     _store(out_refs, tile, cols,
            ks.staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha, config,
-                          config.tuning.mosaic_unroll_localgs, stage=stage))
+                          config.tuning.mosaic_unroll_localgs, stage=stage,
+                          checkpoint=checkpoint))
+
+
+def _checkpoint(refs, base, start, cols, segment: int):
+    """`staged_loop`'s checkpoint hook: the state (r, g, b, T, D) before pair start + m·segment
+    (m >= 1) into row base + m − 1 of `refs` (lgs_jax.backends.backward_segments)."""
+    def checkpoint(j, state):
+        m = (j - start) // segment
+
+        @pl.when((j > start) & ((j - start) % segment == 0))
+        def _():
+            _store(refs, base + m - 1, cols, state[:5])
+
+    return checkpoint
 
 
 def _smem_records(rec_ref, smem, barriers, start, end, evaluate, config: RasterConfig):
@@ -205,16 +225,24 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
 
 
 def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, tiles_x: int,
-            order, bins, data, dt):
+            order, bins, data, dt, segment: int | None = None):
     """Run the vanilla (data = (Gaussian ids, rows)) or Local-GS (data = (masks, records), or
     (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians")
     forward kernel on a (n_tiles, 256 / pixels) grid of one-warpgroup blocks; outputs
-    (n_tiles, 256) each: r, g, b, T, D and the stop pair."""
+    (n_tiles, 256) each: r, g, b, T, D and the stop pair, then with a `segment` (Local-GS only)
+    the five (n_checkpoints, 256) checkpoint buffers of `backward_segments.checkpoints`."""
     n_tiles = bins.tile_start.shape[0]
     common = dict(config=config, tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
                   pixels=pixels)
     kernel = (functools.partial(vanilla_kernel, **common) if vanilla else
-              functools.partial(localgs_kernel, **common, interpret=interpret))
+              functools.partial(localgs_kernel, **common, interpret=interpret,
+                                segment=segment))
+    columns = [bins.tile_start, bins.tile_end]
+    checks = []
+    if segment is not None:
+        base, rows = backward_segments.checkpoints(bins, segment)
+        columns.append(base)
+        checks = [jax.ShapeDtypeStruct((rows, TILE_PIXELS), dt)] * 5
     scratch = ()
     if not vanilla and config.tuning.mosaic_pair_source == "gaussians":
         scratch = mosaic_staging.scratch(dt)
@@ -223,46 +251,48 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
         scratch = (plgpu.SMEM((2, chunk, ks.REC), dt), plgpu.Barrier(num_barriers=2))
     out = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), dt)
     stop = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), jnp.int32)
-    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop], scratch_types=scratch,
+    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop] + checks, scratch_types=scratch,
                         grid=(n_tiles, TILE_PIXELS // pixels), grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
-                        kernel_name=kernel.func.__name__)(
-        order, _ranges(bins.tile_start, bins.tile_end), *data)
+                        kernel_name=kernel.func.__name__)(order, _ranges(*columns), *data)
 
 
-def backward_kernel(order_ref, ranges_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref,
-                    g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, rows_ref, *scratch,
+def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *refs,
                     config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
-                    last_pair: int, interpret: bool):
-    """The backward walk (`kernel_steps.backward_step`) for one warpgroup: rows_ref[wg, s] =
-    (pair j's gradient summed over this block's pixels, its tile) at the pair's row s = row_ref[j]
-    (`gaussian_grads.RowLayout.at`; backends.gaussian_grads reads them there), for the pairs before
-    the block's last stop pair, and zero rows for the tile's pairs after it up to the layout's end
-    (ranges_ref = tile start, end, rows' end): every row is written once per block (the tile in
-    every one), as `reduction` says (lgs_jax.backends.mosaic_rows). `scratch`: when `staged`, the
-    shared-memory record buffers and their barriers (`_smem_records_backward`), then the reduction's
-    (`mosaic_rows.scratch`; the loop carries which exchange buffer is next). Each pair's strip mask
-    and row are loaded one pair ahead (the skip branch waits on them). With
-    `tuning.mosaic_pair_source` "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids,
-    `pairs.gaussian_table`), the records and masks are built per chunk in shared memory
-    (`mosaic_staging`, its buffers first in `scratch`) and a pair's mask is read there once its
-    chunk is built."""
+                    last_pair: int, interpret: bool, segment: int | None):
+    """The backward walk (`kernel_steps.backward_step`) for one warpgroup over segment
+    seg_ref[s] = (tile, lo, hi, checkpoint) (lgs_jax.backends.backward_segments: a tile's whole
+    list by default): rows_ref[wg, r] = (pair j's gradient summed over this block's pixels, its
+    tile) at the pair's row r = row_ref[j] (`gaussian_grads.RowLayout.at`), for the pairs in
+    [lo, hi) before the block's last stop pair, and zero rows for the segment's pairs after it:
+    every row is written once per block (the tile in every one), as `reduction` says
+    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D); with a
+    `segment`, the forward's final r, g, b, D and its five checkpoint buffers, which give a
+    segment that is not its tile's last its entering carry; then rows_ref; then the scratch:
+    when `staged`, the shared-memory record buffers and their barriers
+    (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`; the loop carries
+    which exchange buffer is next). Each pair's strip mask and row are loaded one pair ahead
+    (the skip branch waits on them). With `tuning.mosaic_pair_source` "gaussians", (mask_ref,
+    rec_ref) are (the pairs' Gaussian ids, `pairs.gaussian_table`), the records and masks are
+    built per chunk in shared memory (`mosaic_staging`, its buffers first in the scratch) and a
+    pair's mask is read there once its chunk is built."""
     dt = rec_ref.dtype
-    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
-    tile = order_ref[tid]
+    n_in = 5 if segment is None else 14
+    cot_refs, entry_refs, rows_ref, scratch = refs[:5], refs[5:n_in], refs[n_in], refs[n_in + 1:]
+    sid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tile, lo, hi, check = (seg_ref[sid, c] for c in range(backward_segments.COLUMNS))
     k, _, half = _lanes(wg, pixels)
     trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
     lane = ks.backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
-                             [ref[tile, half] for ref in (g_r_ref, g_g_ref, g_b_ref, g_t_ref,
-                                                          g_d_ref)])
-    start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
-    last = jnp.maximum(jnp.minimum(end, jnp.max(stop_at)), start)
+                             [ref[tile, half] for ref in cot_refs])
+    block_last = jnp.max(stop_at)
+    last = jnp.clip(block_last, lo, hi)
     mine = _strip_bits(wg, pixels)
     n = len(scratch) - len(mosaic_rows.scratch(reduction, dt))  # the records' scratch first
     store_row, zero_row = mosaic_rows.writers(reduction, rows_ref, wg, tile, pixels,
                                               *scratch[n:])
     record, mask_of, begin = _backward_records(rec_ref, mask_ref, scratch[:n], tile, tiles_x,
-                                               start, last, config, last_pair, interpret)
+                                               lo, last, config, last_pair, interpret)
 
     def ahead(j):  # pair j's (strip mask, row)
         jj = jnp.maximum(j, 0)
@@ -294,15 +324,32 @@ def backward_kernel(order_ref, ranges_ref, mask_ref, row_ref, rec_ref, trans_ref
             carry, parity = step(j, mask_word, s, carry, parity)
         return following, carry, parity
 
-    zero = jnp.zeros(k.shape, dt)
-    lax.fori_loop(0, last - start, body,
-                  (ahead(last - 1), (trans, zero, zero, zero, zero), jnp.int32(0)))
+    entry = _entry(trans, entry_refs, tile, check, hi < block_last, half)
+    lax.fori_loop(0, last - lo, body, (ahead(last - 1), entry, jnp.int32(0)))
 
     def after(i, c):  # pairs no pixel of this block reached
         zero_row(row_ref[last + i])
         return c
 
-    lax.fori_loop(0, jnp.maximum(ranges_ref[tile, 2] - last, 0), after, jnp.int32(0))
+    lax.fori_loop(0, hi - last, after, jnp.int32(0))
+
+
+def _entry(trans, entry_refs, tile, check, inside, half):
+    """The walk's carry (T, S_r, S_g, S_b, S_Z) where it enters its segment: at the tile's end
+    (T, 0, 0, 0, 0); inside the block's walk, from checkpoint `check` (`backward_segments`:
+    the forward's T there and C − C_hi, D − D_hi)."""
+    zero = jnp.zeros_like(trans)
+    if not entry_refs:
+        return trans, zero, zero, zero, zero
+    final, saved = entry_refs[:4], entry_refs[4:]
+
+    def from_checkpoint():
+        c = jnp.maximum(check, 0)
+        sums = [final[i][tile, half] - saved[i][c, half] for i in range(3)]
+        return saved[3][c, half], *sums, final[3][tile, half] - saved[4][c, half]
+
+    return lax.cond(inside & (check >= 0), from_checkpoint,
+                    lambda: (trans, zero, zero, zero, zero))
 
 
 def _backward_records(rec_ref, mask_ref, scratch, tile, tiles_x: int, start, last,
@@ -355,21 +402,25 @@ def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
     return record, begin
 
 
-def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, order, bins,
-                  layout, masks, records, lane_rows, dt, reduction: str | None = None):
+def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, segments,
+                  bins, layout, masks, records, lane_rows, dt, entry=(),
+                  reduction: str | None = None):
     """(blocks per tile, layout.size, ROW_WIDTH) pair rows (`gaussian_grads.RowLayout`) from
-    `backward_kernel` on a (n_tiles, blocks per tile) grid: block w's row of each pair with a
+    `backward_kernel` on a (segments, blocks per tile) grid: block w's row of each pair with a
     row (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
-    rows no pair has are left unwritten (no Gaussian's rows reach them). `lane_rows` = the
-    per-tile final T, stop pairs and cotangents (r, g, b, T, D). (masks, records): the pairs'
-    (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians".
-    `reduction`:
-    `mosaic_rows.resolve`'s (by default "transposed" on the GPU, "terms" in interpret mode)."""
+    rows no pair has are left unwritten (no Gaussian's rows reach them). `segments`: the
+    (n, backward_segments.COLUMNS) table (`backward_segments.whole_tiles` or `split`);
+    `entry`: with split segments, the forward's final r, g, b, D and its checkpoints (r, g, b,
+    T, D). `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D).
+    (masks, records): the pairs' (Gaussian ids, `pairs.gaussian_table`) with
+    `tuning.mosaic_pair_source` "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
+    "transposed" on the GPU, "terms" in interpret mode)."""
     reduction = mosaic_rows.resolve(reduction, interpret)
-    capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
+    capacity = bins.gauss.shape[0]
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
-                               reduction=reduction, last_pair=capacity - 1, interpret=interpret)
+                               reduction=reduction, last_pair=capacity - 1, interpret=interpret,
+                               segment=config.tuning.mosaic_backward_segment if entry else None)
     out = jax.ShapeDtypeStruct((n, layout.size, ks.ROW_WIDTH), dt)
     scratch = ()
     if config.tuning.mosaic_pair_source == "gaussians":
@@ -378,9 +429,8 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
         scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
                    plgpu.Barrier(num_barriers=2))
     scratch += mosaic_rows.scratch(reduction, dt)
-    return plgpu.kernel(kernel, out_type=out, scratch_types=scratch, grid=(n_tiles, n),
-                        grid_names=("tile", "wg"),
+    return plgpu.kernel(kernel, out_type=out, scratch_types=scratch,
+                        grid=(segments.shape[0], n), grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
                         kernel_name="localgs_backward_mosaic")(
-        order, _ranges(bins.tile_start, bins.tile_end, layout.end), masks, layout.at, records,
-        *lane_rows)
+        segments, masks, layout.at, records, *lane_rows, *entry)

@@ -4,7 +4,6 @@ XLA path of the `tiles` backend (pairs.chain_hoisted_rows + backward.per_gaussia
 walked-rows layout (`walked_rows`) against numpy, and gradients through it (`render`'s
 `row_capacity`) against those of a row per pair, bit for bit."""
 
-import dataclasses
 import functools
 
 import jax
@@ -116,21 +115,6 @@ def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, shar
         np.testing.assert_array_equal(got, np.minimum(number[mine], rows)[number[mine] < rows])
 
 
-def _saturating(seed: int, n: int):
-    """Adversarial Gaussians behind and among a wall of large, nearly opaque ones (every other
-    Gaussian): most pixels stop well before the end of their tile's list."""
-    g = scenes.scene(seed, kinds=("normal", "needle", "tiny", "opaque", "invalid"), n=n)
-    rng = np.random.default_rng(seed)
-    wall = np.arange(n) % 2 == 0
-    means, log_scales, logit = (np.array(x) for x in (g.means, g.log_scales, g.logit_opacities))
-    means[wall] = np.stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-0.5, 0.5, n),
-                            rng.uniform(2.0, 4.0, n)], -1)[wall]
-    log_scales[wall] = rng.uniform(-0.5, 0.5, (n, 3))[wall]
-    logit[wall] = rng.uniform(2, 6, n)[wall]
-    return scenes.cast(dataclasses.replace(g, means=means, log_scales=log_scales,
-                                           logit_opacities=logit), np.float32)
-
-
 @pytest.mark.parametrize("kernel,pixels", [("triton", None),
                                            pytest.param("mosaic", 128, marks=pytest.mark.slow)])
 @settings(max_examples=1)  # interpret mode
@@ -140,7 +124,7 @@ def test_walked_rows_give_the_gradients_of_a_row_per_pair_to_the_bit(kernel, pix
     pairs only gives the gradients of a row per pair, bit for bit, on a scene where most pairs
     are not walked (asserted); one row fewer is reported (`stats.row_overflow`), never NaN,
     and leaves the image unchanged."""
-    g, cam = _saturating(seed, 200), scenes.camera(32, 32)
+    g, cam = scenes.saturating(seed, 200, np.float32), scenes.camera(32, 32)
     w = np.random.default_rng(seed).normal(size=(32, 32, 3)).astype(np.float32)
     config = C(kernel=kernel, tuning=lgs_jax.KernelConfig(mosaic_forward_pixels=pixels,
                                                           mosaic_backward_pixels=pixels))

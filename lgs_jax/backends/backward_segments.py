@@ -1,0 +1,70 @@
+"""The Mosaic GPU backward's blocks: which pairs of which tile each one walks.
+
+By default (`KernelConfig.mosaic_backward_segment` None) a block walks its tile's whole list,
+from the tile's last stop pair down, as the forward does, and the longest walk sets the
+kernel's length (BENCHMARKS.md §7: 2.4–4.7x a balanced schedule at 1.5M–10M Gaussians). With a
+segment length L, a tile's walked pairs [start, last) are cut at start + L, start + 2L, ...
+into segments, each its own block(s); the last segment of a tile also covers the pairs after
+`last` that need zero rows (up to `RowLayout.end`).
+
+A segment [lo, hi) that is not its tile's last enters the walk at hi with the carry the walk
+would have there (lgs_jax.backends.backward):
+
+    T_hi       the transmittance before pair hi, and
+    S_hi       Σ over the pairs k >= hi a pixel blended of rgb_k·w_k (and z_k·w_k)
+               = C − C_hi (D − D_hi),
+
+where C_hi, D_hi and T_hi are the forward's state before pair hi, which the Local-GS Mosaic GPU
+forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), at index
+`base[tile] + m − 1` of (n_checkpoints, 256) buffers. A block whose pixels all stopped at or
+before hi enters with (T, 0) instead, which is exact for them (T and C stay constant after a
+pixel's stop) and needs no checkpoint (the forward may have exited before hi).
+
+Determinism: segments are disjoint, so each pair row still has one writer per block of pixels.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ..binning import TileBins, segment_of_slot
+from .interface import tile_last
+
+COLUMNS = 4  # a segment's (tile, lo, hi, checkpoint index or −1)
+
+
+def checkpoints(bins: TileBins, segment: int):
+    """((n_tiles,) int32 base index of each tile's checkpoints, number of checkpoint rows): tile
+    t stores checkpoints m = 1 .. (len_t − 1) // segment (pairs start + m·segment inside its
+    list), rows base[t] .. base[t] + count − 1; at most capacity // segment in all."""
+    per_tile = jnp.maximum(bins.tile_end - bins.tile_start - 1, 0) // segment
+    return jnp.cumsum(per_tile) - per_tile, bins.gauss.shape[0] // segment + 1
+
+
+def whole_tiles(order, bins: TileBins, rows_end):
+    """(n_tiles, COLUMNS): one segment per tile in `order`, its whole list, no checkpoint."""
+    return jnp.stack([order, bins.tile_start[order], rows_end[order],
+                      jnp.full_like(order, -1)], -1)
+
+
+def split(bins: TileBins, stop, rows_end, segment: int):
+    """(n_tiles + capacity // segment, COLUMNS) segments of `segment` walked pairs (module
+    docstring), longest walk first; rows past the real segments are empty (lo = hi)."""
+    n_tiles, capacity = bins.tile_start.shape[0], bins.gauss.shape[0]
+    start = bins.tile_start
+    last = tile_last(stop, start, bins.tile_end)
+    count = jnp.maximum((last - start + segment - 1) // segment, 1)
+    first = jnp.cumsum(count) - count
+    size = n_tiles + capacity // segment
+    tile = jnp.minimum(segment_of_slot(first, count, size), n_tiles - 1)
+    m = jnp.arange(size, dtype=jnp.int32) - first[tile]
+    real = m < count[tile]
+    top = m == count[tile] - 1
+    lo = jnp.where(real, start[tile] + m * segment, 0)
+    hi = jnp.where(top, rows_end[tile], lo + segment)
+    hi = jnp.where(real, hi, 0)
+    base, _ = checkpoints(bins, segment)
+    index = jnp.where(real & ~top, base[tile] + m, -1)
+    walked = jnp.minimum(hi, last[tile]) - lo
+    order = jnp.argsort(-walked, stable=True)
+    return jnp.stack([tile, lo, hi, index], -1)[order]

@@ -1,0 +1,122 @@
+"""lgs_jax.backends.backward_segments: the Mosaic GPU backward with each tile's walk split into
+segments (`KernelConfig.mosaic_backward_segment`), entering from the forward's checkpoints. The
+segment table against numpy; gradients against the whole walk's (float64 to 1e-12 of their
+scale: the sums behind a segment are C − C_hi instead of a running sum, so the float32 bits
+differ); the split kernels lower for the GPU."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import lgs_jax
+from lgs_jax import binning
+from lgs_jax.backends import backward_segments
+from lgs_jax.projection import project
+from tests import scenes
+
+C, K = lgs_jax.RasterConfig, lgs_jax.KernelConfig
+W = H = 32
+FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")  # Gaussians' leaf order
+
+
+@settings(max_examples=10)
+@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]))
+def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment):
+    """Random stops: each tile's real segments tile [start, rows end) in order, every one but
+    the last exactly `segment` walked pairs with checkpoint base + m (the forward's row for
+    pair lo + segment), the last one the rest, no checkpoint; the table's other rows are
+    empty; segments come longest walk first."""
+    g = scenes.cast(scenes.scene(seed), np.float64)
+    cam = scenes.camera(W, H)
+    bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
+    rng = np.random.default_rng(seed)
+    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
+    last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(int)
+    stop = start[:, None] + rng.integers(0, last[:, None] - start[:, None] + 1, (start.size, 256))
+    stop[:, 0] = last
+    rows_end = end  # a row per pair: zero rows to the list's end
+    table = np.asarray(jax.jit(backward_segments.split, static_argnums=3)(
+        bins, stop, jnp.asarray(rows_end), segment))
+    base, n_rows = jax.jit(backward_segments.checkpoints, static_argnums=1)(bins, segment)
+    base = np.asarray(base)
+    assert table.shape == (start.size + 1024 // segment, backward_segments.COLUMNS)
+    real = np.zeros(len(table), bool)
+    for t in range(start.size):
+        mine = np.flatnonzero((table[:, 0] == t) & (table[:, 2] > table[:, 1]))
+        if end[t] == start[t]:
+            continue
+        segs = table[mine][np.argsort(table[mine, 1])]
+        real[mine] = True
+        np.testing.assert_array_equal(segs[:, 1], start[t] + segment * np.arange(len(segs)))
+        assert segs[-1, 2] == rows_end[t] and segs[-1, 3] == -1
+        assert len(segs) == max(-(-(last[t] - start[t]) // segment), 1)
+        np.testing.assert_array_equal(segs[:-1, 2], segs[:-1, 1] + segment)
+        np.testing.assert_array_equal(segs[:-1, 3], base[t] + np.arange(len(segs) - 1))
+        assert np.all(segs[:-1, 3] < n_rows)
+    assert np.all(table[~real, 1] == table[~real, 2])  # the rest: empty
+    walked = np.minimum(table[:, 2], last[table[:, 0]]) - table[:, 1]
+    assert np.all(np.diff(np.where(real, walked, 0)[real]) <= 0)
+
+
+def _grads(g, cam, w, config, row_capacity=None):
+    @jax.jit
+    def grads(g):
+        def loss(g):
+            out = lgs_jax.render(g, cam, backend="pallas", config=config, capacity=2048,
+                                 row_capacity=row_capacity)
+            total = (jnp.sum(out.image * w) + jnp.sum(out.alpha * w[..., 0])
+                     + 0.1 * jnp.sum(out.depth * w[..., 1]))
+            return total, out.stats
+        return jax.grad(loss, has_aux=True)(g)
+    return grads(g)
+
+
+@pytest.mark.parametrize("dtype,pixels,rows", [
+    (np.float64, 128, False),
+    pytest.param(np.float64, 256, True, marks=pytest.mark.slow),
+    pytest.param(np.float32, 128, True, marks=pytest.mark.slow)])
+@settings(max_examples=1)  # interpret mode
+@given(seed=st.integers(0, 2**32 - 1))
+def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, seed):
+    """Segments of 16 pairs (tiles walk tens of pairs, asserted): the gradients equal those of
+    the whole walk to 1e-12 of their scale in float64 (5e-5 in float32), half and whole
+    tiles, with a row per pair or walked rows only."""
+    g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(W, H, dtype=dtype)
+    w = np.random.default_rng(seed).normal(size=(H, W, 3)).astype(dtype)
+    config = lambda segment: C(kernel="mosaic", tuning=K(
+        mosaic_forward_pixels=pixels, mosaic_backward_pixels=pixels,
+        mosaic_backward_segment=segment))
+    whole, stats = _grads(g, cam, w, config(None))
+    walked = int(stats.pairs_walked)
+    assert walked > 2 * 16 * (W // 16) * (H // 16) / 2  # several segments per tile on average
+    split, _ = _grads(g, cam, w, config(16), walked if rows else None)
+    tol = 1e-12 if dtype == np.float64 else 5e-5
+    for name, a, b in zip(FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
+        a, b = np.asarray(a), np.asarray(b)
+        assert np.all(np.isfinite(b)), name
+        np.testing.assert_allclose(b, a, rtol=0, atol=tol * (np.max(np.abs(a)) + 1e-300),
+                                   err_msg=name)
+
+
+def test_split_kernels_lower_for_the_gpu(monkeypatch):
+    """The forward storing checkpoints and the split backward lower through Mosaic GPU."""
+    from jax._src.pallas.triton import gpu_info  # gaussian_grads is a Triton kernel
+
+    monkeypatch.setattr(gpu_info, "get_gpu_info",
+                        lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
+    config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_backward_segment=64))
+    g = scenes.cast(scenes.scene(0), np.float32)
+    image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
+                                        capacity=scenes.CAPACITY).image
+    grad = jax.value_and_grad(lambda g, c: jnp.sum(image(g, c) ** 2))
+    text = jax.jit(grad).trace(g, scenes.camera()).lower(lowering_platforms=("cuda",)).as_text()
+    assert text.count("mosaic_gpu") >= 2
+
+
+@pytest.mark.parametrize("segment", [0, 12, 2.0])
+def test_bad_segment_raises(segment):
+    with pytest.raises(ValueError, match="tuning.mosaic_backward_segment"):
+        K(mosaic_backward_segment=segment)
+
