@@ -79,6 +79,11 @@ ROWS = {
     "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(mosaic_forward_pixels=128))),
     "localgs:bwd256": ("pallas", C("gsplat", tuning=K(mosaic_backward_pixels=256,
                                                       vanilla_from_pairs=None))),
+    # the backward's walks split into segments of 1024 / 2048 pairs (experimental, off by default)
+    "localgs:seg1024": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=1024,
+                                                       vanilla_from_pairs=None))),
+    "localgs:seg2048": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=2048,
+                                                       vanilla_from_pairs=None))),
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""

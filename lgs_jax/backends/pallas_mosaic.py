@@ -52,7 +52,10 @@ skipped by one uniform branch: unlike the forward's staged groups, a backward st
 for the branch to pay. Each block writes its own row per pair at the pair's row (its emission slot,
 or its walked row: gaussian_grads.RowLayout) (zero where its pixels had stopped;
 lgs_jax.backends.gaussian_grads adds a tile's blocks and sums each Gaussian's rows): one writer per
-row, no atomics, a fixed summation order, deterministic.
+row, no atomics, a fixed summation order, deterministic. With `tuning.mosaic_backward_segment` the
+blocks walk segments of at most that many pairs instead of whole lists, each entering from the
+checkpoint the Local-GS forward stored there (lgs_jax.backends.backward_segments): the walk's length
+is then a segment, not the longest list's walk.
 """
 
 from __future__ import annotations
