@@ -73,24 +73,24 @@ def _grads(g, cam, w, config, row_capacity=None):
     return grads(g)
 
 
-@pytest.mark.parametrize("dtype,pixels,rows", [
-    (np.float64, 128, False),
-    pytest.param(np.float64, 256, True, marks=pytest.mark.slow),
-    pytest.param(np.float32, 128, True, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("dtype,pixels,rows,size", [
+    (np.float64, 128, False, 16),
+    pytest.param(np.float64, 256, True, 32, marks=pytest.mark.slow),
+    pytest.param(np.float32, 128, True, 32, marks=pytest.mark.slow)])
 @settings(max_examples=1)  # interpret mode
 @given(seed=st.integers(0, 2**32 - 1))
-def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, seed):
+def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, size, seed):
     """Segments of 16 pairs (tiles walk tens of pairs, asserted): the gradients equal those of
     the whole walk to 1e-12 of their scale in float64 (5e-5 in float32), half and whole
-    tiles, with a row per pair or walked rows only."""
-    g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(W, H, dtype=dtype)
-    w = np.random.default_rng(seed).normal(size=(H, W, 3)).astype(dtype)
+    tiles, with a row per pair or walked rows only, on one tile (default set) or four."""
+    g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(size, size, dtype=dtype)
+    w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
     config = lambda segment: C(kernel="mosaic", tuning=K(
         mosaic_forward_pixels=pixels, mosaic_backward_pixels=pixels,
         mosaic_backward_segment=segment))
     whole, stats = _grads(g, cam, w, config(None))
     walked = int(stats.pairs_walked)
-    assert walked > 2 * 16 * (W // 16) * (H // 16) / 2  # several segments per tile on average
+    assert walked > 2 * 16 * (size // 16) ** 2  # more than two segments per tile on average
     split, _ = _grads(g, cam, w, config(16), walked if rows else None)
     tol = 1e-12 if dtype == np.float64 else 5e-5
     for name, a, b in zip(FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
