@@ -93,10 +93,15 @@ WALKED = "@walked"
 capacity is sized from a count of the pairs)."""
 
 
+def _row_key(name: str) -> str:
+    """The `ROWS` key of row `name` (its suffix `POW2` or `WALKED` removed)."""
+    return name.removesuffix(POW2).removesuffix(WALKED)
+
+
 def row_setup(name: str, n_pairs: int):
     """(backend, config, pair capacity) of row `name` (a `ROWS` key, optionally + `POW2` or
     `WALKED`) for a view of `n_pairs` tile–Gaussian pairs."""
-    backend, config = ROWS[name.removesuffix(POW2).removesuffix(WALKED)]
+    backend, config = ROWS[_row_key(name)]
     cap = next_pow2(n_pairs) if name.endswith(POW2) else lgs_jax.pair_capacity(n_pairs)
     return backend, config, cap
 
@@ -246,14 +251,13 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
             walked = lgs_jax.render(g, cam, backend=backend, config=config,
                                     capacity=cap).stats.pairs_walked
             row_cap = lgs_jax.pair_capacity(int(walked))
-        render = lambda g, b=backend, cf=config, cap=cap, rc=row_cap: lgs_jax.render(
-            g, cam, backend=b, config=cf, capacity=cap, row_capacity=rc)
         # w is an argument: closed over, XLA would constant-fold the image-sized weights into
         # the backward (minutes of compilation at 4K).
-        f = jax.jit(jax.value_and_grad(
-            lambda g, w, render=render: (lambda o: (jnp.sum(o.image * w),
-                                                    o.stats.row_overflow))(render(g)),
-            has_aux=True))
+        def loss(g, w, b=backend, cf=config, cap=cap, rc=row_cap):
+            out = lgs_jax.render(g, cam, backend=b, config=cf, capacity=cap, row_capacity=rc)
+            return jnp.sum(out.image * w), out.stats.row_overflow
+
+        f = jax.jit(jax.value_and_grad(loss, has_aux=True))
         (_, overflow), first = f(g, weights)
         again = f(g, weights)[1]
         same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
@@ -345,7 +349,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     rows = args.rows.split(",")
     for name in rows:
-        if name.removesuffix(POW2).removesuffix(WALKED) not in ROWS:
+        if _row_key(name) not in ROWS:
             ap.error(f"--rows: unknown row {name!r} (known: {', '.join(ROWS)}, each optionally "
                      f"with the suffix {POW2}, or with --grad {WALKED})")
         if name.endswith(WALKED) and not args.grad:

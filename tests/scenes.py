@@ -96,6 +96,9 @@ def scene(seed: int, kinds=KINDS, n=N, sh_bases=4, dtype=np.float64) -> lgs_jax.
                              logit_opacities=logit.astype(dtype), sh=sh.astype(dtype))
 
 
+FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")  # Gaussians' leaf order
+
+
 def saturating(seed: int, n: int, dtype) -> lgs_jax.Gaussians:
     """Adversarial Gaussians behind and among a wall of large, nearly opaque ones (every other
     Gaussian): on a 32x32 image most pixels stop well before the end of their tile's list, after

@@ -99,9 +99,9 @@ def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
         walked.astype(jnp.int32), unique_indices=True)
     before = jnp.concatenate([jnp.zeros((1,), jnp.int32), jnp.cumsum(by_slot)])  # (capacity + 1,)
     at = jnp.where(walked, jnp.minimum(before[bins.slot], row_capacity), row_capacity)
-    first = jnp.minimum(bins.first, capacity)
-    row_first = jnp.minimum(before[first], row_capacity)
-    row_end = jnp.minimum(before[jnp.minimum(first + bins.count, capacity)], row_capacity)
+    # first + count <= capacity (`TileBins.first`, `count`: the pairs within the capacity)
+    row_first = jnp.minimum(before[bins.first], row_capacity)
+    row_end = jnp.minimum(before[bins.first + bins.count], row_capacity)
     return RowLayout(at=at, end=last, first=row_first, count=row_end - row_first,
                      size=row_capacity + 1)
 

@@ -262,16 +262,17 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
 
 def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *refs,
                     config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
-                    last_pair: int, interpret: bool, segment: int | None):
+                    last_pair: int, interpret: bool, from_checkpoints: bool):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup over segment
     seg_ref[s] = (tile, lo, hi, checkpoint) (lgs_jax.backends.backward_segments: a tile's whole
     list by default): rows_ref[wg, r] = (pair j's gradient summed over this block's pixels, its
     tile) at the pair's row r = row_ref[j] (`gaussian_grads.RowLayout.at`), for the pairs in
     [lo, hi) before the block's last stop pair, and zero rows for the segment's pairs after it:
     every row is written once per block (the tile in every one), as `reduction` says
-    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D); with a
-    `segment`, the forward's final r, g, b, D and its five checkpoint buffers, which give a
-    segment that is not its tile's last its entering carry; then rows_ref; then the scratch:
+    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D); with
+    `from_checkpoints` (split segments), the forward's final r, g, b, D and its five
+    checkpoint buffers, which give a segment that is not its tile's last its entering carry;
+    then rows_ref; then the scratch:
     when `staged`, the shared-memory record buffers and their barriers
     (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`; the loop carries
     which exchange buffer is next). Each pair's strip mask and row are loaded one pair ahead
@@ -280,7 +281,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     built per chunk in shared memory (`mosaic_staging`, its buffers first in the scratch) and a
     pair's mask is read there once its chunk is built."""
     dt = rec_ref.dtype
-    n_in = 5 if segment is None else 14
+    n_in = 5 + (4 + 5 if from_checkpoints else 0)  # cotangents, final r g b D, checkpoints
     cot_refs, entry_refs, rows_ref, scratch = refs[:5], refs[5:n_in], refs[n_in], refs[n_in + 1:]
     sid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile, lo, hi, check = (seg_ref[sid, c] for c in range(backward_segments.COLUMNS))
@@ -423,7 +424,7 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                reduction=reduction, last_pair=capacity - 1, interpret=interpret,
-                               segment=config.tuning.mosaic_backward_segment if entry else None)
+                               from_checkpoints=bool(entry))
     out = jax.ShapeDtypeStruct((n, layout.size, ks.ROW_WIDTH), dt)
     scratch = ()
     if config.tuning.mosaic_pair_source == "gaussians":

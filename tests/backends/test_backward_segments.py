@@ -18,7 +18,6 @@ from tests import scenes
 
 C, K = lgs_jax.RasterConfig, lgs_jax.KernelConfig
 W = H = 32
-FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")  # Gaussians' leaf order
 
 
 @settings(max_examples=10)
@@ -93,7 +92,7 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
     assert walked > 2 * 16 * (size // 16) ** 2  # more than two segments per tile on average
     split, _ = _grads(g, cam, w, config(16), walked if rows else None)
     tol = 1e-12 if dtype == np.float64 else 5e-5
-    for name, a, b in zip(FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
+    for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
         a, b = np.asarray(a), np.asarray(b)
         assert np.all(np.isfinite(b)), name
         np.testing.assert_allclose(b, a, rtol=0, atol=tol * (np.max(np.abs(a)) + 1e-300),

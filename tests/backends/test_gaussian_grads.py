@@ -51,7 +51,6 @@ CONFIGS = {"hoisted": C(), "center": C(origin="center"), "global": C(local_coord
 
 
 SLOW = pytest.mark.slow
-FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")  # Gaussians' leaf order
 
 
 @pytest.mark.parametrize("name,capacity,blocks", [
@@ -143,7 +142,7 @@ def test_walked_rows_give_the_gradients_of_a_row_per_pair_to_the_bit(kernel, pix
     assert not bool(out.stats.row_overflow)
     got, out_walked = grads(g, walked)
     assert not bool(out_walked.stats.row_overflow)
-    for name, a, b in zip(FIELDS, jax.tree.leaves(got), jax.tree.leaves(every)):
+    for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(got), jax.tree.leaves(every)):
         np.testing.assert_array_equal(a, b, err_msg=name)
     short, out_short = grads(g, walked - 1)
     assert bool(out_short.stats.row_overflow)

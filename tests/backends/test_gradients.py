@@ -18,7 +18,7 @@ from tests.compare import GRAD_F64_REL, assert_close_to_scale
 
 C = lgs_jax.RasterConfig
 SLOW = pytest.mark.slow
-FIELDS = ("means", "quats", "log_scales", "logit_opacities", "sh")
+FIELDS = scenes.FIELDS
 W, H = scenes.W, scenes.H
 
 
