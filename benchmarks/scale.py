@@ -79,7 +79,12 @@ ROWS = {
     "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(mosaic_forward_pixels=128))),
     "localgs:bwd256": ("pallas", C("gsplat", tuning=K(mosaic_backward_pixels=256,
                                                       vanilla_from_pairs=None))),
-    # the backward's walks split into segments of 1024 / 2048 pairs (experimental, off by default)
+    # the backward's walks whole (one block per tile, the default before Dec 2), or split into
+    # segments of 512 / 1024 (the default) / 2048 pairs
+    "localgs:whole": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=None,
+                                                     vanilla_from_pairs=None))),
+    "localgs:seg512": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=512,
+                                                      vanilla_from_pairs=None))),
     "localgs:seg1024": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=1024,
                                                        vanilla_from_pairs=None))),
     "localgs:seg2048": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=2048,

@@ -3,9 +3,10 @@
 By default (`KernelConfig.mosaic_backward_segment` None) a block walks its tile's whole list,
 from the tile's last stop pair down, as the forward does, and the longest walk sets the
 kernel's length (BENCHMARKS.md §7: 2.4–4.7x a balanced schedule at 1.5M–10M Gaussians). With a
-segment length L, a tile's walked pairs [start, last) are cut at start + L, start + 2L, ...
-into segments, each its own block(s); the last segment of a tile also covers the pairs after
-`last` that need zero rows (up to `RowLayout.end`).
+segment length L, a tile's pairs that have rows, [start, `RowLayout.end`), are cut at start +
+L, start + 2L, ... into segments, each its own block(s): the walked pairs [start, last) and,
+with a row per pair, the zero rows after `last` too (left whole, one block's tail of zero rows
+up to the list's end would set the kernel's length instead: H200, BENCHMARKS.md §7).
 
 A segment [lo, hi) that is not its tile's last enters the walk at hi with the carry the walk
 would have there (lgs_jax.backends.backward):
@@ -48,12 +49,13 @@ def whole_tiles(order, bins: TileBins, rows_end):
 
 
 def split(bins: TileBins, stop, rows_end, segment: int):
-    """(n_tiles + capacity // segment, COLUMNS) segments of `segment` walked pairs (module
-    docstring), longest walk first; rows past the real segments are empty (lo = hi)."""
+    """(n_tiles + capacity // segment, COLUMNS) segments of `segment` pairs of [tile_start,
+    rows_end) (module docstring), longest walk first; rows past the real segments are empty
+    (lo = hi)."""
     n_tiles, capacity = bins.tile_start.shape[0], bins.gauss.shape[0]
     start = bins.tile_start
     last = tile_last(stop, start, bins.tile_end)
-    count = jnp.maximum((last - start + segment - 1) // segment, 1)
+    count = jnp.maximum((rows_end - start + segment - 1) // segment, 1)
     first = jnp.cumsum(count) - count
     size = n_tiles + capacity // segment
     tile = jnp.minimum(segment_of_slot(first, count, size), n_tiles - 1)
@@ -65,6 +67,6 @@ def split(bins: TileBins, stop, rows_end, segment: int):
     hi = jnp.where(real, hi, 0)
     base, _ = checkpoints(bins, segment)
     index = jnp.where(real & ~top, base[tile] + m, -1)
-    walked = jnp.minimum(hi, last[tile]) - lo
+    walked = jnp.maximum(jnp.minimum(hi, last[tile]) - lo, 0)
     order = jnp.argsort(-walked, stable=True)
     return jnp.stack([tile, lo, hi, index], -1)[order]

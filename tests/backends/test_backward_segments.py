@@ -24,9 +24,9 @@ W = H = 32
 @given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]))
 def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment):
     """Random stops: each tile's real segments tile [start, rows end) in order, every one but
-    the last exactly `segment` walked pairs with checkpoint base + m (the forward's row for
-    pair lo + segment), the last one the rest, no checkpoint; the table's other rows are
-    empty; segments come longest walk first."""
+    the last exactly `segment` pairs with checkpoint base + m (the forward's row for pair lo +
+    segment), the last one the rest, no checkpoint; the table's other rows are empty; segments
+    come longest walk first."""
     g = scenes.cast(scenes.scene(seed), np.float64)
     cam = scenes.camera(W, H)
     bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
@@ -50,12 +50,12 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
         real[mine] = True
         np.testing.assert_array_equal(segs[:, 1], start[t] + segment * np.arange(len(segs)))
         assert segs[-1, 2] == rows_end[t] and segs[-1, 3] == -1
-        assert len(segs) == max(-(-(last[t] - start[t]) // segment), 1)
+        assert len(segs) == max(-(-(rows_end[t] - start[t]) // segment), 1)
         np.testing.assert_array_equal(segs[:-1, 2], segs[:-1, 1] + segment)
         np.testing.assert_array_equal(segs[:-1, 3], base[t] + np.arange(len(segs) - 1))
         assert np.all(segs[:-1, 3] < n_rows)
     assert np.all(table[~real, 1] == table[~real, 2])  # the rest: empty
-    walked = np.minimum(table[:, 2], last[table[:, 0]]) - table[:, 1]
+    walked = np.maximum(np.minimum(table[:, 2], last[table[:, 0]]) - table[:, 1], 0)
     assert np.all(np.diff(np.where(real, walked, 0)[real]) <= 0)
 
 
