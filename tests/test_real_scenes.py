@@ -3,13 +3,13 @@ renders and against the held-out ground truth."""
 
 import os
 
-import jax
 import matplotlib.image
 import numpy as np
 import pytest
 
 import lgs_jax
 from tests.compare import psnr
+from tests.devices import gpu_only
 
 WHITE = np.ones(3, np.float32)
 GSPLAT = lgs_jax.RasterConfig(convention="gsplat")
@@ -22,13 +22,12 @@ def lego(data_dir):
             os.path.join(root, "lego_cameras.json"), root)
 
 
-ON_GPU = pytest.mark.skipif(jax.default_backend() != "gpu",
-                            reason="Pallas kernels on a 60k-Gaussian scene: GPU only (interpret "
-                                   "mode is too slow)")
+GPU_ONLY = gpu_only("Pallas kernels on a 60k-Gaussian scene: GPU only (interpret mode is "
+                    "too slow)")
 
 
-@pytest.mark.parametrize("backend", ["reference", pytest.param("pallas", marks=ON_GPU),
-                                     pytest.param("pallas_vanilla", marks=ON_GPU)])
+@pytest.mark.parametrize("backend", ["reference", pytest.param("pallas", marks=GPU_ONLY),
+                                     pytest.param("pallas_vanilla", marks=GPU_ONLY)])
 def test_lego_matches_gsplat_renders_at_200(lego, backend):
     g, cam_path, root = lego
     cams = lgs_jax.load_cameras(cam_path, width=200, height=200)

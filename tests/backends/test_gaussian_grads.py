@@ -19,6 +19,7 @@ from lgs_jax.config import RasterConfig as C
 from lgs_jax.layout import tile_grid
 from lgs_jax.projection import project
 from tests import scenes
+from tests.devices import gpu_only
 
 W, H = 96, 64  # 6x4 tiles
 TILES_X = tile_grid(W, H)[0]
@@ -114,8 +115,9 @@ def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, shar
         np.testing.assert_array_equal(got, np.minimum(number[mine], rows)[number[mine] < rows])
 
 
-@pytest.mark.parametrize("kernel,pixels", [("triton", None),
-                                           pytest.param("mosaic", 128, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("kernel,pixels", [("triton", None), pytest.param("mosaic", 128, marks=[
+    pytest.mark.slow, gpu_only("CI time: in interpret mode test_backward_segments.py runs walked "
+                               "rows through the Mosaic GPU backward (whole tiles)")])])
 @settings(max_examples=1)  # interpret mode
 @given(seed=st.integers(0, 2**32 - 1))
 def test_walked_rows_give_the_gradients_of_a_row_per_pair_to_the_bit(kernel, pixels, seed):

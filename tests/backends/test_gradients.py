@@ -15,6 +15,7 @@ import lgs_jax
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import GRAD_F64_REL, assert_close_to_scale
+from tests.devices import ON_GPU
 
 C = lgs_jax.RasterConfig
 SLOW = pytest.mark.slow
@@ -197,7 +198,6 @@ def test_fast_backends_float32_gradients_are_close_to_float64(backend):
 # `vanilla_other` (the vanilla Mosaic GPU forward, interpreted: 24 s) is left out: its backward
 # is the Mosaic kernel in the difference form, which test_pallas.py's walk test checks, and its
 # forward test_mosaic_kernels_equal_triton_kernels.
-ON_GPU = jax.default_backend() == "gpu"
 OTHER = "triton" if ON_GPU else "mosaic"
 PALLAS = {"local_gs": ("pallas", C()), "difference": ("pallas", C(hoist=False)),
           "global": ("pallas", C(local_coords=False)), "gsplat": ("pallas", C("gsplat")),

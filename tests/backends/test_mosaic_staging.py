@@ -20,10 +20,10 @@ from lgs_jax.backends import mosaic_staging, pallas
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_render_close
+from tests.devices import ON_GPU, gpu_only
 
 C = lgs_jax.RasterConfig
 K = lgs_jax.KernelConfig
-ON_GPU = jax.default_backend() == "gpu"
 DENSE = ("huge_far", "faint", "needle", "normal", "tiny", "invalid", "behind")
 N_DENSE = 640
 TILE_CAMERA = dict(width=16, height=16)  # one tile: every pair in one list
@@ -39,9 +39,9 @@ def _render(g, cam, config, source, pixels):
                           backend="pallas", config=config, capacity=CAPACITY)
 
 
-GPU_ONLY = pytest.mark.skipif(not ON_GPU, reason=(
+GPU_ONLY = gpu_only(
     "CI time: in interpret mode the Mosaic GPU tests of test_pallas.py cover this case on lists "
-    "within one chunk"))
+    "within one chunk")
 
 
 @pytest.mark.parametrize("name,dtype,pixels", [("local_gs", np.float32, 256)] + [

@@ -20,6 +20,7 @@ import lgs_jax
 from lgs_jax.backends import mosaic_rows, pallas, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
+from tests.devices import ON_GPU, gpu_only
 from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, GRAD_F64_REL,
                            assert_close_to_scale, assert_float32_close, assert_render_close,
                            assert_within_fast_bound)
@@ -27,7 +28,6 @@ from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, GRAD_F
 C = lgs_jax.RasterConfig
 K = lgs_jax.KernelConfig
 SLOW = pytest.mark.slow
-ON_GPU = jax.default_backend() == "gpu"
 AUTO = "mosaic" if ON_GPU else "triton"  # what kernel="auto" runs here (KernelConfig)
 KERNEL = {"pallas": "localgs", "pallas_vanilla": "vanilla"}
 LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
@@ -182,8 +182,8 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
                                       getattr(outs[0, 128], field))
 
 
-@pytest.mark.skipif(not ON_GPU, reason="CI time: TMA staging of XLA's records is not the "
-                    "default (KernelConfig.mosaic_pair_source); interpret mode has no TMA")
+@gpu_only("CI time: TMA staging of XLA's records is not the default "
+          "(KernelConfig.mosaic_pair_source); interpret mode has no TMA")
 @pytest.mark.parametrize("backend,pixels", [("pallas", 128)])
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
