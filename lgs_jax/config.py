@@ -128,7 +128,8 @@ class KernelConfig:
             if self.mosaic_backward_segment % self.mosaic_unroll_localgs:
                 raise ValueError(f"tuning.mosaic_backward_segment: {self.mosaic_backward_segment}"
                                  f" is not a multiple of mosaic_unroll_localgs="
-                                 f"{self.mosaic_unroll_localgs}")
+                                 f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
+                                 f"whole walks)")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
                              f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")

@@ -9,12 +9,14 @@ blocks taken longest list first (`pallas._longest_first`) onto R resident blocks
 ncu's occupancy of the Local-GS kernel), each costing its walked pairs. Printed: the model's
 makespan over the ideal (all walked pairs / R) and the longest single block over the ideal, a
 lower bound of the makespan whatever the order; then, per `--split` length, the bounds of
-`split_model` (long lists split across blocks) relative to that makespan. The `tiles` backend on
+`split_model` (long lists split across blocks) relative to that makespan, and with `--local` the
+same with each segment's first pass run (`split_model_local`). The `tiles` backend on
 a CPU (same stops). Also printed: the pairs some block of their tile walked (`render`'s
 `stats.pairs_walked`) and the backward's row buffers (48 bytes per row and block) for them and
 for every pair.
 """
 import argparse
+import dataclasses
 import heapq
 import os
 import sys
@@ -32,7 +34,12 @@ from lgs_jax.projection import project  # noqa: E402
 RESIDENT = 132 * 5
 
 
-def walks(g, cam):
+def walks(g, cam, local: list[int] = ()):
+    """(list lengths, pairs each block walks, blocks per tile, {L: local walks}): with `local`
+    segment lengths L, for each, the pairs each block of a tile whose list is longer than L
+    walks in each segment [start + m·L, start + (m + 1)·L) of it when it starts from T = 1 (a
+    split forward's first pass: the same stop rule on the segment alone), (n_tiles, blocks,
+    segments); tiles within one segment get zeros."""
     w, h = cam.width, cam.height
     p = jax.jit(project)(g, cam)
     cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
@@ -41,11 +48,26 @@ def walks(g, cam):
     config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
     n_tiles = bins.tile_start.shape[0]
     backend = pallas.LOCALGS if gpu else REGISTRY["tiles"]
-    res = jax.jit(lambda p, b: backend.rasterize(p, b, w, h, config))(p, bins)
+    stops = jax.jit(lambda p, b: backend.rasterize(p, b, w, h, config).stop)
     pixels = pallas.plan(config, False, n_tiles).forward_pixels if gpu else 128
+
+    def block_walks(b):
+        walked = np.asarray(stops(p, b)) - np.asarray(b.tile_start)[:, None]
+        return walked.reshape(n_tiles, 256 // pixels, pixels).max(-1)
+
     start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
-    walked = (np.asarray(res.stop) - start[:, None]).reshape(n_tiles, 256 // pixels, pixels)
-    return end - start, walked.max(-1), 256 // pixels
+    segments = {}
+    for seg in local:
+        split = end - start > seg
+        per_segment = []
+        for m in range(int(np.max((end - start + seg - 1) // seg))):
+            lo = np.where(split, np.minimum(start + m * seg, end), start)
+            hi = np.where(split, np.minimum(lo + seg, end), start)
+            per_segment.append(block_walks(dataclasses.replace(
+                bins, tile_start=jax.numpy.asarray(lo, np.int32),
+                tile_end=jax.numpy.asarray(hi, np.int32))))
+        segments[seg] = np.stack(per_segment, -1)
+    return end - start, block_walks(bins), 256 // pixels, segments
 
 
 def schedule(lengths, walked, per_tile):
@@ -87,6 +109,22 @@ def split_model(lengths, walked, seg: int) -> tuple[int, int]:
     return makespan(pass1_lo) + p2, makespan(pass1_hi) + p2
 
 
+def split_model_local(lengths, walked, local, seg: int) -> int:
+    """`split_model`'s makespan with pass 1 costing each segment's own walk from T = 1
+    (`walks`' local walks: a block stops where its pixels' product of 1 − α within the segment
+    alone falls to the threshold) instead of its bounds."""
+    pass1, pass2 = [], []
+    for n, ws, loc in zip(lengths, walked, local):
+        for w, lw in zip(ws, loc):
+            if n <= seg:
+                pass2.append(w)
+                continue
+            for m, s0 in enumerate(range(0, n, seg)):
+                pass1.append(lw[m])
+                pass2.append(min(seg, n - s0, max(w - s0, 0)))
+    return makespan(pass1) + makespan(pass2)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -94,11 +132,15 @@ def main() -> int:
     ap.add_argument("--scenes", default="guitar_x16_1080p,guitar_x64_1080p,guitar_x110_4k")
     ap.add_argument("--split", type=int, nargs="*", default=[1024, 2048, 4096],
                     help="segment lengths to model (split_model)")
+    ap.add_argument("--local", action="store_true",
+                    help="also run each segment's first pass (one render per segment index; "
+                         "slow on a CPU) for split_model_local")
     args = ap.parse_args()
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     for scene in args.scenes.split(","):
         g, cam = load_scene(scene, args.data)
-        lengths, walked, per_tile = walks(jax.device_put(g), cam)
+        lengths, walked, per_tile, local = walks(jax.device_put(g), cam,
+                                                 args.split if args.local else ())
         ideal = walked.sum() / RESIDENT
         q = np.percentile(lengths, [50, 90, 99, 100])
         print(f"{scene}: {lengths.sum() / 1e6:.2f}M pairs in {lengths.size} tiles (list "
@@ -116,8 +158,10 @@ def main() -> int:
         now = schedule(lengths, walked, per_tile)
         for seg in args.split:
             lo, hi = split_model(lengths, walked, seg)
+            exact = (f", {split_model_local(lengths, walked, local[seg], seg) / now:.2f} with "
+                     f"the first pass's own walks" if seg in local else "")
             print(f"  lists split every {seg} pairs: makespan {lo / now:.2f}–{hi / now:.2f} "
-                  f"of now", flush=True)
+                  f"of now{exact}", flush=True)
     return 0
 
 

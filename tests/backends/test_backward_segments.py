@@ -121,3 +121,9 @@ def test_bad_segment_raises(segment):
     with pytest.raises(ValueError, match="tuning.mosaic_backward_segment"):
         K(mosaic_backward_segment=segment)
 
+
+def test_default_segment_names_itself_when_the_unroll_does_not_divide_it():
+    """The segment is on by default, so an unroll it is no multiple of says how to fix it."""
+    with pytest.raises(ValueError, match="mosaic_backward_segment: 1024 .* or to None"):
+        K(mosaic_pair_source="records", mosaic_unroll_localgs=3, mosaic_chunk=96)
+
