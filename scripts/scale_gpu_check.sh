@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Scale GPU session (issues 17 and 18), one device call per part, each under 10 minutes:
+#   bash scripts/scale_gpu_check.sh tests  # the split backward's and walked rows' tests (2 min)
+#   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 8 min)
+#   bash scripts/scale_gpu_check.sh fwd    # forward per scene
+#   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat)
+# One benchmarks.scale process per scene (a failing row costs one scene, not the run), gsplat
+# 1.5.3 in the same process. Run from the repository root on the device machine (scenes in
+# carry/data, the gsplat wheel in carry/wheels); logs and CSVs to $OUT; a short table last.
+set -uo pipefail
+. "$(dirname "$0")/gpu_env.sh"
+export LGS_JAX_CACHE="$PWD/build/jax_cache"
+quiet() { grep -v "Warning\|warn(\|t = lambda"; }
+scenes="${SCENES:-guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k}"
+case "${1:-grad}" in
+  tests)
+    timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider -n 4 \
+      tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
+      tests/backends/test_gradients.py -m 'slow or not slow' 2>&1 | tail -3 \
+      | tee "$out/tests.log" ;;
+  grad)
+    for s in $scenes; do
+      timeout "${SCENE_TIMEOUT:-150}" python3 -m benchmarks.scale --grad --data carry/data \
+        --scenes "$s" --rows "${GRAD_ROWS:-localgs,localgs@walkedcap,localgs@walked}" \
+        --repeat 5 --csv "$out/grad_$s.csv" 2>&1 | quiet > "$out/grad_$s.log"
+    done
+    grep -h "grad:" "$out"/grad_*.log ;;
+  fwd)
+    for s in $scenes; do
+      timeout "${SCENE_TIMEOUT:-110}" python3 -m benchmarks.scale --data carry/data \
+        --scenes "$s" --rows "${FWD_ROWS:-localgs,vanilla,auto}" --repeat 10 \
+        --csv "$out/fwd_$s.csv" 2>&1 | quiet > "$out/fwd_$s.log"
+    done
+    grep -h " e2e " "$out"/fwd_*.log ;;
+  train)
+    timeout "${TRAIN_TIMEOUT:-500}" python3 benchmarks/train_vs_gsplat.py --data-root carry/data \
+      --scenes skull --steps "${STEPS:-7000}" --eval-every "${STEPS:-7000}" --no-gsplat \
+      --out "$out/train_skull" 2>&1 | tr '\r' '\n' | grep -v "step/s\|s/step" > "$out/train.log"
+    tail -6 "$out/train.log" ;;
+  *) echo "usage: $0 tests|grad|fwd|train" >&2; exit 2 ;;
+esac
