@@ -20,10 +20,10 @@ import lgs_jax
 from lgs_jax.backends import mosaic_rows, pallas, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
-from tests.devices import ON_GPU, gpu_only
 from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, GRAD_F64_REL,
                            assert_close_to_scale, assert_float32_close, assert_render_close,
                            assert_within_fast_bound)
+from tests.devices import ON_GPU, gpu_only
 
 C = lgs_jax.RasterConfig
 K = lgs_jax.KernelConfig
