@@ -8,9 +8,9 @@ each round.
 Rows (`ROWS`) name a backend and config; every row's pair buffer is `lgs_jax.pair_capacity` of
 the view's pairs, or with the suffix `@pow2` (e.g. `--rows localgs,localgs@pow2`) the power of
 two above them, the policy before `pair_capacity`: the same row at both sizes measures what the
-pair capacity costs in one run. With --grad, the suffix `@walked` gives the backward rows for
-the walked pairs only (`render`'s `row_capacity`, sized from an eager forward), and
-`@walkedcap` the same layout in a buffer of the pair capacity. The shared
+pair capacity costs in one run. With --grad, the suffix `@walked` sizes the backward's buffer of
+rows for the walked pairs (`render`'s `row_capacity`) from an eager forward's count instead of
+the pair capacity. The shared
 stages below (`project`, `emit`, `sort`, `pair_prep`) are timed once, at the `pair_capacity`
 size.
 
@@ -97,20 +97,16 @@ WALKED = "@walked"
 """Row-name suffix (--grad): the backward's rows for the walked pairs only, `render`'s
 `row_capacity` = `pair_capacity` of an eager forward's `stats.pairs_walked` (as the pair
 capacity is sized from a count of the pairs)."""
-WALKED_ALL = "@walkedcap"
-"""Row-name suffix (--grad): rows for the walked pairs only, laid out as `WALKED`'s, in a buffer
-of the pair capacity (`row_capacity` = capacity: never overflows, no count needed; the time of
-the walked layout at the memory of a row per pair)."""
 
 
 def _row_key(name: str) -> str:
-    """The `ROWS` key of row `name` (its suffix `POW2`, `WALKED` or `WALKED_ALL` removed)."""
-    return name.removesuffix(POW2).removesuffix(WALKED).removesuffix(WALKED_ALL)
+    """The `ROWS` key of row `name` (its suffix `POW2` or `WALKED` removed)."""
+    return name.removesuffix(POW2).removesuffix(WALKED)
 
 
 def row_setup(name: str, n_pairs: int):
-    """(backend, config, pair capacity) of row `name` (a `ROWS` key, optionally + `POW2`,
-    `WALKED` or `WALKED_ALL`) for a view of `n_pairs` tile–Gaussian pairs."""
+    """(backend, config, pair capacity) of row `name` (a `ROWS` key, optionally + `POW2` or
+    `WALKED`) for a view of `n_pairs` tile–Gaussian pairs."""
     backend, config = ROWS[_row_key(name)]
     cap = next_pow2(n_pairs) if name.endswith(POW2) else lgs_jax.pair_capacity(n_pairs)
     return backend, config, cap
@@ -261,8 +257,6 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
             walked = lgs_jax.render(g, cam, backend=backend, config=config,
                                     capacity=cap).stats.pairs_walked
             row_cap = lgs_jax.pair_capacity(int(walked))
-        elif name.endswith(WALKED_ALL):
-            row_cap = cap
         # w is an argument: closed over, XLA would constant-fold the image-sized weights into
         # the backward (minutes of compilation at 4K).
         def loss(g, w, b=backend, cf=config, cap=cap, rc=row_cap):
@@ -363,10 +357,9 @@ def main(argv=None) -> int:
     for name in rows:
         if _row_key(name) not in ROWS:
             ap.error(f"--rows: unknown row {name!r} (known: {', '.join(ROWS)}, each optionally "
-                     f"with the suffix {POW2}, or with --grad {WALKED} or {WALKED_ALL})")
-        if name.endswith((WALKED, WALKED_ALL)) and not args.grad:
-            ap.error(f"--rows: {name!r}: the suffixes {WALKED} and {WALKED_ALL} size the "
-                     f"backward (--grad)")
+                     f"with the suffix {POW2}, or with --grad {WALKED})")
+        if name.endswith(WALKED) and not args.grad:
+            ap.error(f"--rows: {name!r}: the suffix {WALKED} sizes the backward (--grad)")
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     results = []
     for scene in args.scenes.split(","):

@@ -131,9 +131,9 @@ class TileBins:
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
       n_unbounded: int32 Gaussians binned to every tile because rounding could not bound them.
-      row_capacity: rows of the Pallas backward's per-pair gradient buffer (static): None for a
-        row per pair at its emission slot (capacity rows), else rows only for the pairs some
-        pixel of their tile reached, this many (backends.gaussian_grads.walked_rows).
+      row_capacity: rows of the Pallas backward's buffer of gradient rows for the pairs some
+        pixel of their tile reached (static; backends.gaussian_grads.walked_rows): this many,
+        or None for the pair capacity (never too few).
     """
 
     gauss: Any

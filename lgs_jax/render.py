@@ -12,9 +12,9 @@ at most 12.5% waste). Under
 (`render_growing` does that loop). An eager call never returns a truncated image: it raises
 `CapacityError`.
 
-Row capacity: the Pallas backward stores a gradient row per pair and block of a tile, by default
-for every pair; `row_capacity` sizes that buffer for the pairs some pixel reached
-(`stats.pairs_walked`) instead, reported in `stats.row_overflow` the same way.
+Row capacity: the Pallas backward stores a gradient row per walked pair (a pair some pixel of its
+tile reached) and block, in a buffer of the pair capacity's rows by default; `row_capacity`
+sizes it for `stats.pairs_walked` instead, reported in `stats.row_overflow` the same way.
 """
 
 from __future__ import annotations
@@ -240,12 +240,12 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
       capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up
         with `pair_capacity`. Under jit/vmap pass an int and check `stats.overflow`.
       row_capacity: rows of the Pallas backends' backward buffer of per-pair gradients (48
-        bytes per row and block of a tile; the memory of a gradient at scale). None: a row for
-        every pair (capacity rows; nothing can overflow). An int: rows only for the pairs
-        some pixel reached (`stats.pairs_walked`, typically 15–30% of the pairs at 1M–10M
-        Gaussians), this many; the same gradients to the bit while `stats.row_overflow` is
-        False. Size it from an earlier render's `stats.pairs_walked` (`pair_capacity` of it
-        leaves headroom) and check `stats.row_overflow`. Other backends ignore it.
+        bytes per row and block of a tile; the memory of a gradient at scale), each a pair some
+        pixel reached (`stats.pairs_walked`, typically 15–30% of the pairs at 1M–10M
+        Gaussians). None: as many rows as `capacity` (nothing can overflow). An int: this
+        many; the same gradients to the bit while `stats.row_overflow` is False. Size it
+        from an earlier render's `stats.pairs_walked` (`pair_capacity` of it leaves headroom)
+        and check `stats.row_overflow`. Other backends ignore it.
       screen_offsets: optional (N, 2) added to the projected means (pixels). Pass zeros and
         differentiate with respect to it to get ∂L/∂mean2d per Gaussian, the screen-space
         gradient densification strategies accumulate (with `visible`); binning sees the offset

@@ -81,7 +81,7 @@ def reduction_share(g, cam, repeat: int):
         cf = dataclasses.replace(config, tuning=dataclasses.replace(config.tuning,
                                                                     mosaic_chunk=chunk))
         def rows(b, m, r, o, lr):
-            layout = gaussian_grads.slot_rows(b)
+            layout = gaussian_grads.rows_of(b, lr[1])
             return pallas_mosaic.backward_rows(
                 cf, False, plan.backward_pixels, tiles_x,
                 backward_segments.whole_tiles(o, b, layout.end), b, layout, m, r, lr,

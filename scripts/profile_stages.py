@@ -69,7 +69,7 @@ def profile(g, cam, repeat: int):
 
     def rows_of(b, t, s, sv, c):
         lane_rows = (t, s, c[0][..., 0], c[0][..., 1], c[0][..., 2], c[1], c[2])
-        layout = gaussian_grads.slot_rows(b)
+        layout = gaussian_grads.rows_of(b, s)
         segments = backward_segments.whole_tiles(sv[2], b, layout.end)
         return pallas_mosaic.backward_rows(C, bplan.interpret, bplan.backward_pixels, tiles_x,
                                            segments, b, layout, sv[0], sv[1], lane_rows,
@@ -96,9 +96,9 @@ def profile(g, cam, repeat: int):
         "backward (kernel + chain + sum)": (grads, (p, bins, state.trans, stop, saved, cot)),
         "backward kernel (rows)": (kernel_rows, (bins, state.trans, stop, saved, cot)),
         **{f"gaussian_grads (chain + sum), {n} lanes": (
-            j(lambda r, b, p, n=n: gaussian_grads.sums(r, gaussian_grads.slot_rows(b), p,
-                                                       tiles_x, C, False, lanes=n)),
-            (emission_rows, bins, p)) for n in (32, 64, 128)},
+            j(lambda r, b, s, p, n=n: gaussian_grads.sums(r, gaussian_grads.rows_of(b, s), p,
+                                                          tiles_x, C, False, lanes=n)),
+            (emission_rows, bins, stop, p)) for n in (32, 64, 128)},
         "XLA: chain_hoisted_rows": (j(lambda p, b, r: pairs.chain_hoisted_rows(
             pairs.gather(p, b.gauss), b, r, tiles_x, C)), (p, bins, rows11)),
         "XLA: per_gaussian_sum": (j(backward.per_gaussian_sum, static_argnums=2),

@@ -4,10 +4,10 @@ With `KernelConfig.mosaic_backward_segment` None a block walks its tile's whole 
 tile's last stop pair down, as the forward does, and the longest walk sets the kernel's length
 (BENCHMARKS.md §7: 2.4–4.7x a balanced schedule at 1.5M–10M Gaussians). With a segment length L
 (1024 by default; H200: 0.76x the whole walks' forward + backward time at 5.8M Gaussians), a
-tile's pairs that have rows, [start, `RowLayout.end`), are cut at start + L, start + 2L, ...
-into segments, each its own block(s): the walked pairs [start, last) and, with a row per pair,
-the zero rows after `last` too (left whole, one block's tail of zero rows up to the list's end
-would set the kernel's length instead: H200, BENCHMARKS.md §7).
+tile's pairs that have rows, [start, `RowLayout.end`) (the walked pairs [start, last); a
+layout with rows past `last` too, zero rows, gets them cut the same way: left whole, one
+block's tail of zero rows would set the kernel's length: H200, BENCHMARKS.md §7), are cut at
+start + L, start + 2L, ... into segments, each its own block(s).
 
 A segment [lo, hi) that is not its tile's last enters the walk at hi with the carry the walk
 would have there (lgs_jax.backends.backward):

@@ -20,13 +20,13 @@ no chained copy, no permutation, no segmented scan (the XLA path the `tiles` bac
 pairs.chain_hoisted_rows then backends.backward.per_gaussian_sum: the same values, summed in
 another association).
 
-Where the rows are (`RowLayout`): by default at the pairs' emission slots, a row per pair and
-block (`slot_rows`: capacity rows, those of pairs no pixel reached zero). With
-`TileBins.row_capacity` only the pairs some pixel of their tile reached get rows
-(`walked_rows`): the walked pairs (73–85% of the pairs are not, at 1.5M–10M Gaussians,
-BENCHMARKS.md §7), numbered in emission-slot order, so a Gaussian's rows are still
-consecutive and summed in the same order: the same gradients to the bit (a zero row adds +0)
-from a buffer of row_capacity rows instead of capacity.
+Where the rows are (`RowLayout`, `walked_rows`): only the pairs some pixel of their tile
+reached get rows (73–85% of the pairs are not, at 1.5M–10M Gaussians, BENCHMARKS.md §7),
+numbered in emission-slot order, so a Gaussian's rows are consecutive and summed in slot order.
+A row per pair at its emission slot (a zero row for a pair no pixel reached, which adds +0)
+would give the same gradients to the bit; skipping those rows makes the backward 4–13% faster
+at 1.5M–10M Gaussians (H200, BENCHMARKS.md §7). The buffer holds `TileBins.row_capacity` rows,
+or the pair capacity's (never too few) without one.
 
 `sums` is the Pallas Triton kernel (one program per `LANES` Gaussians, looping to the longest
 count among them; per-lane gathers of rows, which Mosaic GPU's Pallas cannot express);
@@ -78,12 +78,6 @@ class RowLayout:
     size: int = dataclasses.field(metadata=dict(static=True))
 
 
-def slot_rows(bins: TileBins) -> RowLayout:
-    """A row per pair at its emission slot (`TileBins.slot`; capacity rows)."""
-    return RowLayout(at=bins.slot, end=bins.tile_end, first=bins.first, count=bins.count,
-                     size=bins.gauss.shape[0])
-
-
 def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
     """Rows for the walked pairs only (`interface.tile_last` of the forward's `stop`),
     numbered by an exclusive running count over emission slots (a Gaussian's walked slots get
@@ -107,10 +101,9 @@ def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
 
 
 def rows_of(bins: TileBins, stop) -> RowLayout:
-    """The layout `bins.row_capacity` asks for (`slot_rows` or `walked_rows`)."""
-    if bins.row_capacity is None:
-        return slot_rows(bins)
-    return walked_rows(bins, stop, bins.row_capacity)
+    """`walked_rows` in `bins.row_capacity` rows, or the pair capacity's without one."""
+    capacity = bins.gauss.shape[0]
+    return walked_rows(bins, stop, capacity if bins.row_capacity is None else bins.row_capacity)
 
 
 def _pair_terms(vals, tile, fields, tiles_x: int, config: RasterConfig):

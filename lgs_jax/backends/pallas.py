@@ -27,10 +27,9 @@ Backward (both backends): the backward kernel walks each tile's pairs back to fr
 last pair any pixel blended, with the forward's own α arithmetic (hoisted V·B clamped at ln o, or
 the difference form: the vanilla forward's backward is the Local-GS backward with hoist and
 warp_cull off) and strip masks: the walk of lgs_jax.backends.backward, one pair per step. Each
-pair's gradient, summed over its tile's pixels, is stored as a row at the pair's emission slot,
-or with `TileBins.row_capacity` in a buffer of rows for the walked pairs only, numbered in slot
-order (gaussian_grads.RowLayout; one writer per row, no atomics): each Gaussian's rows are
-consecutive; a second kernel
+pair's gradient, summed over its tile's pixels, is stored as a row in a buffer of rows for the
+walked pairs only, numbered in emission-slot order (gaussian_grads.RowLayout; one writer per
+row, no atomics): each Gaussian's rows are consecutive; a second kernel
 (lgs_jax.backends.gaussian_grads) chains each Gaussian's rows through Eq. 8 (hoisted form) and
 sums them, one lane per Gaussian in slot order: deterministic, and no per-pair XLA pass.
 

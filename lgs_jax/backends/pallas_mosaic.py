@@ -49,8 +49,8 @@ GPU code: 13 shuffles per thread where one warp reduction per term takes 55, one
 warps, one barrier per pair, one coalesced store of the row; interpret mode, which cannot run inline
 code, sums each term with `jnp.sum`). A pair none of the block's strips takes (mask bits clear) is
 skipped by one uniform branch: unlike the forward's staged groups, a backward step is long enough
-for the branch to pay. Each block writes its own row per pair at the pair's row (its emission slot,
-or its walked row: gaussian_grads.RowLayout) (zero where its pixels had stopped;
+for the branch to pay. Each block writes its own row per pair at the pair's walked row
+(gaussian_grads.RowLayout) (zero where its pixels had stopped;
 lgs_jax.backends.gaussian_grads adds a tile's blocks and sums each Gaussian's rows): one writer per
 row, no atomics, a fixed summation order, deterministic. With `tuning.mosaic_backward_segment` the
 blocks walk segments of at most that many pairs instead of whole lists, each entering from the

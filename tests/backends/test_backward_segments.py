@@ -36,7 +36,7 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
     last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(int)
     stop = start[:, None] + rng.integers(0, last[:, None] - start[:, None] + 1, (start.size, 256))
     stop[:, 0] = last
-    rows_end = end  # a row per pair: zero rows to the list's end
+    rows_end = end  # rows past the stops too (zero rows), the general case; walked rows end at last
     table = np.asarray(jax.jit(backward_segments.split, static_argnums=3)(
         bins, stop, jnp.asarray(rows_end), segment))
     base, n_rows = jax.jit(backward_segments.checkpoints, static_argnums=1)(bins, segment)
@@ -83,7 +83,8 @@ def _grads(g, cam, w, config, row_capacity=None):
 def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, size, seed):
     """Segments of 16 pairs (tiles walk tens of pairs, asserted): the gradients equal those of
     the whole walk to 1e-12 of their scale in float64 (5e-5 in float32), half and whole
-    tiles, with a row per pair or walked rows only, on one tile (default set) or four."""
+    tiles, rows in a buffer of the pair capacity or of the walked pairs, on one tile (default
+    set) or four."""
     g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(size, size, dtype=dtype)
     w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
     config = lambda segment: C(kernel="mosaic", tuning=K(

@@ -1,8 +1,8 @@
 """lgs_jax.backends.gaussian_grads: the Pallas backward's per-Gaussian chain and sum of the
 emission-order pair rows, against its jnp twin (bit for bit, interpret mode) and against the
 XLA path of the `tiles` backend (pairs.chain_hoisted_rows + backward.per_gaussian_sum); the
-walked-rows layout (`walked_rows`) against numpy, and gradients through it (`render`'s
-`row_capacity`) against those of a row per pair, bit for bit."""
+walked-rows layout (`walked_rows`) against numpy, and gradients with `render`'s `row_capacity`
+at the walked pairs against those of the default buffer (the pair capacity's), bit for bit."""
 
 import functools
 
@@ -33,8 +33,10 @@ def _projected_bins(g, cam, capacity):
 
 @functools.partial(jax.jit, static_argnums=(3,))
 def _three_ways(rows, bins, p, config):
-    """(kernel, jnp twin, XLA path) per-Gaussian gradients of emission-order `rows`."""
-    layout = gaussian_grads.slot_rows(bins)
+    """(kernel, jnp twin, XLA path) per-Gaussian gradients of emission-order `rows`: every pair
+    walked (each tile's pixels stop at its list's end), so pair rows are numbered by slot."""
+    stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
+    layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
     kernel = gaussian_grads.sums(rows, layout, p, TILES_X, config, interpret=True)
     twin = gaussian_grads.reference(rows, layout, p, TILES_X, config)
     sorted_rows = jnp.sum(rows[:, bins.slot, :ks.GRAD_VALUES], 0)  # the blocks added
@@ -120,11 +122,11 @@ def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, shar
                                "rows through the Mosaic GPU backward (whole tiles)")])])
 @settings(max_examples=1)  # interpret mode
 @given(seed=st.integers(0, 2**32 - 1))
-def test_walked_rows_give_the_gradients_of_a_row_per_pair_to_the_bit(kernel, pixels, seed):
-    """`render(row_capacity=stats.pairs_walked)`: the Pallas backward with rows for the walked
-    pairs only gives the gradients of a row per pair, bit for bit, on a scene where most pairs
-    are not walked (asserted); one row fewer is reported (`stats.row_overflow`), never NaN,
-    and leaves the image unchanged."""
+def test_a_row_capacity_at_the_walked_pairs_gives_the_defaults_gradients(kernel, pixels, seed):
+    """`render(row_capacity=stats.pairs_walked)`: the Pallas backward with a buffer of exactly
+    the walked pairs' rows gives the gradients of the default buffer (the pair capacity's rows),
+    bit for bit, on a scene where most pairs are not walked (asserted); one row fewer is
+    reported (`stats.row_overflow`), never NaN, and leaves the image unchanged."""
     g, cam = scenes.saturating(seed, 200, np.float32), scenes.camera(32, 32)
     w = np.random.default_rng(seed).normal(size=(32, 32, 3)).astype(np.float32)
     config = C(kernel=kernel, tuning=lgs_jax.KernelConfig(mosaic_forward_pixels=pixels,
