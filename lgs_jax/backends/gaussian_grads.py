@@ -1,13 +1,14 @@
 """The Pallas backward's last step: each Gaussian's pair rows chained to its screen-space
 parameters and summed, one lane per Gaussian, in a fixed order.
 
-The backward kernels (lgs_jax.backends.pallas_mosaic, pallas_triton) store each pair's row at
-the pair's emission slot (`TileBins.slot`), where a Gaussian's pairs are the consecutive slots
-[first, first + count) in ascending tile order (`TileBins.first`, `TileBins.count`). A row
+The backward kernels (lgs_jax.backends.pallas_mosaic, pallas_triton) store each walked pair's
+row at its row in emission-slot order (`RowLayout`; a Gaussian's pairs are the consecutive slots
+[first, first + count) in ascending tile order, `TileBins.first`, `TileBins.count`). A row
 holds the pair's gradient summed over one block's pixels (`kernel_steps.GRAD_VALUES` values:
 the α model's 7 columns, ∂L/∂rgb, ∂L/∂z) and, in column `kernel_steps.TILE_COLUMN`, its tile
-index as a float (exact: images have fewer than 2^24 tiles, lgs_jax.scene checks); rows of
-pairs no pixel reached are zero. For Gaussian g this computes, walking its slots in order,
+index as a float (exact: images have fewer than 2^24 tiles, lgs_jax.scene checks); a block's
+row of a pair none of its pixels reached is zero. For Gaussian g this computes, walking its
+rows in order,
 
     hoisted (Eq. 8):  Σ_pairs [∂L/∂μ, ∂L/∂(a, b, c), ∂L/∂ln o + clamp, ∂L/∂rgb, ∂L/∂z]
                       with ∂L/∂(a, b, c, Δ, ln o) = hoist.hoist_terms_vjp(∂L/∂V, a, b, c, Δ),

@@ -1,6 +1,6 @@
 """How the Mosaic GPU backward kernel (lgs_jax.backends.pallas_mosaic) writes a pair's row: its
-gradient terms summed over the block's pixels, then the pair's tile, at the pair's emission slot
-(lgs_jax.backends.gaussian_grads reads the rows there).
+gradient terms summed over the block's pixels, then the pair's tile, at the pair's row
+(`gaussian_grads.RowLayout`, which reads the rows there).
 
 Two reductions (`REDUCTIONS`, `writers`):
   "transposed" (the GPU default): `transposed_row`, a transposing butterfly in inline Mosaic GPU

@@ -18,9 +18,9 @@ every pixel is done.
 Backward (`backward_kernel`): one program per tile, 256 lanes (8 warps), walking the tile's pairs
 back to front from the last pair any pixel blended (`kernel_steps.backward_step`). Per pair, the
 per-pixel gradient terms are reduced over the tile in one (256, 16) column reduction and stored with
-the tile as the pair's row (its emission slot, or its walked row: gaussian_grads.RowLayout;
-backends.gaussian_grads sums them per Gaussian there): each pair belongs to one tile, so every row
-has one writer (no atomics; rows of pairs never visited stay zero, through an aliased zero buffer).
+the tile at the pair's walked row (gaussian_grads.RowLayout; backends.gaussian_grads sums them
+per Gaussian there): each pair belongs to one tile, so every row has one writer (no atomics;
+rows never written stay zero, through an aliased zero buffer).
 """
 
 from __future__ import annotations
