@@ -4,9 +4,7 @@ With `KernelConfig.mosaic_backward_segment` None a block walks its tile's whole 
 tile's last stop pair down, as the forward does, and the longest walk sets the kernel's length
 (BENCHMARKS.md §7: 2.4–4.7x a balanced schedule at 1.5M–10M Gaussians). With a segment length L
 (1024 by default; H200: 0.76x the whole walks' forward + backward time at 5.8M Gaussians), a
-tile's pairs that have rows, [start, `RowLayout.end`) (the walked pairs [start, last); a
-layout with rows past `last` too, zero rows, gets them cut the same way: left whole, one
-block's tail of zero rows would set the kernel's length: H200, BENCHMARKS.md §7), are cut at
+tile's walked pairs, [start, last) (`RowLayout.end`: the pairs that have rows), are cut at
 start + L, start + 2L, ... into segments, each its own block(s).
 
 A segment [lo, hi) that is not its tile's last enters the walk at hi with the carry the walk
@@ -30,7 +28,6 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ..binning import TileBins, segment_of_slot
-from .interface import tile_last
 
 COLUMNS = 4  # a segment's (tile, lo, hi, checkpoint index or −1)
 
@@ -43,20 +40,20 @@ def checkpoints(bins: TileBins, segment: int):
     return jnp.cumsum(per_tile) - per_tile, bins.gauss.shape[0] // segment + 1
 
 
-def whole_tiles(order, bins: TileBins, rows_end):
-    """(n_tiles, COLUMNS): one segment per tile in `order`, its whole list, no checkpoint."""
-    return jnp.stack([order, bins.tile_start[order], rows_end[order],
+def whole_tiles(order, bins: TileBins, last):
+    """(n_tiles, COLUMNS): one segment per tile in `order`, its walked pairs [tile_start, last),
+    no checkpoint."""
+    return jnp.stack([order, bins.tile_start[order], last[order],
                       jnp.full_like(order, -1)], -1)
 
 
-def split(bins: TileBins, stop, rows_end, segment: int):
-    """(n_tiles + capacity // segment, COLUMNS) segments of `segment` pairs of [tile_start,
-    rows_end) (module docstring), longest walk first; rows past the real segments are empty
-    (lo = hi)."""
+def split(bins: TileBins, last, segment: int):
+    """(n_tiles + capacity // segment, COLUMNS) segments of `segment` pairs of each tile's walked
+    pairs [tile_start, last) (`RowLayout.end`; module docstring), longest first; rows past the
+    real segments are empty (lo = hi), as is the one segment of a tile that walked nothing."""
     n_tiles, capacity = bins.tile_start.shape[0], bins.gauss.shape[0]
     start = bins.tile_start
-    last = tile_last(stop, start, bins.tile_end)
-    count = jnp.maximum((rows_end - start + segment - 1) // segment, 1)
+    count = jnp.maximum((last - start + segment - 1) // segment, 1)
     first = jnp.cumsum(count) - count
     size = n_tiles + capacity // segment
     tile = jnp.minimum(segment_of_slot(first, count, size), n_tiles - 1)
@@ -64,10 +61,9 @@ def split(bins: TileBins, stop, rows_end, segment: int):
     real = m < count[tile]
     top = m == count[tile] - 1
     lo = jnp.where(real, start[tile] + m * segment, 0)
-    hi = jnp.where(top, rows_end[tile], lo + segment)
+    hi = jnp.where(top, last[tile], lo + segment)
     hi = jnp.where(real, hi, 0)
     base, _ = checkpoints(bins, segment)
     index = jnp.where(real & ~top, base[tile] + m, -1)
-    walked = jnp.maximum(jnp.minimum(hi, last[tile]) - lo, 0)
-    order = jnp.argsort(-walked, stable=True)
+    order = jnp.argsort(lo - hi, stable=True)
     return jnp.stack([tile, lo, hi, index], -1)[order]

@@ -256,7 +256,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
                  g_depth)
     layout = gaussian_grads.rows_of(bins, stop_at)
     if plan_.backward == "mosaic":
-        segments = (backward_segments.split(bins, stop_at, layout.end, _segment(plan_)) if entry
+        segments = (backward_segments.split(bins, layout.end, _segment(plan_)) if entry
                     else backward_segments.whole_tiles(order, bins, layout.end))
         rows = pallas_mosaic.backward_rows(config, plan_.interpret, plan_.backward_pixels,
                                            tiles_x, segments, bins, layout, masks, records,
