@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Scale GPU session (issues 17 and 18), one device call per part, each under 10 minutes:
 #   bash scripts/scale_gpu_check.sh tests  # the split backward's and walked rows' tests (2 min)
-#   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 8 min)
+#   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 6 min)
 #   bash scripts/scale_gpu_check.sh fwd    # forward per scene
-#   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat)
+#   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat; 5 min)
+# Dec 2 (H200): gsplat's build took 107 s, then `grad` with two rows about 65 s per scene, and
+# `train` 287 s. Lines are written as they come, so a call cut by its time limit keeps them.
 # One benchmarks.scale process per scene (a failing row costs one scene, not the run), gsplat
 # 1.5.3 in the same process. Run from the repository root on the device machine (scenes in
 # carry/data, the gsplat wheel in carry/wheels); logs and CSVs to $OUT; a short table last.
@@ -27,7 +29,7 @@ case "${1:-grad}" in
   grad)
     build_gsplat
     for s in $scenes; do
-      timeout "${SCENE_TIMEOUT:-150}" python3 -m benchmarks.scale --grad --data carry/data \
+      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --data carry/data \
         --scenes "$s" --rows "${GRAD_ROWS:-localgs,localgs@walked}" \
         --repeat 5 --csv "$out/grad_$s.csv" 2>&1 | quiet > "$out/grad_$s.log"
     done
