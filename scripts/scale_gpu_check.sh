@@ -4,6 +4,7 @@
 #   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 6 min)
 #   bash scripts/scale_gpu_check.sh fwd    # forward per scene
 #   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat; 5 min)
+#   bash scripts/scale_gpu_check.sh ahead  # steps beside a compile ahead (ahead_contention.py)
 # Dec 2 (H200): gsplat's build took 107 s, then `grad` with two rows about 65 s per scene, and
 # `train` 287 s. Lines are written as they come, so a call cut by its time limit keeps them.
 # One benchmarks.scale process per scene (a failing row costs one scene, not the run), gsplat
@@ -47,5 +48,10 @@ case "${1:-grad}" in
       --scenes skull --steps "${STEPS:-7000}" --eval-every "${STEPS:-7000}" --no-gsplat \
       --out "$out/train_skull" 2>&1 | tr '\r' '\n' | grep -v "step/s\|s/step" > "$out/train.log"
     tail -6 "$out/train.log" ;;
-  *) echo "usage: $0 tests|grad|fwd|train" >&2; exit 2 ;;
+  ahead)
+    for flags in "" "--xla_gpu_force_compilation_parallelism=1"; do
+      XLA_FLAGS="$flags" timeout "${AHEAD_TIMEOUT:-250}" python3 scripts/ahead_contention.py \
+        2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
+    done ;;
+  *) echo "usage: $0 tests|grad|fwd|train|ahead" >&2; exit 2 ;;
 esac
