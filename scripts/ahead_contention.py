@@ -112,8 +112,9 @@ def run(variant, args, grad, g, cam, cap, cap_next):
         marks = {name: float(t) for name, t in
                  (line.split() for line in child.stdout.read().splitlines())}
     begun, lowered, compiled = marks["started"], marks["lowered"], marks["compiled"]
-    return (_rate(times, t0, launched), _rate(times, begun, lowered), _rate(times, lowered, compiled),
-            _rate(times, end, end + args.seconds), lowered - begun, compiled - lowered)
+    return (_rate(times, t0, launched), _rate(times, begun, lowered),
+            _rate(times, lowered, compiled), _rate(times, end, end + args.seconds),
+            lowered - begun, compiled - lowered)
 
 
 def main(argv=None):
