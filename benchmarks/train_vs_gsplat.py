@@ -85,8 +85,12 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--run-dir", help="our runs' directories, checkpoints included (large; "
                                       "default: a temporary folder)")
     ap.add_argument("--no-gsplat", action="store_true")
-    ap.add_argument("--no-compile-ahead", action="store_true",
-                    help="our trainer without compiling ahead of pair-capacity growths")
+    ahead = ap.add_mutually_exclusive_group()
+    ahead.add_argument("--no-compile-ahead", action="store_true",
+                       help="our trainer without compiling ahead of pair-capacity growths")
+    ahead.add_argument("--compile-ahead-process", action="store_true",
+                       help="our trainer compiling ahead in a child process (`fit`'s "
+                            "compile_ahead='process')")
     ap.add_argument("--no-ours", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
@@ -124,7 +128,7 @@ def run_ours(args, scene: str) -> dict:
     import jax
 
     from lgs_jax import train
-    from lgs_jax.cli import use_compile_cache
+    from lgs_jax.cli import ahead_mode, use_compile_cache
     from lgs_jax.train import report
 
     use_compile_cache()
@@ -133,7 +137,7 @@ def run_ours(args, scene: str) -> dict:
     result = train.fit(d, args.steps, out, strategy=strategy, settings=settings,
                        max_gaussians=cap, seed=args.seed, overwrite=True, backend=args.backend,
                        pool_size=cap if args.strategy == "mcmc" else None,
-                       compile_ahead=False if args.no_compile_ahead else None)
+                       compile_ahead=ahead_mode(args))
     rows = report.read_metrics(os.path.join(out, "metrics.jsonl"))
     count = {r["step"]: r["gaussians"] for r in rows if "gaussians" in r and "step" in r}
     curve = [dict(step=r["step"], psnr=r["heldout_psnr"], ssim=r["heldout_ssim"],

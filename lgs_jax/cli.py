@@ -227,7 +227,7 @@ def _fit(args) -> int:
                        crop=tuple(args.crop) if args.crop else None, seed=args.seed,
                        backend=args.backend, pool_size=args.pool_size, resume=args.resume,
                        overwrite=args.overwrite,
-                       compile_ahead=False if args.no_compile_ahead else None)
+                       compile_ahead=ahead_mode(args))
     print(json.dumps(result, indent=1))
     return 0
 
@@ -311,7 +311,12 @@ def _fit_parser(sub, common) -> None:
                    help="pair buffer size as a multiple of a view's pairs, at the start and at "
                         "each growth (a recompile); larger: fewer recompiles, larger buffers "
                         "(default: 1.5)")
-    f.add_argument("--no-compile-ahead", action="store_true",
+    ahead = f.add_mutually_exclusive_group()
+    ahead.add_argument("--compile-ahead-process", action="store_true",
+                       help="compile the step for a grown pair buffer ahead in a child process, "
+                            "through the persistent compilation cache, instead of a thread (no "
+                            "contention for Python's lock; the same results)")
+    ahead.add_argument("--no-compile-ahead", action="store_true",
                    help="compile the step for a grown pair buffer only when a step needs it "
                         "(default on a GPU: compile it in a background thread before; the same "
                         "results)")
@@ -355,6 +360,11 @@ def _one_line(e: BaseException) -> str:
     else:
         text = f"{type(e).__name__}: {e} (--debug shows the traceback)"
     return " ".join(text.split())
+
+
+def ahead_mode(args) -> bool | str | None:
+    """`fit`'s compile_ahead from --no-compile-ahead / --compile-ahead-process (None: default)."""
+    return False if args.no_compile_ahead else "process" if args.compile_ahead_process else None
 
 
 def use_compile_cache() -> str | None:

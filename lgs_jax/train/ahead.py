@@ -11,17 +11,56 @@ argument shapes (a pool that grew since needs its own compile, as before), for e
 that capacity. It is the program `jax.jit` compiles for that capacity, and compiling it does
 not depend on timing (the step has no matrix product or convolution for XLA to autotune): the
 same bits (tests/train: a run with and one without, bit for bit).
+
+In a thread, tracing and lowering the step (Python: Mosaic GPU's layout inference, about 6 s
+per capacity, `scripts/lower_time.py`) hold Python's lock, and the training loop's steps ran
+about 6x slower while it did on the H200 (BENCHMARKS.md §7). Mode "process" compiles in a child
+process instead (`ahead_child`), into JAX's persistent compilation cache: at the growth the
+jitted step lowers again in this process and loads the executable from the cache. It needs
+the cache (`jax_compilation_cache_dir`); a child that fails, or a cache entry the step does not
+find (a JAX setting the child lacks), costs only the compile it was to save.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import os
+import pickle
+import subprocess
+import sys
 import time
 from typing import Callable
 
 import jax
 
 from ..render import pair_capacity
+
+MODES = ("thread", "process")
+
+# JAX settings a child compile must share with this process for its cache entry to be the one
+# this process looks up (the cache's key covers the program, the devices and the options).
+SHARED_CONFIG = ("jax_enable_x64", "jax_compilation_cache_dir", "jax_platforms",
+                 "jax_persistent_cache_min_compile_time_secs",
+                 "jax_persistent_cache_min_entry_size_bytes", "jax_default_matmul_precision")
+
+
+def mode_of(compile_ahead) -> str | None:
+    """`fit`'s compile_ahead as a `Stepper` mode: None (default) is "thread" where the step
+    runs on a GPU (the compile takes host cores the step does not use; on a CPU it would
+    compete with the step for them) and no compile ahead elsewhere; True is "thread", False
+    None; "thread" and "process" (which needs JAX's persistent compilation cache) as they are."""
+    if compile_ahead is None:
+        return "thread" if jax.default_backend() == "gpu" else None
+    if compile_ahead is True or compile_ahead is False:
+        return "thread" if compile_ahead else None
+    if compile_ahead not in MODES:
+        raise ValueError(f"compile_ahead: expected one of {MODES}, True, False or None, got "
+                         f"{compile_ahead!r}")
+    if compile_ahead == "process" and not jax.config.jax_compilation_cache_dir:
+        raise ValueError("compile_ahead='process' compiles into JAX's persistent compilation "
+                         "cache, which is off (set jax_compilation_cache_dir, or call "
+                         "lgs_jax.cli.use_compile_cache())")
+    return compile_ahead
 
 
 def signature(args) -> tuple:
@@ -45,13 +84,17 @@ class Stepper:
     (`prepare`), and picks the capacity of a growth (`grow`).
 
     `step(args, capacity)` is the jitted step; `lower(args, capacity)` its `jax.stages.Lowered`
-    (args may be `jax.ShapeDtypeStruct`s). With `ahead=False` it only runs the jitted step and
-    grows to `pair_capacity(pairs, headroom)`, as before.
+    (args may be `jax.ShapeDtypeStruct`s; for mode "process" `lower` must pickle: a module-level
+    function or a `functools.partial` of one). `mode`: "thread", "process" (module docstring) or
+    None, which only runs the jitted step and grows to `pair_capacity(pairs, headroom)`.
     """
 
-    def __init__(self, step: Callable, lower: Callable, headroom: float, ahead: bool = True):
-        self._step, self._lower, self._headroom = step, lower, headroom
-        self._threads = concurrent.futures.ThreadPoolExecutor(1) if ahead else None
+    def __init__(self, step: Callable, lower: Callable, headroom: float,
+                 mode: str | None = "thread"):
+        if mode not in (None, *MODES):
+            raise ValueError(f"mode: expected one of {MODES} or None, got {mode!r}")
+        self._step, self._lower, self._headroom, self._mode = step, lower, headroom, mode
+        self._threads = concurrent.futures.ThreadPoolExecutor(1) if mode else None
         self._job = None  # (capacity, signature, future) of the background compile
         self._ready = None  # (capacity, signature, executable) taken from a finished job
 
@@ -72,8 +115,11 @@ class Stepper:
                 return
             self._job[2].cancel()  # not started yet (else it finishes, unused)
         abstract = _abstract(args)
-        self._job = (following, sig, self._threads.submit(
-            lambda: self._lower(abstract, following).compile()))
+        if self._mode == "process":
+            compile_ = lambda: _compile_in_child(self._lower, abstract, following)
+        else:
+            compile_ = lambda: self._lower(abstract, following).compile()
+        self._job = (following, sig, self._threads.submit(compile_))
 
     def grow(self, pairs: int, sig: tuple) -> tuple[int, float, bool]:
         """(new capacity, seconds waited for the compile ahead, whether it was used) for a
@@ -84,7 +130,8 @@ class Stepper:
         if job is not None and job[0] >= pairs and job[1] == sig:
             t0 = time.perf_counter()
             try:
-                self._ready = (job[0], sig, job[2].result())
+                executable = job[2].result()  # None from a child: the jitted step loads it
+                self._ready = None if executable is None else (job[0], sig, executable)
                 return job[0], time.perf_counter() - t0, True
             except Exception:  # noqa: BLE001 - any failure: the jitted step compiles instead
                 pass
@@ -95,3 +142,14 @@ class Stepper:
         self._job = self._ready = None
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
+
+
+def _compile_in_child(lower: Callable, abstract, capacity: int) -> None:
+    """Compile `lower(abstract, capacity)` in a child process (`ahead_child`) into the persistent
+    compilation cache, with this process's `SHARED_CONFIG`; raises if the child fails."""
+    config = {name: jax.config.values[name] for name in SHARED_CONFIG
+              if name in jax.config.values}
+    env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")  # this process holds the GPU
+    subprocess.run([sys.executable, "-m", "lgs_jax.train.ahead_child"], env=env, check=True,
+                   input=pickle.dumps(config) + pickle.dumps((lower, abstract, capacity)),
+                   capture_output=True)

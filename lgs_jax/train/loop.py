@@ -15,6 +15,7 @@ PLY), heldout_<name>.png (render beside ground truth), curves.png, result.json.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import time
@@ -29,7 +30,7 @@ from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2, pair_capacity
 from . import checkpoint, report
-from .ahead import Stepper, signature
+from .ahead import Stepper, mode_of, signature
 from .data import RunData, prepare, views_for_step
 from .init import start_gaussians
 from .losses import PADDINGS
@@ -126,11 +127,17 @@ def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
     return report.heldout_metrics(images, rd.test_images)
 
 
-def _stepper(setup: Setup, compile_ahead: bool) -> Stepper:
-    """`train_step` of this run behind an `ahead.Stepper`."""
+def _lower_step(args, capacity: int, *, setup: Setup):
+    """`train_step` lowered for `args` at `capacity` (module level, so that `ahead`'s child
+    process can unpickle it)."""
+    return train_step.lower(*args, setup=setup, capacity=capacity)
+
+
+def _stepper(setup: Setup, mode: str | None) -> Stepper:
+    """`train_step` of this run behind an `ahead.Stepper` of `mode`."""
     return Stepper(lambda a, c: train_step(*a, setup=setup, capacity=c),
-                   lambda a, c: train_step.lower(*a, setup=setup, capacity=c),
-                   setup.settings.pair_headroom, compile_ahead)
+                   functools.partial(_lower_step, setup=setup), setup.settings.pair_headroom,
+                   mode)
 
 
 def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say,
@@ -169,15 +176,13 @@ def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
 
 
 def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, clock,
-          compile_ahead: bool):
+          ahead_mode: str | None):
     """Steps st.step .. setup.steps (module docstring); returns the seconds spent in steps
     (their compilation, timed by `clock`, included)."""
     progress, s = report.Progress(st.step, setup.steps), setup.settings
     key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
-    if compile_ahead is None:
-        compile_ahead = jax.default_backend() == "gpu"
-    stepper = _stepper(setup, compile_ahead)
+    stepper = _stepper(setup, ahead_mode)
     busy = 0.0
     try:
         with open(os.path.join(out, "metrics.jsonl"), "a", buffering=1) as f:
@@ -248,7 +253,8 @@ def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -
 def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         settings: Settings = Settings(), max_gaussians: int = 1_000_000, downscale: int = 1,
         crop=None, seed: int = 0, backend: str | None = None, pool_size: int | None = None,
-        resume: bool = False, overwrite: bool = False, compile_ahead: bool | None = None,
+        resume: bool = False, overwrite: bool = False,
+        compile_ahead: bool | str | None = None,
         log=print) -> dict:
     """Train on `data` (a dataset folder or a `Dataset`) for `steps` steps into run directory
     `out`; returns the final metrics (also in OUT/result.json).
@@ -260,10 +266,12 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     window of every image. backend: a differentiable backend of `render` (default `pallas` on
     GPUs, `tiles` elsewhere). `out` must be new or empty unless `resume` (continue from its
     checkpoint, bit-identically) or `overwrite` (delete its previous run's files first).
-    compile_ahead: compile the step for the next pair capacity in a background thread while
-    training (`ahead.py`; the same results, fewer waits on compiles as the pairs grow); None
-    (default): where the step runs on a GPU, so that the compile takes host cores the step does
-    not use (on a CPU it competes with the step for them).
+    compile_ahead: compile the step for the next pair capacity while training (`ahead.py`; the
+    same results, fewer waits on compiles as the pairs grow): True or "thread" in a background
+    thread, "process" in a child process through JAX's persistent compilation cache (no
+    contention for Python's lock; not yet measured on a GPU), False not at all; None (default):
+    "thread" where the step runs on a GPU, so that the compile takes host cores the step does
+    not use (on a CPU it competes with the step for them), else False.
     Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
     and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
     time of the steps and refinements, their compilation included, evaluations and checkpoints
@@ -271,6 +279,7 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     waiting for a compile ahead; compiles ahead that finish in time cost the run nothing).
     """
     _check_args(steps, max_gaussians, settings)
+    ahead_mode = mode_of(compile_ahead)
     rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
     backend = backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
     setup = Setup(settings, strategy or DefaultStrategy(), steps, rd.scene_scale, backend)
@@ -280,7 +289,7 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         st = _fresh(setup, rd, seed, max_gaussians, pool_size, log)
     start, t0, clock = st.step, time.perf_counter(), report.CompileClock()
     with clock.listening():
-        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock, compile_ahead)
+        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock, ahead_mode)
     return _finish(out, setup, st, rd, start, busy, time.perf_counter() - t0, log,
                    clock.seconds)
 

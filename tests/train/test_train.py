@@ -170,18 +170,20 @@ def test_resume_is_bit_identical(skull, tmp_path):
 
 def test_compiling_ahead_changes_no_bit(skull, tmp_path):
     """`fit` compiles the step for the next pair capacity in a background thread (the default
-    on GPUs) and takes it when the pairs grow past the capacity (at step 10 here); without it the
-    step is compiled there. Same bits at the end, though the capacities may differ
-    (`ahead.Stepper` takes the smallest one that holds the pairs): nothing depends on the
-    capacity but drops."""
-    logs = {True: [], False: []}
+    on GPUs) or a child process (through the suite's persistent cache) and takes it when the
+    pairs grow past the capacity (at step 10 here); without it the step is compiled there. Same
+    bits at the end, though the capacities may differ (`ahead.Stepper` takes the smallest one
+    that holds the pairs): nothing depends on the capacity but drops."""
+    logs = {True: [], "process": [], False: []}
     for on, log in logs.items():
         _fit(skull, tmp_path / str(on), log=log.append, compile_ahead=on)
-    assert any("grown" in m and "(compiled ahead;" in m for m in logs[True]), logs[True]
+    for on in (True, "process"):
+        assert any("grown" in m and "(compiled ahead;" in m for m in logs[on]), logs[on]
     assert any("grown" in m and "(one recompile)" in m for m in logs[False]), logs[False]
-    a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in ("True", "False"))
+    a, b, c = (np.load(tmp_path / r / "checkpoint.npz") for r in ("True", "process", "False"))
     for name in a.files:
-        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+        np.testing.assert_array_equal(a[name], c[name], err_msg=name)
+        np.testing.assert_array_equal(b[name], c[name], err_msg=name)
 
 
 class _Lowered:

@@ -1,0 +1,94 @@
+"""lgs_jax.train.ahead's mode "process": the step for the next capacity compiled in a child
+process lands in the persistent compilation cache under the key this process looks up (a cache
+hit at the growth, from a cache that was empty), and `fit`'s compile_ahead is checked."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import pytest
+from jax._src import compilation_cache
+
+from lgs_jax.train import ahead
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _scaled(x, capacity):
+    return jnp.cumsum(jnp.sin(x) * capacity)
+
+
+def _lower_scaled(args, capacity):
+    """Module level, so that the child process can unpickle it."""
+    return _scaled.lower(*args, capacity)
+
+
+@pytest.fixture
+def empty_cache(tmp_path):
+    """A persistent compilation cache of its own, empty, caching every compile; the suite's
+    cache back afterwards."""
+    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs")
+    before = {name: jax.config.values[name] for name in names}
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path / "cache"))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    compilation_cache.reset_cache()
+    yield tmp_path / "cache"
+    for name, value in before.items():
+        jax.config.update(name, value)
+    compilation_cache.reset_cache()
+
+
+def test_a_child_compile_is_the_growths_cache_hit(empty_cache):
+    stepper = ahead.Stepper(lambda a, c: _scaled(*a, c), _lower_scaled, 1.5, "process")
+    args = (jnp.linspace(0, 1, 5),)
+    sig = ahead.signature(args)
+    first = stepper.run(args, 1024, sig)
+    stepper.prepare(args, 1024, sig)  # pair_capacity(1025, 1.5) = 2048, in a child process
+    capacity, waited, taken = stepper.grow(1100, sig)
+    assert (capacity, taken) == (2048, True) and waited >= 0
+    events = []
+    listen = lambda event, **_: events.append(event)
+    jax.monitoring.register_event_listener(listen)
+    try:
+        grown = stepper.run(args, capacity, sig)
+    finally:
+        jax.monitoring.unregister_event_listener(listen)
+    stepper.close()
+    assert "/jax/compilation_cache/cache_hits" in events, events
+    assert jnp.array_equal(grown, first * 2)
+
+
+def test_a_failed_child_costs_only_the_compile(empty_cache):
+    """A `lower` the child cannot unpickle (a lambda): the growth compiles in this process."""
+    stepper = ahead.Stepper(lambda a, c: _scaled(*a, c), lambda a, c: _lower_scaled(a, c), 1.5,
+                            "process")
+    args = (jnp.linspace(0, 1, 5),)
+    sig = ahead.signature(args)
+    stepper.run(args, 1024, sig)
+    stepper.prepare(args, 1024, sig)
+    capacity, _, taken = stepper.grow(1100, sig)
+    assert capacity == 2048 and not taken
+    assert jnp.array_equal(stepper.run(args, 2048, sig), _scaled(args[0], 2048))
+    stepper.close()
+
+
+@pytest.mark.parametrize("value,want", [(True, "thread"), (False, None), ("thread", "thread"),
+                                        ("process", "process"), (None, None)])
+def test_compile_ahead_modes(value, want):
+    """On this CPU None means no compile ahead; "process" with the suite's cache on."""
+    assert ahead.mode_of(value) == want
+
+
+@pytest.mark.parametrize("value", ["threads", 1, "yes"])
+def test_bad_compile_ahead_raises(value):
+    with pytest.raises(ValueError, match="compile_ahead"):
+        ahead.mode_of(value)
+
+
+def test_process_mode_without_the_cache_raises():
+    before = jax.config.values["jax_compilation_cache_dir"]
+    jax.config.update("jax_compilation_cache_dir", None)
+    try:
+        with pytest.raises(ValueError, match="persistent compilation cache"):
+            ahead.mode_of("process")
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
