@@ -23,7 +23,10 @@ Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by defa
 3DGS compositing rule, alpha cap 0.99, or gsplat's with --convention gsplat; gsplat's: 0.999).
 Time per step: the training loop's wall time (one host sync per step in both, as
 simple_trainer's progress bar does) without evaluations; ours also without compilation (both
-numbers are written), gsplat's after one warm-up render (its CUDA extension loaded).
+numbers are written; compiling ahead in a thread, the default on a GPU, counts only the waits
+as compilation, so steps slowed beside a compile ahead count as steps: use
+--no-compile-ahead for the steps alone), gsplat's after one warm-up render (its CUDA extension
+loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians),
 summary.csv (final and best PSNR/SSIM, ms/step, peak MB, Gaussians), <scene>_<trainer>.json,
