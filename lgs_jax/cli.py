@@ -317,9 +317,9 @@ def _fit_parser(sub, common) -> None:
                             "through the persistent compilation cache, instead of a thread (no "
                             "contention for Python's lock; the same results)")
     ahead.add_argument("--no-compile-ahead", action="store_true",
-                   help="compile the step for a grown pair buffer only when a step needs it "
-                        "(default on a GPU: compile it in a background thread before; the same "
-                        "results)")
+                       help="compile the step for a grown pair buffer only when a step needs "
+                            "it (default on a GPU: compile it in a background thread before; "
+                            "the same results)")
     f.add_argument("--crop", type=_int_at_least(0), nargs=4, metavar=("X0", "Y0", "W", "H"),
                    help="train and evaluate on this window of every image (quick checks)")
     f.add_argument("--seed", type=int, default=0,
