@@ -18,7 +18,10 @@ about 6x slower while it did on the H200 (BENCHMARKS.md §7). Mode "process" com
 process instead (`ahead_child`), into JAX's persistent compilation cache: at the growth the
 jitted step lowers again in this process and loads the executable from the cache. It needs
 the cache (`jax_compilation_cache_dir`); a child that fails, or a cache entry the step does not
-find (a JAX setting the child lacks), costs only the compile it was to save.
+find (a JAX setting the child lacks), costs only the compile it was to save. (Sending the
+executable back serialized, `jax.experimental.serialize_executable`, would spare this process
+the lowering too, but on the CPU the train step so loaded failed at run time, "NOT_FOUND:
+Function broadcast_divide_fusion.5 not found", where the cache's own loading works.)
 """
 
 from __future__ import annotations
