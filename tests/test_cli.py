@@ -6,6 +6,7 @@ import matplotlib.image
 import pytest
 
 import lgs_jax
+from lgs_jax import cli
 from lgs_jax.cli import main
 
 
@@ -180,3 +181,17 @@ def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "cache")
     finally:
         jax.config.update("jax_compilation_cache_dir", session)
+
+
+@pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], False),
+                                        (["--compile-ahead-process"], "process")])
+def test_fit_compile_ahead_flags(flags, want):
+    args = cli._parser().parse_args(["fit", "--data", "d", "--out", "o", *flags])
+    assert cli.ahead_mode(args) == want
+
+
+def test_fit_compile_ahead_flags_exclude_each_other(capsys):
+    with pytest.raises(SystemExit):
+        cli._parser().parse_args(["fit", "--data", "d", "--out", "o", "--no-compile-ahead",
+                                  "--compile-ahead-process"])
+    assert "not allowed with" in capsys.readouterr().err
