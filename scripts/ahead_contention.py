@@ -137,7 +137,7 @@ def main(argv=None):
     for i, variant in enumerate(args.variants.split(",")):
         cap_next = lgs_jax.pair_capacity(cap + 1, 1.5 + 0.25 * i)  # a compile of its own
         rows.append((variant, *run(variant, args, grad, g, cam, cap, cap_next)))
-        print(rows[-1], flush=True)
+        print(f"{variant}: compiled capacity {cap_next}", flush=True)
     print(f"{'variant':>13} {'before':>8} {'lowering':>9} {'compiling':>10} {'after':>8} "
           f"{'lower s':>8} {'compile s':>9}  (steps per second)")
     for v, *r in rows:

@@ -52,7 +52,7 @@ case "${1:-grad}" in
   ahead)
     for flags in "" "--xla_gpu_force_compilation_parallelism=1"; do
       XLA_FLAGS="$flags" timeout "${AHEAD_TIMEOUT:-250}" python3 scripts/ahead_contention.py \
-        2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
+        ${AHEAD_ARGS:-} 2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
     done ;;
   *) echo "usage: $0 tests|grad|fwd|train|ahead" >&2; exit 2 ;;
 esac
