@@ -99,6 +99,7 @@ class Stepper:
         self._step, self._lower, self._headroom, self._mode = step, lower, headroom, mode
         self._threads = concurrent.futures.ThreadPoolExecutor(1) if mode else None
         self._job = None  # (capacity, signature, future) of the background compile
+        self.failure = None  # why the last growth's compile ahead failed (None: it did not)
         self._ready = None  # (capacity, signature, executable) taken from a finished job
 
     def run(self, args, capacity: int, sig: tuple):
@@ -128,16 +129,17 @@ class Stepper:
         """(new capacity, seconds waited for the compile ahead, whether it was used) for a
         step that needs `pairs` pairs: the prepared capacity if it holds them and fits the
         shapes `sig` (waiting for its compile if unfinished), else `pair_capacity(pairs,
-        headroom)` (compiled by the next `run`; also when the compile ahead failed)."""
-        job, self._job = self._job, None
+        headroom)` (compiled by the next `run`; also when the compile ahead failed, which
+        `failure` then says, else None)."""
+        job, self._job, self.failure = self._job, None, None
         if job is not None and job[0] >= pairs and job[1] == sig:
             t0 = time.perf_counter()
             try:
                 executable = job[2].result()  # None from a child: the jitted step loads it
                 self._ready = None if executable is None else (job[0], sig, executable)
                 return job[0], time.perf_counter() - t0, True
-            except Exception:  # noqa: BLE001 - any failure: the jitted step compiles instead
-                pass
+            except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
+                self.failure = _reason(e)
         return pair_capacity(pairs, self._headroom), 0.0, False
 
     def close(self) -> None:
@@ -145,6 +147,12 @@ class Stepper:
         self._job = self._ready = None
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
+
+
+def _reason(e: Exception) -> str:
+    """One line on why a compile ahead failed (a child's last line of stderr)."""
+    lines = (getattr(e, "stderr", None) or b"").decode(errors="replace").strip().splitlines()
+    return lines[-1] if lines else f"{type(e).__name__}: {e}"
 
 
 def _compile_in_child(lower: Callable, abstract, capacity: int) -> None:

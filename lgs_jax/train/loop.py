@@ -158,7 +158,8 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
         st.capacity, waited, ahead = stepper.grow(m["pairs"], sig)
         clock.waited(waited)
         say(f"step {st.step + 1}: pair capacity grown to {st.capacity} "
-            + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)"))
+            + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)")
+            + (f"; the compile ahead failed: {stepper.failure}" if stepper.failure else ""))
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:

@@ -67,6 +67,7 @@ def test_a_failed_child_costs_only_the_compile(empty_cache):
     stepper.prepare(args, 1024, sig)
     capacity, _, taken = stepper.grow(1100, sig)
     assert capacity == 2048 and not taken
+    assert "pickle" in stepper.failure.lower(), stepper.failure  # the child's reason
     assert jnp.array_equal(stepper.run(args, 2048, sig), _scaled(args[0], 2048))
     stepper.close()
 
