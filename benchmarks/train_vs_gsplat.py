@@ -2,7 +2,8 @@
 
     python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
         [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
-        [--backend NAME] [--convention 3dgs|gsplat] [--no-gsplat] [--no-ours] [--inline]
+        [--backend NAME] [--convention 3dgs|gsplat] [--pair-headroom 1.5] [--no-gsplat]
+        [--no-ours] [--inline]
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
 (so each one's peak memory is its own, and JAX stays off the GPU while gsplat runs), on the same:
@@ -94,6 +95,9 @@ def parse(argv=None) -> argparse.Namespace:
     ahead.add_argument("--compile-ahead-process", action="store_true",
                        help="our trainer compiling ahead in a child process (`fit`'s "
                             "compile_ahead='process')")
+    ap.add_argument("--pair-headroom", type=float, default=1.5,
+                    help="our trainer's pair capacity over the pairs needed (Settings."
+                         "pair_headroom; larger: fewer growths and recompiles, larger buffers)")
     ap.add_argument("--no-ours", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
@@ -115,7 +119,8 @@ def scene_setup(args, scene: str):
     if args.refine_from is not None:
         strategy = dataclasses.replace(strategy, refine_start_iter=args.refine_from)
     settings = train.Settings(eval_every=args.eval_every, checkpoint_every=max(args.steps, 1),
-                              ssim_padding=args.ssim_padding, convention=args.convention)
+                              ssim_padding=args.ssim_padding, convention=args.convention,
+                              pair_headroom=args.pair_headroom)
     return d, cap, strategy, settings
 
 

@@ -4,7 +4,8 @@
 #   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 6 min)
 #   bash scripts/scale_gpu_check.sh fwd    # forward per scene
 #   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat; 5 min;
-#                                          # TRAIN_ARGS=--compile-ahead-process, --no-compile-ahead)
+#                                          # TRAIN_ARGS=--compile-ahead-process, --no-compile-ahead,
+#                                          # --pair-headroom 3; TRAIN_SCENES=lego)
 #   bash scripts/scale_gpu_check.sh ahead  # steps beside a compile ahead (ahead_contention.py)
 # Dec 2 (H200): gsplat's build took 107 s, then `grad` with two rows about 65 s per scene, and
 # `train` 287 s. Lines are written as they come, so a call cut by its time limit keeps them.
@@ -46,8 +47,9 @@ case "${1:-grad}" in
     grep -h " e2e " "$out"/fwd_*.log ;;
   train)
     timeout "${TRAIN_TIMEOUT:-500}" python3 benchmarks/train_vs_gsplat.py --data-root carry/data \
-      --scenes skull --steps "${STEPS:-7000}" --eval-every "${STEPS:-7000}" --no-gsplat \
-      ${TRAIN_ARGS:-} --out "$out/train_skull" 2>&1 | tr '\r' '\n' | grep -v "step/s\|s/step" > "$out/train.log"
+      --scenes ${TRAIN_SCENES:-skull} --steps "${STEPS:-7000}" --eval-every "${STEPS:-7000}" \
+      --no-gsplat ${TRAIN_ARGS:-} --out "$out/train_${TRAIN_SCENES:-skull}" 2>&1 | tr '\r' '\n' \
+      | grep -v "step/s\|s/step" > "$out/train.log"
     tail -6 "$out/train.log" ;;
   ahead)
     for flags in "" "--xla_gpu_force_compilation_parallelism=1"; do
