@@ -2,7 +2,7 @@
 
     python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
         [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
-        [--backend NAME] [--convention 3dgs|gsplat] [--pair-headroom 1.5] [--no-gsplat]
+        [--backend NAME] [--convention 3dgs|gsplat] [--pair-headroom 3] [--no-gsplat]
         [--no-ours] [--inline]
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
@@ -61,6 +61,7 @@ SCENES = {  # folder in the data root, image downscale, Gaussian cap
 def parse(argv=None) -> argparse.Namespace:
     """The command line (module docstring)."""
     from lgs_jax.config import CONVENTIONS
+    from lgs_jax.train.settings import Settings
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data-root", default=os.environ.get(
@@ -95,7 +96,7 @@ def parse(argv=None) -> argparse.Namespace:
     ahead.add_argument("--compile-ahead-process", action="store_true",
                        help="our trainer compiling ahead in a child process (`fit`'s "
                             "compile_ahead='process')")
-    ap.add_argument("--pair-headroom", type=float, default=1.5,
+    ap.add_argument("--pair-headroom", type=float, default=Settings.pair_headroom,
                     help="our trainer's pair capacity over the pairs needed (Settings."
                          "pair_headroom; larger: fewer growths and recompiles, larger buffers)")
     ap.add_argument("--no-ours", action="store_true")

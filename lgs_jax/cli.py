@@ -270,6 +270,8 @@ def _render_parser(sub, common) -> None:
 
 def _fit_parser(sub, common) -> None:
     """The `fit` subcommand's options."""
+    from .train.settings import Settings
+
     f = sub.add_parser(
         "fit", parents=[common], help="train Gaussians on a capture (COLMAP, transforms.json, "
                                       "NeRF-synthetic) with densification",
@@ -307,10 +309,11 @@ def _fit_parser(sub, common) -> None:
                         "or gsplat's 0.999)")
     f.add_argument("--eval-every", type=_int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
-    f.add_argument("--pair-headroom", type=_number_at_least(1.0, float), default=1.5,
+    f.add_argument("--pair-headroom", type=_number_at_least(1.0, float),
+                   default=Settings.pair_headroom,
                    help="pair buffer size as a multiple of a view's pairs, at the start and at "
                         "each growth (a recompile); larger: fewer recompiles, larger buffers "
-                        "(default: 1.5)")
+                        f"(default: {Settings.pair_headroom:g})")
     ahead = f.add_mutually_exclusive_group()
     ahead.add_argument("--compile-ahead-process", action="store_true",
                        help="compile the step for a grown pair buffer ahead in a child process, "

@@ -1,16 +1,19 @@
 """The training step compiled for the next pair capacity before a step needs it.
 
 A step whose views need more tile–Gaussian pairs than the capacity grows it (`loop._one_step`),
-and the step is compiled again for the new capacity: about 20 s on an H200, eight times in a
-7k-step skull run (175 s of its 263 s; BENCHMARKS.md §5). Pairs grow gradually (densification),
+and the step is compiled again for the new capacity: about 20 s on an H200, three times in a
+7k-step skull run at the default headroom (BENCHMARKS.md §7). Pairs grow gradually (densification),
 so the next capacity is predictable: the smallest one a growth can pick, `pair_capacity(capacity
 + 1, headroom)`. `Stepper` compiles the step for it in a background thread while training goes
 on (XLA compiles outside Python's global lock, and the main thread mostly waits on the device),
 and at the growth uses that executable if it holds the pairs and was compiled for the same
 argument shapes (a pool that grew since needs its own compile, as before), for every step at
-that capacity. It is the program `jax.jit` compiles for that capacity, and compiling it does
-not depend on timing (the step has no matrix product or convolution for XLA to autotune): the
-same bits (tests/train: a run with and one without, bit for bit).
+that capacity. It is the program `jax.jit` compiles for that capacity, compiled with XLA's
+autotuning off (`step.COMPILER_OPTIONS`), so that a compile beside running steps picks no other
+kernel configuration than one on an idle GPU: the same bits (tests/train: a run with and one
+without, bit for bit, on the CPU). On the H200, two skull runs at headroom 3 compiled ahead
+(thread, process) ended at 25.96 dB where four without compiling ahead ended at 26.81, before
+autotuning was turned off (BENCHMARKS.md §7, "Dec 2, midday"): not yet re-checked on a GPU.
 
 In a thread, tracing and lowering the step (Python: Mosaic GPU's layout inference, about 6 s
 per capacity, `scripts/lower_time.py`) hold Python's lock, and the training loop's steps ran
@@ -18,7 +21,10 @@ about 6x slower while it did on the H200 (BENCHMARKS.md §7). Mode "process" com
 process instead (`ahead_child`), into JAX's persistent compilation cache: at the growth the
 jitted step lowers again in this process and loads the executable from the cache. It needs
 the cache (`jax_compilation_cache_dir`); a child that fails, or a cache entry the step does not
-find (a JAX setting the child lacks), costs only the compile it was to save. (Sending the
+find (a JAX setting the child lacks), costs only the compile it was to save. Skull, 7k steps,
+headroom 3, H200: 19.42 ms per step with a thread (the steps slowed beside its lowering), 18.04
+with a child (which starts Python and JAX first: it waited 15 s at each of the two early
+growths, where the thread waited 3–5 s), 22.46 with no compile ahead; one run each. (Sending the
 executable back serialized, `jax.experimental.serialize_executable`, would spare this process
 the lowering too, but on the CPU the train step so loaded failed at run time, "NOT_FOUND:
 Function broadcast_divide_fusion.5 not found", where the cache's own loading works.)

@@ -270,7 +270,8 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     compile_ahead: compile the step for the next pair capacity while training (`ahead.py`; the
     same results, fewer waits on compiles as the pairs grow): True or "thread" in a background
     thread, "process" in a child process through JAX's persistent compilation cache (no
-    contention for Python's lock; not yet measured on a GPU), False not at all; None (default):
+    contention for Python's lock; 7% less wall time than the thread in one skull run on the
+    H200, `ahead.py`), False not at all; None (default):
     "thread" where the step runs on a GPU, so that the compile takes host cores the step does
     not use (on a CPU it competes with the step for them), else False.
     Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR

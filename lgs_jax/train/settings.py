@@ -24,12 +24,12 @@ class Settings:
     pair_headroom (>= 1): the pair capacity of a training view is
     `pair_capacity(pairs, pair_headroom)` of the pairs it needs, at the start (first training
     view) and whenever a step overflows (that step's largest view; the step is redone, nothing
-    is dropped). Every per-pair pass costs in proportion to the capacity and every growth is a
-    recompile of the step (about 20 s on an H200): 1.5 grows about once per 1.5x growth of the
-    pairs (BENCHMARKS.md §5: Lego 7k grew twice and ran 2.3 ms per step faster than with the
-    power of two above twice the pairs; skull 7k, whose pairs grew 27x, grew 8 times, 175 s of
-    compilation); a larger value means fewer recompiles and larger buffers. Not part of the
-    checkpointed recipe (it changes no result).
+    is dropped). Every growth is a recompile of the step (about 20 s on an H200) and every
+    per-pair pass costs in proportion to the capacity. 3 (the default) grows about once per 3x
+    growth of the pairs: on the skull capture (7k steps, pairs grow 27x) 3 growths and 157 s
+    against 8 and 244 s at 1.5, the steps themselves within 2% (9.70 against 9.54 ms;
+    BENCHMARKS.md §7, "Dec 2, midday"). Smaller values mean fewer pair slots and more
+    recompiles. Not part of the checkpointed recipe (it changes no result).
     """
 
     lr_means: float = 1.6e-4
@@ -49,7 +49,7 @@ class Settings:
     checkpoint_every: int = 1000
     init_points: int = 100_000
     init_extent: float | None = None
-    pair_headroom: float = 1.5
+    pair_headroom: float = 3.0
 
 
 @dataclasses.dataclass(frozen=True)

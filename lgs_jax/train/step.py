@@ -8,6 +8,12 @@ one Adam update; then the strategy's per-step update. A step whose loss, gradien
 parameters (active slots) are not finite changes nothing: it returns its inputs with ok False
 (`fit` reports it). A view whose tile pairs overflow the capacity is reported (overflow,
 pairs): `fit` grows the capacity and runs the same step again, so no pair is ever dropped.
+
+Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
+among kernel configurations, reductions' included, by timing them while it compiles
+(openxla/xla#37902: a `jnp.sum` whose bits depend on the pick), so the same program compiled
+twice, e.g. once ahead in a thread beside running steps (`ahead.py`) and once when the GPU is
+idle, could round differently. Without autotuning a compile picks by fixed rules.
 """
 
 from __future__ import annotations
@@ -26,6 +32,8 @@ from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
 from .settings import Setup
 from .strategy import StepInfo
+
+COMPILER_OPTIONS = {"xla_gpu_autotune_level": 0}  # module docstring; no effect on a CPU
 
 
 def _finite(tree, active) -> jax.Array:
@@ -75,7 +83,8 @@ def step_keys(key, step):
     return jax.random.split(jax.random.fold_in(key, step))
 
 
-@functools.partial(jax.jit, static_argnames=("setup", "capacity"))
+@functools.partial(jax.jit, static_argnames=("setup", "capacity"),
+                   compiler_options=COMPILER_OPTIONS)
 def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx, background,
                step, key, *, setup: Setup, capacity: int):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
@@ -105,7 +114,8 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx,
     return pool, opt_state, strategy_state, metrics
 
 
-@functools.partial(jax.jit, static_argnames=("strategy", "cap"))
+@functools.partial(jax.jit, static_argnames=("strategy", "cap"),
+                   compiler_options=COMPILER_OPTIONS)
 def _refine(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
     new = strategy.refine(strategy_state, pool, opt_state, step, step_keys(key, step)[1], cap)
     ok = _finite(new[1].params, new[1].active)
@@ -131,7 +141,8 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap:
         pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)
 
 
-@functools.partial(jax.jit, static_argnames=("backend", "capacity", "convention"))
+@functools.partial(jax.jit, static_argnames=("backend", "capacity", "convention"),
+                   compiler_options=COMPILER_OPTIONS)
 def _render_pool(pool: Pool, cam, background, *, backend: str, capacity: int, convention: str):
     return render(render_gaussians(pool.params, pool.active), cam, background=background,
                   backend=backend, capacity=capacity, config=RasterConfig(convention))

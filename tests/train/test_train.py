@@ -111,8 +111,10 @@ STRATEGY = train.DefaultStrategy(refine_start_iter=3, refine_every=4, grow_grad2
 
 
 def _fit(data, out, **kwargs):
-    """One configuration for every fit below, so they share one compiled step."""
-    settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3)
+    """One configuration for every fit below, so they share one compiled step; headroom 1.5
+    (not the default 3), so that the pairs outgrow the first capacity (at step 10)."""
+    settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3,
+                              pair_headroom=1.5)
     return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
                      max_gaussians=1024, pool_size=1024, backend="reference",
                      log=kwargs.pop("log", lambda m: None), **kwargs)
@@ -437,7 +439,7 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     saved = checkpoint.config_of(setup, seed=0)
     assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
     other = checkpoint.config_of(dataclasses.replace(
-        setup, steps=5, backend="pallas", settings=train.Settings(pair_headroom=3.0)), 0)
+        setup, steps=5, backend="pallas", settings=train.Settings(pair_headroom=1.5)), 0)
     # run length, backend and pair headroom may change
     assert checkpoint.config_mismatch(saved, other) is None
     changed = checkpoint.config_of(
