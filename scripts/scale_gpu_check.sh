@@ -7,6 +7,10 @@
 #                                          # TRAIN_ARGS=--compile-ahead-process, --no-compile-ahead,
 #                                          # --pair-headroom 3; TRAIN_SCENES=lego)
 #   bash scripts/scale_gpu_check.sh ahead  # steps beside a compile ahead (ahead_contention.py)
+#   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
+#                                          # compile ahead twice and with a thread, each compiling
+#                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
+#                                          # adds e.g. process:--compile-ahead-process)
 # Dec 2 (H200): gsplat's build took 107 s, then `grad` with two rows about 65 s per scene, and
 # `train` 287 s. Lines are written as they come, so a call cut by its time limit keeps them.
 # One benchmarks.scale process per scene (a failing row costs one scene, not the run), gsplat
@@ -56,5 +60,18 @@ case "${1:-grad}" in
       XLA_FLAGS="$flags" timeout "${AHEAD_TIMEOUT:-250}" python3 scripts/ahead_contention.py \
         ${AHEAD_ARGS:-} 2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|train|ahead" >&2; exit 2 ;;
+  determinism)
+    for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
+      name="${run%%:*}"; flag="${run#*:}"
+      rm -rf "build/cache_$name"  # a compile of its own, not one a cache holds
+      LGS_JAX_CACHE="$PWD/build/cache_$name" timeout "${RUN_TIMEOUT:-150}" python3 -m lgs_jax \
+        fit --data carry/data/skull --out "build/det_$name" --overwrite --steps "${STEPS:-1500}" \
+        --strategy mcmc --max-gaussians 500000 --eval-every "${STEPS:-1500}" $flag ${DET_ARGS:-} \
+        2>&1 | tr '\r' '\n' \
+        | grep "grown\|PSNR\|rror" > "$out/det_$name.log"
+      python3 -c "import hashlib, sys, numpy as np; z = np.load(sys.argv[1]); h = hashlib.sha256()
+[h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
+        "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
+    done ;;
+  *) echo "usage: $0 tests|grad|fwd|train|ahead|determinism" >&2; exit 2 ;;
 esac
