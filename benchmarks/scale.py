@@ -90,6 +90,12 @@ ROWS = {
                                                        vanilla_from_pairs=None))),
     "localgs:seg2048": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=2048,
                                                        vanilla_from_pairs=None))),
+    # each forward block walks only the pairs its strips take (KernelConfig.mosaic_compact;
+    # half-tile forward blocks), also with half-tile backward blocks
+    "localgs:compact": ("pallas", C("gsplat", tuning=K(mosaic_compact=True,
+                                                       vanilla_from_pairs=None))),
+    "localgs:compact128": ("pallas", C("gsplat", tuning=K(
+        mosaic_compact=True, mosaic_backward_pixels=128, vanilla_from_pairs=None))),
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""

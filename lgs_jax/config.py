@@ -82,6 +82,16 @@ class KernelConfig:
         are C − C_hi, not a running sum) and are bitwise repeatable. H200, forward+backward
         at 5.8M Gaussians, 1080p (BENCHMARKS.md §7): 12.21 ms with 1024, 16.08 with None
         (gsplat: 10.95); with `render`'s row_capacity at the walked pairs 10.52 against 14.29.
+      mosaic_compact: the Local-GS Mosaic GPU forward (records built from Gaussians, exact
+        blending, warp_cull) keeps, of each staged chunk of 128 pairs, only those whose strip
+        mask has a bit in the block's strips, packed first in shared memory (a stable partition:
+        a ballot and a population count per warp, one exchange across the warps), and walks
+        those: block-level culling, the paper's warp-level skip at the granularity Pallas
+        gives a kernel. The pairs it drops blend nothing in the block's pixels (the masks are
+        conservative), so the outputs are the same bits. With it the forward runs half-tile
+        blocks unless mosaic_forward_pixels says otherwise. Model (CPU, BENCHMARKS.md §7): the
+        longest block's walk to 0.49–0.56 of today's at 1.45M–10M Gaussians. Not yet run on a
+        GPU: off by default.
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -103,6 +113,7 @@ class KernelConfig:
     mosaic_chunk: int = 64
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
+    mosaic_compact: bool = False
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -130,6 +141,14 @@ class KernelConfig:
                                  f" is not a multiple of mosaic_unroll_localgs="
                                  f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
                                  f"whole walks)")
+        if not isinstance(self.mosaic_compact, bool):
+            raise ValueError(f"tuning.mosaic_compact: expected a bool, got "
+                             f"{self.mosaic_compact!r}")
+        if (self.mosaic_compact and self.mosaic_backward_segment is not None
+                and self.mosaic_backward_segment % 128):
+            raise ValueError(f"tuning.mosaic_backward_segment: {self.mosaic_backward_segment} is "
+                             f"not a multiple of 128, the chunk mosaic_compact packs (the "
+                             f"forward stores the split backward's entries at chunk starts)")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
                              f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Scale GPU session (issues 17 and 18), one device call per part, each under 10 minutes:
-#   bash scripts/scale_gpu_check.sh tests  # the split backward's and walked rows' tests (2 min)
+#   bash scripts/scale_gpu_check.sh tests  # the split backward's, walked rows' and staging
+#                                          # (compaction included) tests (3 min)
 #   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 6 min)
 #   bash scripts/scale_gpu_check.sh fwd    # forward per scene
 #   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat; 5 min;
@@ -31,7 +32,8 @@ case "${1:-grad}" in
   tests)
     timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider -n 4 \
       tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
-      tests/backends/test_gradients.py -m 'slow or not slow' 2>&1 | tail -3 \
+      tests/backends/test_gradients.py tests/backends/test_mosaic_staging.py \
+      -m 'slow or not slow' 2>&1 | tail -3 \
       | tee "$out/tests.log" ;;
   grad)
     build_gsplat

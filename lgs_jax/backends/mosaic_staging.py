@@ -30,12 +30,14 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
 from jax.experimental.mosaic.gpu import utils as mgpu_utils
 from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
-from jaxlib.mlir.dialects import arith, memref, vector
+from jaxlib.mlir.dialects import arith, memref, nvvm, scf, vector
+from jaxlib.mlir.dialects import math as math_dialect
 
 from .. import pairs
 from ..config import RasterConfig
@@ -151,3 +153,125 @@ def backward_source(gauss_ref, table_ref, smem, tile, tiles_x: int, config: Rast
         return _read(smem, j, [ks.REC - 1])[0].astype(jnp.int32)
 
     return (lambda j: _read(smem, j)), mask, begin
+
+
+COUNT = 4  # `compact_scratch`'s sync buffer: the warps' kept counts at 0..3, the chunk's here
+
+
+def compact_scratch(dt) -> tuple:
+    """Shared memory of the compacted forward (`compact_loop`): one chunk's records (REC,
+    LANES), their pair indices (LANES,) and the warps' and the chunk's kept counts (8,)."""
+    return (plgpu.SMEM((ks.REC, LANES), dt), plgpu.SMEM((LANES,), jnp.int32),
+            plgpu.SMEM((8,), jnp.int32))
+
+
+def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
+    """Store chunk `base`'s records (lane t: pair base + t) in `buf` as a stable partition, the
+    kept lanes first (`keep`, int32 0/1), their pair indices in `index_ref`, and the number kept
+    at sync_ref[COUNT]; every thread may read them when this returns. On the GPU (inline Mosaic
+    GPU code): per warp a ballot of `keep` and population counts give each lane its rank among
+    the warp's kept lanes and the warp's count; the counts go through `sync_ref` (one barrier),
+    so lane t's position is its kept rank in the warpgroup, or for a lane not kept, the count
+    kept plus its rank among those not kept; then one store per column and a second barrier.
+    Every position holds a record of this chunk (finite, where a stale one could be NaN)."""
+    if interpret:
+        order = jnp.argsort(keep == 0, stable=True)
+        for c, v in enumerate(records):
+            buf[c, :] = v[order]
+        index_ref[...] = (base + jnp.arange(LANES, dtype=jnp.int32))[order]
+        sync_ref[COUNT] = jnp.sum(keep, dtype=jnp.int32)
+        return
+
+    @plgpu.inline_mgpu(
+        arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(()))
+        + (_STRIDED,) * (len(records) + 1))
+    def store(_, buf, index_ref, sync_ref, first, *arrays):
+        i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
+        c = lambda v: mgpu_utils.c(v, i32)
+        at = lambda v: arith.index_cast(index, v)
+        value = lambda a: vector.extract(a.registers.flat[0], dynamic_position=[],
+                                         static_position=ir.DenseI64ArrayAttr.get([0]))
+        tid = arith.remui(mgpu_utils.thread_idx(), c(LANES))
+        lane, warp = arith.remui(tid, c(32)), arith.divui(tid, c(32))
+        kept = arith.cmpi(arith.CmpIPredicate.ne, value(arrays[-1]), c(0))
+        ballot = nvvm.vote_sync(c(0xFFFFFFFF), kept, "ballot", results=[i32])
+        rank = math_dialect.ctpop(arith.andi(ballot, nvvm.read_ptx_sreg_lanemask_lt(results=[i32])))
+        with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.eq, lane, c(0)))
+                               .then_block):
+            memref.store(math_dialect.ctpop(ballot), sync_ref, [at(warp)])
+            scf.yield_([])
+        mgpu_utils.warpgroup_barrier()
+        counts = vector.load(ir.VectorType.get((4,), i32), sync_ref, [at(c(0))])
+        counts = [vector.extract(counts, dynamic_position=[],
+                                 static_position=ir.DenseI64ArrayAttr.get([w])) for w in range(4)]
+        before, total = rank, c(0)
+        for w, n in enumerate(counts):
+            before = arith.addi(before, arith.select(
+                arith.cmpi(arith.CmpIPredicate.ugt, warp, c(w)), n, c(0)))
+            total = arith.addi(total, n)
+        pos = arith.select(kept, before, arith.subi(arith.addi(total, tid), before))
+        for col, a in enumerate(arrays[:-1]):
+            memref.store(value(a), buf, [at(c(col)), at(pos)])
+        memref.store(arith.addi(first.registers.item(), tid), index_ref, [at(pos)])
+        with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.eq, tid, c(0)))
+                               .then_block):
+            memref.store(total, sync_ref, [at(c(COUNT))])
+            scf.yield_([])
+        mgpu_utils.warpgroup_barrier()
+
+    store(buf, index_ref, sync_ref, base, *records, keep)
+
+
+def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, block_bits,
+                 evaluate, lanes: int, dt, config: RasterConfig, last_pair: int,
+                 interpret: bool, checkpoint=None):
+    """The compacted Local-GS forward walk (`KernelConfig.mosaic_compact`) of pairs [start,
+    end): per chunk of LANES pairs, the records built as `stage` builds them, those whose strip
+    mask has a bit of `block_bits` (the block's strips) packed first (`_partition`), and only
+    those blended, `unroll` per iteration (`kernel_steps.blend`, with each pair's own index for
+    the stop pair), while some lane still blends. A dropped pair has no bit in the block's
+    strips, so no pixel of the block passes its α test (the masks are conservative): the state
+    is the same as after walking every pair, and the outputs are `kernel_steps.staged_loop`'s
+    to the bit. `checkpoint(j, state)` runs at each chunk's start j with the state before pair j
+    (chunks start at multiples of LANES, as the split backward's entries do). Returns (r, g, b,
+    T, D, stop pair) per lane."""
+    buf, index_ref, sync_ref = scratch
+    unroll = config.tuning.mosaic_unroll_localgs
+    tx, ty = tile % tiles_x, tile // tiles_x
+    offsets = lax.broadcasted_iota(jnp.int32, (LANES,), 0)
+
+    def stage_chunk(c):
+        base = start + c * LANES
+        cols = gather(gauss_ref, table_ref, base, last_pair, interpret)
+        mask = pairs.strip_mask_columns(cols, tx, ty, config)
+        keep = (((mask & block_bits) != 0) & (base + offsets < end)).astype(jnp.int32)
+        _partition(pairs.record_columns(cols, tx, ty, config, mask), keep, base, buf,
+                   index_ref, sync_ref, interpret)
+
+    def cond(carry):
+        c, _, st = carry
+        return (start + c * LANES < end) & ks.running(st, config)
+
+    def body(carry):
+        c, v, st = carry
+        first = v == 0
+        if checkpoint is not None:
+            checkpoint(jnp.where(first, start + c * LANES, start), st)
+        pl.when(first)(lambda: stage_chunk(c))
+        n = sync_ref[COUNT]
+        at = [jnp.minimum(v + u, LANES - 1) for u in range(unroll)]
+        evaluated = []
+        for p in at:
+            rec = [buf[col, p] for col in range(ks.REC)]
+            evaluated.append(evaluate(rec, rec[ks.REC - 1].astype(jnp.int32)))
+        for u, ((alpha, hit, rgb, z), p) in enumerate(zip(evaluated, at)):
+            st = ks.blend(st, alpha, hit & (v + u < n), rgb, z, index_ref[p], config)
+        wrap = v + unroll >= n
+        return jnp.where(wrap, c + 1, c), jnp.where(wrap, 0, v + unroll), st
+
+    zero = jnp.zeros((lanes,), dt)
+    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
+             jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
+    _, _, st = lax.while_loop(cond, body, (jnp.int32(0), jnp.int32(0), empty))
+    walked = start + (end - start + unroll - 1) // unroll * unroll  # staged_loop's last j
+    return st[:5] + (jnp.minimum(st[6], walked),)

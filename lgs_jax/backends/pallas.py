@@ -140,7 +140,9 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
         forward, backward_impl = (t.auto_vanilla if vanilla else t.auto_localgs), t.auto_backward
     return Plan(config=config, vanilla=vanilla, forward=forward, backward=backward_impl,
                 interpret=interpret,
-                forward_pixels=block_pixels(t.mosaic_forward_pixels, n_tiles, config),
+                forward_pixels=block_pixels(
+                    t.mosaic_forward_pixels or (128 if t.mosaic_compact else None), n_tiles,
+                    config),
                 backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
                 routed=routed)
 

@@ -23,6 +23,9 @@ scalar per-warp code, not array code), so the α of a pair whose bit is clear fo
 block's strips is still computed there. Branching around a staged group with no bit set in any
 of the block's strips measured slower than predicating (BENCHMARKS.md §6), so the kernel stages
 `tuning.mosaic_unroll_localgs` pairs per iteration and lets the lane predicates do the culling.
+With `tuning.mosaic_compact` (`compacts`) the block culls instead: of each chunk of 128 pairs it
+builds, it walks only those with a mask bit in its own strips (lgs_jax.backends.mosaic_staging.
+compact_loop), the same outputs to the bit.
 
 Pair records. By default (`tuning.mosaic_pair_source="gaussians"`) the Local-GS forward and
 the backward build them inside the kernel, per chunk of 128 pairs, from the pairs' Gaussian ids
@@ -115,6 +118,15 @@ def staged(config: RasterConfig, dt) -> bool:
     return from_xla and t.mosaic_chunk > 0 and jnp.dtype(dt) == jnp.float32
 
 
+def compacts(config: RasterConfig) -> bool:
+    """Whether the Local-GS forward walks each chunk's pairs of its block only
+    (`KernelConfig.mosaic_compact`, `mosaic_staging.compact_loop`): asked for, records built
+    from Gaussians, exact blending (a pixel's stop pair), strip masks on (`warp_cull`)."""
+    t = config.tuning
+    return (t.mosaic_compact and t.mosaic_pair_source == "gaussians"
+            and config.blend == "exact" and config.warp_cull)
+
+
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
                    interpret: bool, segment: int | None = None):
@@ -140,6 +152,14 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
             hit = hit & ((mask_word & bit) != 0)
         return alpha, hit, rec[7:10], rec[10]
 
+    checkpoint = None
+    if segment is not None:
+        checkpoint = _checkpoint(check_refs, ranges_ref[tile, 2], start, cols, segment)
+    if compacts(config):
+        _store(out_refs, tile, cols, mosaic_staging.compact_loop(
+            mask_ref, rec_ref, scratch, start, end, tile, tiles_x, _strip_bits(wg, pixels),
+            evaluate, k.shape[0], dt, config, last_pair, interpret, checkpoint))
+        return
     if config.tuning.mosaic_pair_source == "gaussians":
         fetch, pair_alpha, stage = mosaic_staging.forward_source(
             mask_ref, rec_ref, scratch[0], start, end, tile, tiles_x, evaluate, config,
@@ -155,9 +175,6 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
             return evaluate([rec_ref[fetched[0], c] for c in range(ks.REC - 1)], fetched[1])
 
         stage = None
-    checkpoint = None
-    if segment is not None:
-        checkpoint = _checkpoint(check_refs, ranges_ref[tile, 2], start, cols, segment)
     _store(out_refs, tile, cols,
            ks.staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha, config,
                           config.tuning.mosaic_unroll_localgs, stage=stage,
@@ -247,7 +264,9 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
         columns.append(base)
         checks = [jax.ShapeDtypeStruct((rows, TILE_PIXELS), dt)] * 5
     scratch = ()
-    if not vanilla and config.tuning.mosaic_pair_source == "gaussians":
+    if not vanilla and compacts(config):
+        scratch = mosaic_staging.compact_scratch(dt)
+    elif not vanilla and config.tuning.mosaic_pair_source == "gaussians":
         scratch = mosaic_staging.scratch(dt)
     elif not vanilla and staged(config, dt):
         chunk = config.tuning.mosaic_chunk

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lgs_jax
-from lgs_jax import binning
+from lgs_jax import binning, pairs
 from lgs_jax.backends import mosaic_staging, pallas
 from lgs_jax.projection import project
 from tests import scenes
@@ -115,18 +115,22 @@ def test_plans_under_differentiation():
     assert plan.for_gradients().config.tuning.mosaic_pair_source == "records"
 
 
-@pytest.mark.parametrize("dtype", [np.float32, pytest.param(np.float64, marks=pytest.mark.slow)])
-def test_in_kernel_staging_lowers_for_the_gpu(dtype, monkeypatch):
+@pytest.mark.parametrize("dtype,compact", [
+    (np.float32, False), (np.float32, True),
+    pytest.param(np.float64, False, marks=pytest.mark.slow)])
+def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, monkeypatch):
     """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
     lane-vector strip masks without floor or ceil, shared-memory stores, the barrier), float32
-    and float64. Not what
+    and float64; the compacted forward (`mosaic_compact`: ballot, population counts, the
+    per-lane partition). Not what
     the GPU compiler's LLVM translation may still reject: the tests above run the kernels on a
     GPU."""
     from jax._src.pallas.triton import gpu_info  # gaussian_grads is a Triton kernel
 
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
-    config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_pair_source="gaussians"))
+    config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_pair_source="gaussians",
+                                         mosaic_compact=compact))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
                                         capacity=scenes.CAPACITY).image
@@ -144,3 +148,64 @@ def test_in_kernel_staging_lowers_for_the_gpu(dtype, monkeypatch):
 def test_bad_pair_source_settings_raise(tuning, match):
     with pytest.raises(ValueError, match=match):
         K(**tuning)
+
+
+def _compact_config(compact: bool, segment=None):
+    return C(kernel="mosaic", tuning=K(mosaic_compact=compact, mosaic_forward_pixels=128,
+                                        mosaic_backward_pixels=128,
+                                        mosaic_backward_segment=segment))
+
+
+def _dense_tile(seed):
+    g = scenes.scene(seed, kinds=DENSE, n=N_DENSE)
+    cam = scenes.camera(**TILE_CAMERA)
+    p = project(g, cam)
+    bins = binning.bin_gaussians(p, cam.width, cam.height, CAPACITY)
+    n = int(bins.tile_end[0])
+    assert n > 2 * mosaic_staging.LANES
+    masks = np.asarray(pairs.strip_masks(pairs.gather(p, bins.gauss), bins, 1, C()))[:n]
+    for half in (0x0F, 0xF0):  # each half-tile block has pairs to drop and pairs to keep
+        assert 0 < np.count_nonzero(masks & half) < n
+    return g, cam
+
+
+@settings(max_examples=1)  # interpret mode: about 20 s per render
+@given(seed=st.integers(0, 2**32 - 1))
+def test_compacted_forward_is_the_forward_to_the_bit(seed):
+    """`KernelConfig.mosaic_compact`: each half-tile block walks only the pairs whose strip mask
+    reaches its strips (of a list crossing three 128-pair chunks): the same images (exact
+    blending: a dropped pair blends nothing in the block). Interpret mode; on the GPU the
+    arithmetic is the same kernel's, so the bits should agree there too."""
+    g, cam = _dense_tile(seed)
+    out = {c: lgs_jax.render(g, cam, backend="pallas", config=_compact_config(c),
+                             capacity=CAPACITY) for c in (False, True)}
+    assert out[True].stats.kernel == "localgs-mosaic"
+    for field in ("image", "alpha", "depth"):
+        np.testing.assert_array_equal(getattr(out[True], field), getattr(out[False], field),
+                                      err_msg=field)
+
+
+@pytest.mark.slow
+@settings(max_examples=1)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_compacted_forward_gives_the_same_gradients_and_split_entries(seed):
+    """The compacted forward's stop pairs and the split backward's entries (stored at chunk
+    starts, segments of 128) are those of the full walk: the same gradients to the bit."""
+    g, cam = _dense_tile(seed)
+    w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
+    grads = {}
+    for compact in (False, True):
+        config = _compact_config(compact, segment=128)
+        loss = lambda g, config=config: jax.numpy.sum(lgs_jax.render(
+            g, cam, backend="pallas", config=config, capacity=CAPACITY).image * w)
+        grads[compact] = jax.tree.leaves(jax.grad(loss)(g))
+    for got, want in zip(grads[True], grads[False]):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_compaction_needs_chunk_aligned_segments():
+    with pytest.raises(ValueError, match="multiple of 128"):
+        K(mosaic_compact=True, mosaic_backward_segment=64)
+    with pytest.raises(ValueError, match="tuning.mosaic_compact"):
+        K(mosaic_compact=1)
+    assert pallas.plan(_compact_config(True), False, 10**5).forward_pixels == 128
