@@ -10,7 +10,9 @@ ncu's occupancy of the Local-GS kernel), each costing its walked pairs. Printed:
 makespan over the ideal (all walked pairs / R) and the longest single block over the ideal, a
 lower bound of the makespan whatever the order; then, per `--split` length, the bounds of
 `split_model` (long lists split across blocks) relative to that makespan, and with `--local` the
-same with each segment's first pass run (`split_model_local`). The `tiles` backend on
+same with each segment's first pass run (`split_model_local`); with `--compact` the walks of
+half-tile blocks that skip the pairs none of their strips takes (`compact_walks`,
+`KernelConfig.mosaic_compact`) against the default blocks'. The `tiles` backend on
 a CPU (same stops). Also printed: the pairs some block of their tile walked (`render`'s
 `stats.pairs_walked`) and the backward's row buffers (48 bytes per row and block) for them and
 for every pair.
@@ -27,7 +29,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene  # noqa: E402
-from lgs_jax import binning  # noqa: E402
+from lgs_jax import binning, pairs  # noqa: E402
 from lgs_jax.backends import REGISTRY, pallas  # noqa: E402
 from lgs_jax.projection import project  # noqa: E402
 
@@ -68,6 +70,34 @@ def walks(g, cam, local: list[int] = ()):
                 tile_end=jax.numpy.asarray(hi, np.int32))))
         segments[seg] = np.stack(per_segment, -1)
     return end - start, block_walks(bins), 256 // pixels, segments
+
+
+def compact_walks(g, cam):
+    """(pairs each block of the default size walks, (n_tiles, blocks); pairs each half-tile
+    block walks, and of those the ones whose strip mask has a bit in the block's strips: what a
+    block of `KernelConfig.mosaic_compact` walks, (n_tiles, 2) each). The stops are the
+    `tiles` backend's (a CPU) or the Local-GS kernel's."""
+    w, h = cam.width, cam.height
+    p = jax.jit(project)(g, cam)
+    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
+    backend = pallas.LOCALGS if jax.default_backend() == "gpu" else REGISTRY["tiles"]
+    stop = np.asarray(jax.jit(lambda p, b: backend.rasterize(p, b, w, h, config).stop)(p, bins))
+    tiles_x = (w + 15) // 16
+    masks = np.asarray(jax.jit(lambda p, b: pairs.strip_masks(
+        pairs.gather(p, b.gauss), b, tiles_x, config))(p, bins))
+    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
+    last = np.minimum(stop.reshape(len(start), 2, 128).max(-1), end[:, None])
+    walked = np.maximum(last - start[:, None], 0)
+    relevant = np.zeros_like(walked)
+    for t in np.nonzero(walked.max(1))[0]:
+        for b, bits in enumerate((0x0F, 0xF0)):
+            relevant[t, b] = np.count_nonzero(masks[start[t]:last[t, b]] & bits)
+    pixels = pallas.block_pixels(None, len(start), config)
+    default = np.minimum(stop.reshape(len(start), 256 // pixels, pixels).max(-1),
+                         end[:, None]) - start[:, None]
+    return np.maximum(default, 0), walked, relevant
 
 
 def schedule(lengths, walked, per_tile):
@@ -135,10 +165,18 @@ def main() -> int:
     ap.add_argument("--local", action="store_true",
                     help="also run each segment's first pass (one render per segment index; "
                          "slow on a CPU) for split_model_local")
+    ap.add_argument("--compact", action="store_true",
+                    help="also model `KernelConfig.mosaic_compact` (compact_walks)")
     args = ap.parse_args()
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     for scene in args.scenes.split(","):
         g, cam = load_scene(scene, args.data)
+        if args.compact:
+            now, half, kept = compact_walks(jax.device_put(g), cam)
+            print(f"{scene} compacted: half-tile blocks walk {kept.sum() / 1e6:.2f}M of "
+                  f"{half.sum() / 1e6:.2f}M block-pairs, longest {kept.max()} of {half.max()}; "
+                  f"makespan {makespan(kept.ravel()) / makespan(now.ravel()):.2f} of the "
+                  f"default blocks' ({now.shape[1]} per tile)", flush=True)
         lengths, walked, per_tile, local = walks(jax.device_put(g), cam,
                                                  args.split if args.local else ())
         ideal = walked.sum() / RESIDENT
