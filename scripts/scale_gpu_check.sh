@@ -8,6 +8,9 @@
 #                                          # TRAIN_ARGS=--compile-ahead-process, --no-compile-ahead,
 #                                          # --pair-headroom 3; TRAIN_SCENES=lego)
 #   bash scripts/scale_gpu_check.sh ahead  # steps beside a compile ahead (ahead_contention.py)
+#   bash scripts/scale_gpu_check.sh compact  # KernelConfig.mosaic_compact on the GPU: its tests,
+#                                          # then forward and forward + backward against the
+#                                          # default per scene, no gsplat (about 8 min)
 #   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
 #                                          # compile ahead twice and with a thread, each compiling
 #                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
@@ -62,6 +65,22 @@ case "${1:-grad}" in
       XLA_FLAGS="$flags" timeout "${AHEAD_TIMEOUT:-250}" python3 scripts/ahead_contention.py \
         ${AHEAD_ARGS:-} 2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
     done ;;
+  compact)
+    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 \
+      tests/backends/test_mosaic_staging.py -m 'slow or not slow' -k compact 2>&1 | tail -3 \
+      | tee "$out/compact_tests.log"
+    for s in $scenes; do
+      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --no-gsplat --data carry/data \
+        --scenes "$s" --rows localgs,localgs:compact,vanilla --repeat 10 \
+        --csv "$out/compact_fwd_$s.csv" 2>&1 | quiet > "$out/compact_fwd_$s.log"
+    done
+    grep -h " e2e \|raster" "$out"/compact_fwd_*.log
+    for s in ${GRAD_SCENES:-guitar_x16_1080p guitar_x110_4k}; do
+      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --no-gsplat \
+        --data carry/data --scenes "$s" --rows localgs,localgs:compact,localgs:compact128 \
+        --repeat 5 --csv "$out/compact_grad_$s.csv" 2>&1 | quiet > "$out/compact_grad_$s.log"
+    done
+    grep -h "grad:" "$out"/compact_grad_*.log ;;
   determinism)
     for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
       name="${run%%:*}"; flag="${run#*:}"
@@ -75,5 +94,5 @@ case "${1:-grad}" in
 [h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
         "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|train|ahead|determinism" >&2; exit 2 ;;
+  *) echo "usage: $0 tests|grad|fwd|train|ahead|compact|determinism" >&2; exit 2 ;;
 esac
