@@ -138,11 +138,12 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
         forward = backward_impl = "triton"
     else:
         forward, backward_impl = (t.auto_vanilla if vanilla else t.auto_localgs), t.auto_backward
+    forward_pixels = t.mosaic_forward_pixels
+    if forward_pixels is None and t.mosaic_compact and not vanilla:
+        forward_pixels = 128  # compacted blocks: half tiles (KernelConfig.mosaic_compact)
     return Plan(config=config, vanilla=vanilla, forward=forward, backward=backward_impl,
                 interpret=interpret,
-                forward_pixels=block_pixels(
-                    t.mosaic_forward_pixels or (128 if t.mosaic_compact else None), n_tiles,
-                    config),
+                forward_pixels=block_pixels(forward_pixels, n_tiles, config),
                 backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
                 routed=routed)
 

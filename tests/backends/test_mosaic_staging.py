@@ -208,4 +208,6 @@ def test_compaction_needs_chunk_aligned_segments():
         K(mosaic_compact=True, mosaic_backward_segment=64)
     with pytest.raises(ValueError, match="tuning.mosaic_compact"):
         K(mosaic_compact=1)
-    assert pallas.plan(_compact_config(True), False, 10**5).forward_pixels == 128
+    compact = C(kernel="mosaic", tuning=K(mosaic_compact=True))
+    assert pallas.plan(compact, False, 10**5).forward_pixels == 128  # whole tiles otherwise
+    assert pallas.plan(compact, True, 10**5).forward_pixels == 256  # the vanilla kernel's
