@@ -185,6 +185,21 @@ def test_compacted_forward_is_the_forward_to_the_bit(seed):
                                       err_msg=field)
 
 
+@settings(max_examples=3)
+@given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
+def test_compacted_forward_on_partial_tiles_and_short_lists(seed, dtype):
+    """The compaction on the suite's small scenes (every kind, 3x2 tiles, partial edge tiles,
+    lists within one chunk, half-tile blocks with nothing to keep): the full walk's images and
+    pair counts."""
+    g, cam = scenes.cast(scenes.scene(seed), dtype), scenes.camera(dtype=dtype)
+    out = {c: lgs_jax.render(g, cam, backend="pallas", config=_compact_config(c),
+                             capacity=scenes.CAPACITY) for c in (False, True)}
+    for field in ("image", "alpha", "depth"):
+        np.testing.assert_array_equal(getattr(out[True], field), getattr(out[False], field),
+                                      err_msg=field)
+    assert int(out[True].stats.pairs_walked) == int(out[False].stats.pairs_walked)
+
+
 @pytest.mark.slow
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
