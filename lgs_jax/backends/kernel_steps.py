@@ -135,15 +135,20 @@ def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCon
         return j + unroll, nxt, lax.cond(functools.reduce(jnp.logical_or, takes), group,
                                          lambda st: st, st)
 
-    zero = jnp.zeros((lanes,), dt)
-    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
-             jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
     first = [fetch(start + u) for u in range(unroll)]
-    j, _, st = lax.while_loop(cond, body, (start, first, empty))
+    j, _, st = lax.while_loop(cond, body, (start, first, empty_state(lanes, dt)))
     if stage is not None:
         stage[1](j)
     stop_at = jnp.minimum(st[6], j) if config.blend == "exact" else jnp.full((lanes,), j)
     return st[:5] + (stop_at,)
+
+
+def empty_state(lanes: int, dt):
+    """The blend state (`blend`) of `lanes` pixels before any pair: r = g = b = D = 0, T = 1,
+    not done, no stop pair (int32 max)."""
+    zero = jnp.zeros((lanes,), dt)
+    return (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
+            jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
 
 
 def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: int):

@@ -195,7 +195,8 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
         lane, warp = arith.remui(tid, c(32)), arith.divui(tid, c(32))
         kept = arith.cmpi(arith.CmpIPredicate.ne, value(arrays[-1]), c(0))
         ballot = nvvm.vote_sync(c(0xFFFFFFFF), kept, "ballot", results=[i32])
-        rank = math_dialect.ctpop(arith.andi(ballot, nvvm.read_ptx_sreg_lanemask_lt(results=[i32])))
+        below = nvvm.read_ptx_sreg_lanemask_lt(results=[i32])  # lanes under this one
+        rank = math_dialect.ctpop(arith.andi(ballot, below))
         with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.eq, lane, c(0)))
                                .then_block):
             memref.store(math_dialect.ctpop(ballot), sync_ref, [at(warp)])
@@ -269,9 +270,7 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         wrap = v + unroll >= n
         return jnp.where(wrap, c + 1, c), jnp.where(wrap, 0, v + unroll), st
 
-    zero = jnp.zeros((lanes,), dt)
-    empty = (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
-             jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
-    _, _, st = lax.while_loop(cond, body, (jnp.int32(0), jnp.int32(0), empty))
+    _, _, st = lax.while_loop(cond, body, (jnp.int32(0), jnp.int32(0),
+                                           ks.empty_state(lanes, dt)))
     walked = start + (end - start + unroll - 1) // unroll * unroll  # staged_loop's last j
     return st[:5] + (jnp.minimum(st[6], walked),)
