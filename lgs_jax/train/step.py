@@ -19,6 +19,7 @@ idle, could round differently. Without autotuning a compile picks by fixed rules
 from __future__ import annotations
 
 import functools
+import types
 
 import jax
 import jax.numpy as jnp
@@ -33,7 +34,8 @@ from .pool import Pool, grow, render_gaussians, sh_mask
 from .settings import Setup
 from .strategy import StepInfo
 
-COMPILER_OPTIONS = {"xla_gpu_autotune_level": 0}  # module docstring; no effect on a CPU
+# module docstring; no effect on a CPU; read-only (jit keeps a reference)
+COMPILER_OPTIONS = types.MappingProxyType({"xla_gpu_autotune_level": 0})
 
 
 def _finite(tree, active) -> jax.Array:
