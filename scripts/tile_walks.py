@@ -36,6 +36,18 @@ from lgs_jax.projection import project  # noqa: E402
 RESIDENT = 132 * 5
 
 
+def _binned(g, cam):
+    """(projected, binned at `pair_capacity` of the view's pairs, the Local-GS config, the
+    backend whose stops are the walks: the Mosaic GPU kernel on a GPU, `tiles` elsewhere)."""
+    w, h = cam.width, cam.height
+    p = jax.jit(project)(g, cam)
+    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
+    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
+    backend = pallas.LOCALGS if jax.default_backend() == "gpu" else REGISTRY["tiles"]
+    return p, bins, config, backend
+
+
 def walks(g, cam, local: list[int] = ()):
     """(list lengths, pairs each block walks, blocks per tile, {L: local walks}): with `local`
     segment lengths L, for each, the pairs each block of a tile whose list is longer than L
@@ -43,13 +55,9 @@ def walks(g, cam, local: list[int] = ()):
     split forward's first pass: the same stop rule on the segment alone), (n_tiles, blocks,
     segments); tiles within one segment get zeros."""
     w, h = cam.width, cam.height
-    p = jax.jit(project)(g, cam)
-    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
-    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
+    p, bins, config, backend = _binned(g, cam)
     gpu = jax.default_backend() == "gpu"
-    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
     n_tiles = bins.tile_start.shape[0]
-    backend = pallas.LOCALGS if gpu else REGISTRY["tiles"]
     stops = jax.jit(lambda p, b: backend.rasterize(p, b, w, h, config).stop)
     pixels = pallas.plan(config, False, n_tiles).forward_pixels if gpu else 128
 
@@ -78,11 +86,7 @@ def compact_walks(g, cam):
     block of `KernelConfig.mosaic_compact` walks, (n_tiles, 2) each). The stops are the
     `tiles` backend's (a CPU) or the Local-GS kernel's."""
     w, h = cam.width, cam.height
-    p = jax.jit(project)(g, cam)
-    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
-    bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
-    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
-    backend = pallas.LOCALGS if jax.default_backend() == "gpu" else REGISTRY["tiles"]
+    p, bins, config, backend = _binned(g, cam)
     stop = np.asarray(jax.jit(lambda p, b: backend.rasterize(p, b, w, h, config).stop)(p, bins))
     tiles_x = (w + 15) // 16
     masks = np.asarray(jax.jit(lambda p, b: pairs.strip_masks(
