@@ -62,8 +62,12 @@ K = lgs_jax.KernelConfig
 LOCAL = K(vanilla_from_pairs=None)  # the Local-GS kernel at every size (no routing)
 # row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
 ROWS = {
-    "auto": ("pallas", C("gsplat")),  # what users get: vanilla from 2^24 pairs (KernelConfig)
+    "auto": ("pallas", C("gsplat")),  # what users get (KernelConfig's defaults)
     "localgs": ("pallas", C("gsplat", tuning=LOCAL)),
+    # every forward block walks its tile's whole list (KernelConfig.mosaic_compact off: the
+    # default before Dec 2, afternoon)
+    "localgs:full": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                    mosaic_compact=False))),
     "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
     # the Mosaic GPU kernels reading pair records XLA built (KernelConfig.mosaic_pair_source;
     # "localgs" builds them in the kernels, the default since Dec 1)
@@ -90,12 +94,6 @@ ROWS = {
                                                        vanilla_from_pairs=None))),
     "localgs:seg2048": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=2048,
                                                        vanilla_from_pairs=None))),
-    # each forward block walks only the pairs its strips take (KernelConfig.mosaic_compact;
-    # half-tile forward blocks), also with half-tile backward blocks
-    "localgs:compact": ("pallas", C("gsplat", tuning=K(mosaic_compact=True,
-                                                       vanilla_from_pairs=None))),
-    "localgs:compact128": ("pallas", C("gsplat", tuning=K(
-        mosaic_compact=True, mosaic_backward_pixels=128, vanilla_from_pairs=None))),
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""

@@ -44,10 +44,12 @@ class KernelConfig:
         its pair buffer (`capacity`) holds at least this many pairs (kernel "auto" only). Set
         when the Local-GS records were built in XLA, which cost more there than the kernel
         saved (H200: vanilla 8.39 against Local-GS 9.72 ms at 24M pairs); with the records
-        built in the kernels (`mosaic_pair_source`) the two tie there (7.23 against 7.11 ms,
-        memory 1072 against 1211 MiB; BENCHMARKS.md §7). Images agree to float32 rounding
-        (both are exact; the kernels evaluate α in different forms). Under differentiation the
-        Local-GS forward and backward still run. None: never.
+        built in the kernels (`mosaic_pair_source`) the two tied there (7.23 against 7.11 ms,
+        memory 1072 against 1211 MiB), and with `mosaic_compact` Local-GS is the faster kernel
+        at every size measured (2.69 against 3.45 ms at 24M pairs; BENCHMARKS.md §7), hence
+        None by default (never). Images agree to float32 rounding (both are exact; the kernels
+        evaluate α in different forms). Under differentiation the Local-GS forward and backward
+        still run.
       interpret: run the Pallas kernels in interpret mode (True), lower them for the GPU (False:
         on a machine without one only tracing and lowering work, which tests use to check that
         every kernel lowers), or decide by the platform (None: interpret unless JAX's default
@@ -82,16 +84,20 @@ class KernelConfig:
         are C − C_hi, not a running sum) and are bitwise repeatable. H200, forward+backward
         at 5.8M Gaussians, 1080p (BENCHMARKS.md §7): 12.21 ms with 1024, 16.08 with None
         (gsplat: 10.95); with `render`'s row_capacity at the walked pairs 10.52 against 14.29.
-      mosaic_compact: the Local-GS Mosaic GPU forward (records built from Gaussians, exact
-        blending, warp_cull) keeps, of each staged chunk of 128 pairs, only those whose strip
-        mask has a bit in the block's strips, packed first in shared memory (a stable partition:
-        a ballot and a population count per warp, one exchange across the warps), and walks
-        those: block-level culling, the paper's warp-level skip at the granularity Pallas
-        gives a kernel. The pairs it drops blend nothing in the block's pixels (the masks are
-        conservative), so the outputs are the same bits. With it the forward runs half-tile
-        blocks unless mosaic_forward_pixels says otherwise. Model (CPU, BENCHMARKS.md §7): the
-        longest block's walk to 0.49–0.56 of today's at 1.45M–10M Gaussians. Not yet run on a
-        GPU: off by default.
+      mosaic_compact: the Local-GS Mosaic GPU forward (where its records are built from
+        Gaussians, blending is exact, warp_cull is on and mosaic_backward_segment is None or a
+        multiple of 128; otherwise it walks every pair) keeps, of each staged chunk of 128
+        pairs, only those whose strip mask has a bit in the block's strips, packed first in
+        shared memory (a stable partition: a ballot and a population count per warp, one
+        exchange across the warps), and walks those: block-level culling, the paper's
+        warp-level skip at the granularity Pallas gives a kernel. The pairs it drops blend
+        nothing in the block's pixels (the masks are conservative), so the outputs are the full
+        walk's: bit for bit in interpret mode and in float32 on the H200 (images and
+        gradients), within 8e-15 in float64 there (the two kernels compile to other
+        multiply-add contractions). With it the forward runs half-tile blocks unless
+        mosaic_forward_pixels says otherwise. H200 (BENCHMARKS.md §7): the forward kernel 0.68x
+        its time without at 5.8M Gaussians (1080p), 0.76x at 1.45M, 0.83x at 10M (4K), 0.95x
+        at 0.09M (720p).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -102,7 +108,7 @@ class KernelConfig:
     auto_vanilla: Literal["triton", "mosaic"] = "mosaic"
     auto_backward: Literal["triton", "mosaic"] = "mosaic"
     interpret: bool | None = None
-    vanilla_from_pairs: int | None = 2**24
+    vanilla_from_pairs: int | None = None
     triton_unroll_localgs: int = 2
     triton_unroll_vanilla: int = 8
     mosaic_unroll_localgs: int = 8
@@ -113,7 +119,7 @@ class KernelConfig:
     mosaic_chunk: int = 64
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
-    mosaic_compact: bool = False
+    mosaic_compact: bool = True
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -144,11 +150,6 @@ class KernelConfig:
         if not isinstance(self.mosaic_compact, bool):
             raise ValueError(f"tuning.mosaic_compact: expected a bool, got "
                              f"{self.mosaic_compact!r}")
-        if (self.mosaic_compact and self.mosaic_backward_segment is not None
-                and self.mosaic_backward_segment % 128):
-            raise ValueError(f"tuning.mosaic_backward_segment: {self.mosaic_backward_segment} is "
-                             f"not a multiple of 128, the chunk mosaic_compact packs (the "
-                             f"forward stores the split backward's entries at chunk starts)")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
                              f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")

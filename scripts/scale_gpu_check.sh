@@ -10,7 +10,7 @@
 #   bash scripts/scale_gpu_check.sh ahead  # steps beside a compile ahead (ahead_contention.py)
 #   bash scripts/scale_gpu_check.sh compact  # KernelConfig.mosaic_compact on the GPU: its tests,
 #                                          # then forward and forward + backward against the
-#                                          # default per scene, no gsplat (about 8 min)
+#                                          # full walks per scene, no gsplat (about 6 min)
 #   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
 #                                          # compile ahead twice and with a thread, each compiling
 #                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
@@ -71,13 +71,13 @@ case "${1:-grad}" in
       | tee "$out/compact_tests.log"
     for s in $scenes; do
       timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --no-gsplat --data carry/data \
-        --scenes "$s" --rows localgs,localgs:compact,vanilla --repeat 10 \
+        --scenes "$s" --rows localgs:full,localgs,vanilla --repeat 10 \
         --csv "$out/compact_fwd_$s.csv" 2>&1 | quiet > "$out/compact_fwd_$s.log"
     done
     grep -h " e2e \|raster" "$out"/compact_fwd_*.log
     for s in ${GRAD_SCENES:-guitar_x16_1080p guitar_x110_4k}; do
       timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --no-gsplat \
-        --data carry/data --scenes "$s" --rows localgs,localgs:compact,localgs:compact128 \
+        --data carry/data --scenes "$s" --rows localgs:full,localgs,localgs:px128 \
         --repeat 5 --csv "$out/compact_grad_$s.csv" 2>&1 | quiet > "$out/compact_grad_$s.log"
     done
     grep -h "grad:" "$out"/compact_grad_*.log ;;

@@ -9,8 +9,8 @@ counterpart of each kernel, which the tests compare them with, is lgs_jax.backen
 masks, same hoisted arithmetic, same blending semantics, same backward walk) and
 lgs_jax.backends.reference (per-pixel semantics).
 
-`pallas` runs the Local-GS kernel (Sec. III; except a forward-only render whose pair buffer
-reaches `KernelConfig.vanilla_from_pairs`, which runs the vanilla kernel: a tie there): a
+`pallas` runs the Local-GS kernel (Sec. III; a forward-only render whose pair buffer reaches
+`KernelConfig.vanilla_from_pairs`, if set, runs the vanilla kernel instead): a
 hoisted 6-vector V per (tile, Gaussian) pair (Eq. 8; built in the Mosaic GPU kernels,
 lgs_jax.backends.mosaic_staging, or in XLA, `kernel_steps.pair_records`), ln α as
 V·[x'², x'y', y'², x', y', 1] per pixel (Eq. 10), the strip masks as warp-uniform predicates
@@ -139,7 +139,7 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
     else:
         forward, backward_impl = (t.auto_vanilla if vanilla else t.auto_localgs), t.auto_backward
     forward_pixels = t.mosaic_forward_pixels
-    if forward_pixels is None and t.mosaic_compact and not vanilla:
+    if forward_pixels is None and not vanilla and pallas_mosaic.compacts(config):
         forward_pixels = 128  # compacted blocks: half tiles (KernelConfig.mosaic_compact)
     return Plan(config=config, vanilla=vanilla, forward=forward, backward=backward_impl,
                 interpret=interpret,

@@ -23,9 +23,10 @@ scalar per-warp code, not array code), so the α of a pair whose bit is clear fo
 block's strips is still computed there. Branching around a staged group with no bit set in any
 of the block's strips measured slower than predicating (BENCHMARKS.md §6), so the kernel stages
 `tuning.mosaic_unroll_localgs` pairs per iteration and lets the lane predicates do the culling.
-With `tuning.mosaic_compact` (`compacts`) the block culls instead: of each chunk of 128 pairs it
-builds, it walks only those with a mask bit in its own strips (lgs_jax.backends.mosaic_staging.
-compact_loop), the same outputs to the bit.
+With `tuning.mosaic_compact` (`compacts`; the default) the block culls instead: of each chunk of
+128 pairs it builds, it walks only those with a mask bit in its own strips
+(lgs_jax.backends.mosaic_staging.compact_loop), the full walk's outputs (bit for bit in float32 on
+the H200; float64 within ulps there, another compilation's multiply-add contractions).
 
 Pair records. By default (`tuning.mosaic_pair_source="gaussians"`) the Local-GS forward and
 the backward build them inside the kernel, per chunk of 128 pairs, from the pairs' Gaussian ids
@@ -121,10 +122,13 @@ def staged(config: RasterConfig, dt) -> bool:
 def compacts(config: RasterConfig) -> bool:
     """Whether the Local-GS forward walks each chunk's pairs of its block only
     (`KernelConfig.mosaic_compact`, `mosaic_staging.compact_loop`): asked for, records built
-    from Gaussians, exact blending (a pixel's stop pair), strip masks on (`warp_cull`)."""
+    from Gaussians, exact blending (a pixel's stop pair), strip masks on (`warp_cull`), and the
+    split backward's entries (stored at the forward's chunk starts) at multiples of 128."""
     t = config.tuning
+    segment = t.mosaic_backward_segment
     return (t.mosaic_compact and t.mosaic_pair_source == "gaussians"
-            and config.blend == "exact" and config.warp_cull)
+            and config.blend == "exact" and config.warp_cull
+            and (segment is None or segment % mosaic_staging.LANES == 0))
 
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,

@@ -13,7 +13,9 @@ autotuning off (`step.COMPILER_OPTIONS`), so that a compile beside running steps
 kernel configuration than one on an idle GPU: the same bits (tests/train: a run with and one
 without, bit for bit, on the CPU). On the H200, two skull runs at headroom 3 compiled ahead
 (thread, process) ended at 25.96 dB where four without compiling ahead ended at 26.81, before
-autotuning was turned off (BENCHMARKS.md §7, "Dec 2, midday"): not yet re-checked on a GPU.
+autotuning was turned off (BENCHMARKS.md §7, "Dec 2, midday"); with it off, skull runs of
+1500 steps, twice without and once with a compile ahead in a thread (two growths, one compiled
+ahead at step 604 and used for 800 steps), ended with the same checkpoint bits on the H200.
 
 In a thread, tracing and lowering the step (Python: Mosaic GPU's layout inference, about 6 s
 per capacity, `scripts/lower_time.py`) hold Python's lock, and the training loop's steps ran

@@ -242,7 +242,8 @@ def test_plan_routes_large_forward_renders_to_the_vanilla_kernel():
     """`KernelConfig.vanilla_from_pairs`: with kernel "auto" a `pallas` plan whose pair buffer
     reaches the threshold runs the vanilla kernel forward, and Local-GS again under
     differentiation; never for an explicit kernel, nor with the threshold None."""
-    gpu = C(tuning=K(interpret=False))
+    gpu = C(tuning=K(interpret=False, vanilla_from_pairs=2**24))
+    assert not pallas.plan(C(tuning=K(interpret=False)), False, 1, 2**30).vanilla  # the default
     assert not pallas.plan(gpu, False, 1, 2**24 - 1).vanilla
     routed = pallas.plan(gpu, False, 1, 2**24)
     assert routed.vanilla and routed.kernel_name == "vanilla-mosaic"
@@ -288,9 +289,14 @@ def test_plan_resolves_implementation_and_block_size():
     assert (pallas.plan(interp, False, 1).forward, pallas.plan(interp, True, 1).backward) == (
         "triton", "triton")
     assert pallas.plan(interp, True, 1).kernel_name == "vanilla-triton"
-    # BENCHMARKS.md §6: whole tiles from 8192 tiles on (3840x2160: 32,400 tiles), half below.
-    assert [pallas.plan(gpu, False, t).forward_pixels for t in (1, 8191, 8192, 32400)] == [
-        128, 128, 256, 256]
+    # BENCHMARKS.md §6: whole tiles from 8192 tiles on (3840x2160: 32,400 tiles), half below;
+    # the compacted Local-GS forward (the default) in half tiles (§7).
+    full = C(tuning=K(interpret=False, mosaic_compact=False))
+    for config, vanilla in ((full, False), (gpu, True)):
+        assert [pallas.plan(config, vanilla, t).forward_pixels
+                for t in (1, 8191, 8192, 32400)] == [128, 128, 256, 256]
+    assert [pallas.plan(gpu, False, t).forward_pixels for t in (1, 32400)] == [128, 128]
+    assert pallas.plan(gpu, False, 32400).backward_pixels == 256
     fixed = C(tuning=K(mosaic_backward_pixels=256))
     assert pallas.plan(fixed, False, 1).backward_pixels == 256
     with pytest.raises(ValueError, match="tuning.mosaic_chunk"):
