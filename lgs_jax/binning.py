@@ -25,7 +25,7 @@ rx = √(τ_pad·c/det), ry = √(τ_pad·a/det); pixel column j is inside iff |
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -221,14 +221,52 @@ class Emission:
     count: Any
 
 
-def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission:
+class SlotPlan(NamedTuple):
+    """What `emit_pairs` knows per Gaussian before it fills the slots, for an `expand` function.
+
+    Per depth rank k: order[k] (the k-th Gaussian of `depth_order`), start[k] (its first slot:
+    an exclusive prefix sum of the tile counts) and kept[k] (its slots within the capacity; 0
+    for a Gaussian with no tile or starting past the capacity); per Gaussian index, rect =
+    (tx0, ty0, nx): its tile rectangle's corner and width (nx >= 1). Slot start[k] + i,
+    i < kept[k], holds Gaussian order[k] and tile (ty0 + i // nx)·tiles_x + tx0 + i % nx; slots
+    from `total` on are padding (tile n_tiles, Gaussian order[-1]).
+    """
+
+    order: Any
+    start: Any
+    kept: Any
+    rect: Any
+    total: Any
+    tiles_x: int
+    n_tiles: int
+    capacity: int
+
+
+def expand_slots(plan: SlotPlan):
+    """(tile, gauss) of every slot (`SlotPlan`) in XLA: `segment_of_slot` finds each slot's
+    depth rank (no scatter-add, so deterministic on GPUs), then a row gather per slot of
+    (start, Gaussian) and one of the Gaussian's rectangle (BENCHMARKS.md §7: one five-column
+    row per slot, the rectangles gathered in depth order first, was slower)."""
+    k = segment_of_slot(plan.start, plan.kept, plan.capacity)
+    per_k = jnp.stack([plan.start, plan.order], -1)[k]  # one row gather per slot
+    g = per_k[:, 1]
+    rect = plan.rect[g]
+    slot = jnp.arange(plan.capacity, dtype=jnp.int32)
+    local = slot - per_k[:, 0]
+    tile = (rect[:, 1] + local // rect[:, 2]) * plan.tiles_x + rect[:, 0] + local % rect[:, 2]
+    return jnp.where(slot < plan.total, tile, plan.n_tiles), g
+
+
+def emit_pairs(p: Projected, width: int, height: int, capacity: int,
+               expand: Callable[[SlotPlan], Any] = expand_slots) -> Emission:
     """Tile–Gaussian pairs in (depth, index) order.
 
     Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
     prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
-    row. `segment_of_slot` finds each slot's k (no scatter-add, so deterministic on GPUs); slots
-    past the total get tile = n_tiles (padding, sorts last). Each Gaussian's (first slot, count
-    within the capacity) is stored at its index (a permutation: one writer per element).
+    row; slots past the total get tile = n_tiles (padding, sorts last). `expand` fills the
+    slots from the per-Gaussian `SlotPlan` (`expand_slots` in XLA, or a kernel giving the same
+    arrays: lgs_jax.backends.pallas_emit). Each Gaussian's (first slot, count within the
+    capacity) is stored at its index (a permutation: one writer per element).
     """
     if not 0 < capacity <= MAX_PAIRS:
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
@@ -239,16 +277,11 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission
     order = depth_order(p)
     counts_sorted = counts[order]
     starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact when total fits (else overflow)
-    k = segment_of_slot(starts, counts_sorted, capacity)
-    per_k = jnp.stack([starts, order], -1)[k]  # one row gather per slot: (start, Gaussian)
-    g = per_k[:, 1]
-    rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)[g]  # (tx0, ty0, nx) of the Gaussian
-    slot = jnp.arange(capacity, dtype=jnp.int32)
-    local = slot - per_k[:, 0]
-    tile = (rect[:, 1] + local // rect[:, 2]) * tiles_x + rect[:, 0] + local % rect[:, 2]
-    tile = jnp.where(slot < total, tile, tiles_x * tiles_y)
     inside = (counts_sorted > 0) & (starts >= 0) & (starts < capacity)
     kept = jnp.where(inside, jnp.minimum(counts_sorted, capacity - starts), 0)
+    rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)
+    tile, g = expand(SlotPlan(order=order, start=starts, kept=kept, rect=rect, total=total,
+                              tiles_x=tiles_x, n_tiles=tiles_x * tiles_y, capacity=capacity))
     first_count = jnp.zeros((order.shape[0], 2), jnp.int32).at[order].set(
         jnp.stack([jnp.where(inside, starts, 0), kept], -1), unique_indices=True)
     return Emission(tile=tile, gauss=g, total=total,
@@ -276,12 +309,13 @@ def sort_pairs(tile, gauss, n_tiles: int):
 
 
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
-                  row_capacity: int | None = None) -> TileBins:
+                  row_capacity: int | None = None,
+                  expand: Callable[[SlotPlan], Any] = expand_slots) -> TileBins:
     """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
     pairs are emitted in depth order and the tile sort is stable. `row_capacity`: the
-    backward's row buffer (`TileBins.row_capacity`)."""
+    backward's row buffer (`TileBins.row_capacity`); `expand`: `emit_pairs`'."""
     tiles_x, tiles_y = tile_grid(width, height)
-    e = emit_pairs(p, width, height, capacity)
+    e = emit_pairs(p, width, height, capacity, expand)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
                     first=e.first, count=e.count, pairs_required=e.total,

@@ -99,6 +99,12 @@ class KernelConfig:
         its time without at 5.8M Gaussians (1080p), 0.76x at 1.45M, 0.83x at 10M (4K), 0.95x
         at 0.09M (720p).
 
+    Binning (every binned backend):
+      emit_kernel: fill the pair slots of the emission with a Pallas Triton kernel, one lane per
+        Gaussian storing its pairs (lgs_jax.backends.pallas_emit; interpret mode as
+        `interpret` says), instead of XLA's per-slot search and gathers
+        (`binning.expand_slots`): the same arrays, bit for bit. Not yet measured on a GPU.
+
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
         blending mode tests its strip-wide stop once per batch).
@@ -120,6 +126,7 @@ class KernelConfig:
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
+    emit_kernel: bool = False
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -147,9 +154,9 @@ class KernelConfig:
                                  f" is not a multiple of mosaic_unroll_localgs="
                                  f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
                                  f"whole walks)")
-        if not isinstance(self.mosaic_compact, bool):
-            raise ValueError(f"tuning.mosaic_compact: expected a bool, got "
-                             f"{self.mosaic_compact!r}")
+        for name in ("mosaic_compact", "emit_kernel"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"tuning.{name}: expected a bool, got {getattr(self, name)!r}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_chunk: {self.mosaic_chunk} is not a multiple of "
                              f"mosaic_unroll_localgs={self.mosaic_unroll_localgs}")
