@@ -100,10 +100,12 @@ class KernelConfig:
         at 0.09M (720p).
 
     Binning (every binned backend):
-      emit_kernel: fill the pair slots of the emission with a Pallas Triton kernel, one lane per
-        Gaussian storing its pairs (lgs_jax.backends.pallas_emit; interpret mode as
-        `interpret` says), instead of XLA's per-slot search and gathers
-        (`binning.expand_slots`): the same arrays, bit for bit. Not yet measured on a GPU.
+      emit_kernel: fill the pair slots of the emission with a Pallas Triton kernel, a program
+        per 32 consecutive Gaussians of the depth order walking their slot range with coalesced
+        stores (lgs_jax.backends.pallas_emit; interpret mode as `interpret` says), instead of
+        XLA's per-slot search and gathers (`binning.expand_slots`): the same arrays, bit for
+        bit. Not yet measured on a GPU (a first version, a lane per Gaussian, was slower than
+        XLA there: BENCHMARKS.md §7), so off by default.
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast

@@ -37,9 +37,9 @@ def test_kernel_emission_is_xlas(seed, dtype, capacity):
 
 
 def test_kernel_emission_spans_every_tile_and_programs():
-    """Gaussians binned to whole images (huge ones) next to small ones, more Gaussians than
-    one program's lanes: each program loops to its longest count while the others' lanes are
-    masked off."""
+    """Gaussians binned to whole images (huge ones) next to small ones and to no tile, more
+    Gaussians than one program's lanes: each program walks its Gaussians' slot range, steps
+    whose slots change owner part-way and a last step cut short (masked lanes)."""
     g = scenes.cast(scenes.scene(3, kinds=("huge_far", "normal", "tiny"), n=3 * 40), np.float32)
     cam = scenes.camera(width=80, height=48)
     p = project(g, cam)
