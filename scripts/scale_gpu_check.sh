@@ -11,6 +11,8 @@
 #   bash scripts/scale_gpu_check.sh compact  # KernelConfig.mosaic_compact on the GPU: its tests,
 #                                          # then forward and forward + backward against the
 #                                          # full walks per scene, no gsplat (about 6 min)
+#   bash scripts/scale_gpu_check.sh emit   # KernelConfig.emit_kernel against XLA's emission:
+#                                          # arrays equal, ms (scripts/probe_emit.py)
 #   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
 #                                          # compile ahead twice and with a thread, each compiling
 #                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
@@ -36,6 +38,7 @@ case "${1:-grad}" in
     timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider -n 4 \
       tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
       tests/backends/test_gradients.py tests/backends/test_mosaic_staging.py \
+      tests/backends/test_pallas_emit.py \
       -m 'slow or not slow' 2>&1 | tail -3 \
       | tee "$out/tests.log" ;;
   grad)
@@ -81,6 +84,9 @@ case "${1:-grad}" in
         --repeat 5 --csv "$out/compact_grad_$s.csv" 2>&1 | quiet > "$out/compact_grad_$s.log"
     done
     grep -h "grad:" "$out"/compact_grad_*.log ;;
+  emit)
+    timeout "${EMIT_TIMEOUT:-200}" python3 scripts/probe_emit.py --data carry/data \
+      --scenes "$(echo $scenes | tr ' ' ',')" --repeat 10 2>&1 | quiet | tee "$out/emit.log" ;;
   determinism)
     for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
       name="${run%%:*}"; flag="${run#*:}"
@@ -94,5 +100,5 @@ case "${1:-grad}" in
 [h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
         "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|train|ahead|compact|determinism" >&2; exit 2 ;;
+  *) echo "usage: $0 tests|grad|fwd|train|ahead|compact|emit|determinism" >&2; exit 2 ;;
 esac
