@@ -234,9 +234,9 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
     strips, so no pixel of the block passes its α test (the masks are conservative): the state
     is the same as after walking every pair, and the outputs are `kernel_steps.staged_loop`'s
     (the same bits in interpret mode and, on the H200, in float32; float64 within ulps there:
-    the two loops compile to other multiply-add contractions). `checkpoint(j, state)` runs at each chunk's start j with the state before pair j
-    (chunks start at multiples of LANES, as the split backward's entries do). Returns (r, g, b,
-    T, D, stop pair) per lane."""
+    the two loops compile to other multiply-add contractions). `checkpoint(j, state)` runs at
+    each chunk's start j with the state before pair j (chunks start at multiples of LANES, as
+    the split backward's entries do). Returns (r, g, b, T, D, stop pair) per lane."""
     buf, index_ref, sync_ref = scratch
     unroll = config.tuning.mosaic_unroll_localgs
     tx, ty = tile % tiles_x, tile // tiles_x
