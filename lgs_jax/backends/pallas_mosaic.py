@@ -351,7 +351,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
             carry, parity = step(j, mask_word, s, carry, parity)
         return following, carry, parity
 
-    entry = _entry(trans, entry_refs, tile, check, hi < block_last, half)
+    entry = _entry(trans, stop_at, lo, entry_refs, tile, check, hi < block_last, half)
     lax.fori_loop(0, last - lo, body, (ahead(last - 1), entry, jnp.int32(0)))
 
     def after(i, c):  # pairs no pixel of this block reached
@@ -361,10 +361,14 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     lax.fori_loop(0, hi - last, after, jnp.int32(0))
 
 
-def _entry(trans, entry_refs, tile, check, inside, half):
-    """The walk's carry (T, S_r, S_g, S_b, S_Z) where it enters its segment: at the tile's end
-    (T, 0, 0, 0, 0); inside the block's walk, from checkpoint `check` (`backward_segments`:
-    the forward's T there and C − C_hi, D − D_hi)."""
+def _entry(trans, stop_at, lo, entry_refs, tile, check, inside, half):
+    """The walk's carry (T, S_r, S_g, S_b, S_Z) where it enters its segment [lo, hi): at the
+    tile's end (T, 0, 0, 0, 0); inside the block's walk, from checkpoint `check`
+    (`backward_segments`: the forward's T there and C − C_hi, D − D_hi). A pixel whose stop
+    pair is at or before lo takes nothing from the segment, and its forward block may have
+    stopped before lo without writing the checkpoint (half-tile forward blocks under a
+    whole-tile backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K), so it
+    enters with (T, 0, 0, 0, 0): its carry never takes that row's values."""
     zero = jnp.zeros_like(trans)
     if not entry_refs:
         return trans, zero, zero, zero, zero
@@ -372,8 +376,11 @@ def _entry(trans, entry_refs, tile, check, inside, half):
 
     def from_checkpoint():
         c = jnp.maximum(check, 0)
-        sums = [final[i][tile, half] - saved[i][c, half] for i in range(3)]
-        return saved[3][c, half], *sums, final[3][tile, half] - saved[4][c, half]
+        reached = stop_at > lo
+        sums = [jnp.where(reached, final[i][tile, half] - saved[i][c, half], zero)
+                for i in range(3)]
+        return (jnp.where(reached, saved[3][c, half], trans), *sums,
+                jnp.where(reached, final[3][tile, half] - saved[4][c, half], zero))
 
     return lax.cond(inside & (check >= 0), from_checkpoint,
                     lambda: (trans, zero, zero, zero, zero))

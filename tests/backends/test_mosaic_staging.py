@@ -150,9 +150,9 @@ def test_bad_pair_source_settings_raise(tuning, match):
         K(**tuning)
 
 
-def _compact_config(compact: bool, segment=None):
+def _compact_config(compact: bool, segment=None, backward_pixels=128):
     return C(kernel="mosaic", tuning=K(mosaic_compact=compact, mosaic_forward_pixels=128,
-                                        mosaic_backward_pixels=128,
+                                        mosaic_backward_pixels=backward_pixels,
                                         mosaic_backward_segment=segment))
 
 
@@ -209,19 +209,22 @@ def test_compacted_forward_on_partial_tiles_and_short_lists(seed, dtype):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("backward_pixels", [128, 256])
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_compacted_forward_gives_the_same_gradients_and_split_entries(seed):
+def test_compacted_forward_gives_the_same_gradients_and_split_entries(backward_pixels, seed):
     """The compacted forward's stop pairs and the split backward's entries (stored at chunk
     starts, segments of 128) are those of the full walk: the same gradients to the bit
-    (float32; H200: bit for bit)."""
+    (float32; H200: bit for bit), with half-tile backward blocks and with whole-tile ones over
+    the half-tile forward blocks (the default at 4K: a half whose pixels all stopped before a
+    segment wrote no entry there, `pallas_mosaic._entry`)."""
     g, cam = _dense_tile(seed)
     g, cam = scenes.cast(g, np.float32), scenes.camera(dtype=np.float32, **TILE_CAMERA)
     w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
     w = w.astype(np.float32)
     grads = {}
     for compact in (False, True):
-        config = _compact_config(compact, segment=128)
+        config = _compact_config(compact, segment=128, backward_pixels=backward_pixels)
         loss = lambda g, config=config: jax.numpy.sum(lgs_jax.render(
             g, cam, backend="pallas", config=config, capacity=CAPACITY).image * w)
         grads[compact] = jax.tree.leaves(jax.grad(loss)(g))
