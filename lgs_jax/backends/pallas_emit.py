@@ -7,9 +7,9 @@ Gaussian's start and rectangle for every slot. Here a program takes LANES consec
 Gaussians of the depth order, whose slots are one contiguous range [s0, s1) (their ranges tile
 it in order), loads their starts, kept counts and rectangles once, and walks the range LANES
 slots at a time: slot s belongs to the j-th of them, j = #{Gaussians whose range ends at or
-before s} (the ends are non-decreasing, empty ranges included), and takes that Gaussian's
-fields by a one-hot selection across the lanes; the stores are coalesced. Per program about
-(s1 − s0) / LANES steps of LANES² comparisons.
+before s} (the ends are non-decreasing, empty ranges included), and loads that Gaussian's
+start and rectangle (rows this program has just read: cached); the stores are coalesced. Per
+program about (s1 − s0) / LANES steps of LANES² comparisons.
 
 The buffers start as padding (tile n_tiles, Gaussian order[-1], as `expand_slots` gives slots
 past the total) and every slot below the total has exactly one writer, so the result is
@@ -49,11 +49,11 @@ def _kernel(start_ref, kept_ref, rect_ref, tile_in, gauss_in, tile_ref, gauss_re
     del tile_in, gauss_in  # aliased to the outputs: the padding already there
     spare = tile_ref.shape[0] - 1
     lane = lax.iota(jnp.int32, LANES)
-    k = pl.program_id(0) * LANES + lane
+    k0 = pl.program_id(0) * LANES
+    k = k0 + lane
     ki = jnp.minimum(k, n - 1)
     start = start_ref[ki]
     kept = jnp.where(k < n, kept_ref[ki], 0)
-    fields = [start] + [rect_ref[ki, c] for c in range(4)]  # start, tx0, ty0, nx, Gaussian
     end = jnp.where(k < n, start + kept, jnp.iinfo(jnp.int32).max)  # past n: never before s
     s0 = jnp.min(jnp.where(kept > 0, start, jnp.iinfo(jnp.int32).max))
     s1 = jnp.max(jnp.where(kept > 0, start + kept, 0))
@@ -63,9 +63,9 @@ def _kernel(start_ref, kept_ref, rect_ref, tile_in, gauss_in, tile_ref, gauss_re
         slot = s0 + c * LANES + lane
         live = slot < s1
         owner = jnp.sum(end[None, :] <= slot[:, None], axis=1, dtype=jnp.int32)
-        pick = owner[:, None] == lane[None, :]
-        first, tx0, ty0, nx, g = (jnp.sum(jnp.where(pick, f[None, :], 0), axis=1,
-                                          dtype=jnp.int32) for f in fields)
+        ko = jnp.minimum(k0 + owner, n - 1)  # the owner's row (cached: this program's rows)
+        first = start_ref[ko]
+        tx0, ty0, nx, g = (rect_ref[ko, c] for c in range(4))
         local = slot - first
         row = local // jnp.maximum(nx, 1)
         tile = (ty0 + row) * tiles_x + tx0 + (local - row * nx)
