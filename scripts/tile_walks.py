@@ -12,8 +12,8 @@ lower bound of the makespan whatever the order; then, per `--split` length, the 
 `split_model` (long lists split across blocks) relative to that makespan, and with `--local` the
 same with each segment's first pass run (`split_model_local`); with `--compact` the walks of
 half-tile blocks that skip the pairs none of their strips takes (`compact_walks`,
-`KernelConfig.mosaic_compact`) against the default blocks'. The `tiles` backend on
-a CPU (same stops). Also printed: the pairs some block of their tile walked (`render`'s
+`KernelConfig.mosaic_compact`, the default since Dec 2) against the full walk's blocks'. The
+`tiles` backend on a CPU (same stops). Also printed: the pairs some block of their tile walked (`render`'s
 `stats.pairs_walked`) and the backward's row buffers (48 bytes per row and block) for them and
 for every pair.
 """
@@ -37,13 +37,15 @@ RESIDENT = 132 * 5
 
 
 def _binned(g, cam):
-    """(projected, binned at `pair_capacity` of the view's pairs, the Local-GS config, the
+    """(projected, binned at `pair_capacity` of the view's pairs, the Local-GS config walking
+    every pair (compaction off: the blocks the model starts from; the stops are the same), the
     backend whose stops are the walks: the Mosaic GPU kernel on a GPU, `tiles` elsewhere)."""
     w, h = cam.width, cam.height
     p = jax.jit(project)(g, cam)
     cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
-    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None))
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None,
+                                                              mosaic_compact=False))
     backend = pallas.LOCALGS if jax.default_backend() == "gpu" else REGISTRY["tiles"]
     return p, bins, config, backend
 
@@ -81,7 +83,7 @@ def walks(g, cam, local: list[int] = ()):
 
 
 def compact_walks(g, cam):
-    """(pairs each block of the default size walks, (n_tiles, blocks); pairs each half-tile
+    """(pairs each block of the full walk's size walks, (n_tiles, blocks); pairs each half-tile
     block walks, and of those the ones whose strip mask has a bit in the block's strips: what a
     block of `KernelConfig.mosaic_compact` walks, (n_tiles, 2) each). The stops are the
     `tiles` backend's (a CPU) or the Local-GS kernel's."""
@@ -99,9 +101,9 @@ def compact_walks(g, cam):
         for b, bits in enumerate((0x0F, 0xF0)):
             relevant[t, b] = np.count_nonzero(masks[start[t]:last[t, b]] & bits)
     pixels = pallas.block_pixels(None, len(start), config)
-    default = np.minimum(stop.reshape(len(start), 256 // pixels, pixels).max(-1),
+    full = np.minimum(stop.reshape(len(start), 256 // pixels, pixels).max(-1),
                          end[:, None]) - start[:, None]
-    return np.maximum(default, 0), walked, relevant
+    return np.maximum(full, 0), walked, relevant
 
 
 def schedule(lengths, walked, per_tile):
@@ -180,7 +182,7 @@ def main() -> int:
             print(f"{scene} compacted: half-tile blocks walk {kept.sum() / 1e6:.2f}M of "
                   f"{half.sum() / 1e6:.2f}M block-pairs, longest {kept.max()} of {half.max()}; "
                   f"makespan {makespan(kept.ravel()) / makespan(now.ravel()):.2f} of the "
-                  f"default blocks' ({now.shape[1]} per tile)", flush=True)
+                  f"full walk's blocks ({now.shape[1]} per tile)", flush=True)
         lengths, walked, per_tile, local = walks(jax.device_put(g), cam,
                                                  args.split if args.local else ())
         ideal = walked.sum() / RESIDENT
