@@ -69,10 +69,6 @@ ROWS = {
     "localgs:full": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                     mosaic_compact=False))),
     "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
-    # the emission's slots filled by a Pallas Triton kernel (KernelConfig.emit_kernel): its e2e
-    # against "localgs" is the kernel's effect (the emit column is XLA's either way)
-    "localgs:emitk": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                     emit_kernel=True))),
     # the Mosaic GPU kernels reading pair records XLA built (KernelConfig.mosaic_pair_source;
     # "localgs" builds them in the kernels, the default since Dec 1)
     "localgs:records": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,

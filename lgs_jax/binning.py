@@ -25,7 +25,7 @@ rx = √(τ_pad·c/det), ry = √(τ_pad·a/det); pixel column j is inside iff |
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -222,10 +222,11 @@ class Emission:
 
 
 class SlotPlan(NamedTuple):
-    """What `emit_pairs` knows per Gaussian before it fills the slots, for an `expand` function.
+    """What `emit_pairs` knows per Gaussian before it fills the slots (`expand_slots`).
 
     Per depth rank k: order[k] (the k-th Gaussian of `depth_order`), start[k] (its first slot:
-    an exclusive prefix sum of the tile counts) and kept[k] (its slots within the capacity; 0
+    an exclusive prefix sum of the tile counts, 2^31 − 1 from where it passes that: so
+    non-decreasing) and kept[k] (its slots within the capacity; 0
     for a Gaussian with no tile or starting past the capacity); per Gaussian index, rect =
     (tx0, ty0, nx): its tile rectangle's corner and width (nx >= 1). Slot start[k] + i,
     i < kept[k], holds Gaussian order[k] and tile (ty0 + i // nx)·tiles_x + tx0 + i % nx; slots
@@ -257,15 +258,13 @@ def expand_slots(plan: SlotPlan):
     return jnp.where(slot < plan.total, tile, plan.n_tiles), g
 
 
-def emit_pairs(p: Projected, width: int, height: int, capacity: int,
-               expand: Callable[[SlotPlan], Any] = expand_slots) -> Emission:
+def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission:
     """Tile–Gaussian pairs in (depth, index) order.
 
     Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
     prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
-    row; slots past the total get tile = n_tiles (padding, sorts last). `expand` fills the
-    slots from the per-Gaussian `SlotPlan` (`expand_slots` in XLA, or a kernel giving the same
-    arrays: lgs_jax.backends.pallas_emit). Each Gaussian's (first slot, count within the
+    row; slots past the total get tile = n_tiles (padding, sorts last): `expand_slots` fills
+    them from the per-Gaussian `SlotPlan`. Each Gaussian's (first slot, count within the
     capacity) is stored at its index (a permutation: one writer per element).
     """
     if not 0 < capacity <= MAX_PAIRS:
@@ -276,11 +275,14 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int,
     total = total_pairs(counts)
     order = depth_order(p)
     counts_sorted = counts[order]
-    starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact when total fits (else overflow)
+    starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact while the sums fit int32;
+    # past 2^31 − 1 (wrapped negative in int32, or large in int64) they become 2^31 − 1:
+    # non-decreasing and past every capacity
+    starts = lax.cummax(jnp.where(starts < 0, MAX_PAIRS, jnp.minimum(starts, MAX_PAIRS)))
     inside = (counts_sorted > 0) & (starts >= 0) & (starts < capacity)
     kept = jnp.where(inside, jnp.minimum(counts_sorted, capacity - starts), 0)
     rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)
-    tile, g = expand(SlotPlan(order=order, start=starts, kept=kept, rect=rect, total=total,
+    tile, g = expand_slots(SlotPlan(order=order, start=starts, kept=kept, rect=rect, total=total,
                               tiles_x=tiles_x, n_tiles=tiles_x * tiles_y, capacity=capacity))
     first_count = jnp.zeros((order.shape[0], 2), jnp.int32).at[order].set(
         jnp.stack([jnp.where(inside, starts, 0), kept], -1), unique_indices=True)
@@ -309,13 +311,12 @@ def sort_pairs(tile, gauss, n_tiles: int):
 
 
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
-                  row_capacity: int | None = None,
-                  expand: Callable[[SlotPlan], Any] = expand_slots) -> TileBins:
+                  row_capacity: int | None = None) -> TileBins:
     """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
     pairs are emitted in depth order and the tile sort is stable. `row_capacity`: the
-    backward's row buffer (`TileBins.row_capacity`); `expand`: `emit_pairs`'."""
+    backward's row buffer (`TileBins.row_capacity`)."""
     tiles_x, tiles_y = tile_grid(width, height)
-    e = emit_pairs(p, width, height, capacity, expand)
+    e = emit_pairs(p, width, height, capacity)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
                     first=e.first, count=e.count, pairs_required=e.total,

@@ -85,9 +85,9 @@ class KernelConfig:
         at 5.8M Gaussians, 1080p (BENCHMARKS.md §7): 12.21 ms with 1024, 16.08 with None
         (gsplat: 10.95); with `render`'s row_capacity at the walked pairs 10.52 against 14.29.
       mosaic_compact: the Local-GS Mosaic GPU forward (where its records are built from
-        Gaussians, blending is exact, warp_cull is on and mosaic_backward_segment is None or a
-        multiple of 128; otherwise it walks every pair) keeps, of each staged chunk of 128
-        pairs, only those whose strip mask has a bit in the block's strips, packed first in
+        Gaussians, α is hoisted, blending is exact, warp_cull is on and mosaic_backward_segment
+        is None or a multiple of 128; otherwise it walks every pair) keeps, of each staged
+        chunk of 128 pairs, only those whose strip mask has a bit in the block's strips, packed first in
         shared memory (a stable partition: a ballot and a population count per warp, one
         exchange across the warps), and walks those: block-level culling, the paper's
         warp-level skip at the granularity Pallas gives a kernel. The pairs it drops blend
@@ -98,14 +98,6 @@ class KernelConfig:
         mosaic_forward_pixels says otherwise. H200 (BENCHMARKS.md §7): the forward kernel 0.68x
         its time without at 5.8M Gaussians (1080p), 0.76x at 1.45M, 0.83x at 10M (4K), 0.95x
         at 0.09M (720p).
-
-    Binning (every binned backend):
-      emit_kernel: fill the pair slots of the emission with a Pallas Triton kernel, a program
-        per 32 consecutive Gaussians of the depth order walking their slot range with coalesced
-        stores (lgs_jax.backends.pallas_emit; interpret mode as `interpret` says), instead of
-        XLA's per-slot search and gathers (`binning.expand_slots`): the same arrays, bit for
-        bit. Not yet measured on a GPU (a first version, a lane per Gaussian, was slower than
-        XLA there: BENCHMARKS.md §7), so off by default.
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -128,7 +120,6 @@ class KernelConfig:
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
-    emit_kernel: bool = False
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -156,7 +147,7 @@ class KernelConfig:
                                  f" is not a multiple of mosaic_unroll_localgs="
                                  f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
                                  f"whole walks)")
-        for name in ("mosaic_compact", "emit_kernel"):
+        for name in ("mosaic_compact",):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"tuning.{name}: expected a bool, got {getattr(self, name)!r}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import binning
-from .backends import REGISTRY, RasterResult, pallas_emit
+from .backends import REGISTRY, RasterResult
 from .backends.interface import pairs_walked
 from .composite import PixelState, finish
 from .config import RasterConfig
@@ -189,8 +189,8 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
-    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity,
-                                  pallas_emit.slot_expander(config)) if spec.binned else None)
+    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity) if spec.binned
+            else None)
     result = spec.rasterize(p, bins, width, height, config)
     state = PixelState(color=result.color, trans=result.trans, depth=result.depth, done=None)
     state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Scale GPU session (issues 17 and 18), one device call per part, each under 10 minutes:
 #   bash scripts/scale_gpu_check.sh tests  # the split backward's, walked rows' and staging
-#                                          # (compaction included) tests (3 min)
+#                                          # (compaction included) tests (about 6 min:
+#                                          # TEST_WORKERS=8 TEST_TIMEOUT=420)
 #   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 6 min)
 #   bash scripts/scale_gpu_check.sh fwd    # forward per scene
 #   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat; 5 min;
@@ -11,8 +12,6 @@
 #   bash scripts/scale_gpu_check.sh compact  # KernelConfig.mosaic_compact on the GPU: its tests,
 #                                          # then forward and forward + backward against the
 #                                          # full walks per scene, no gsplat (about 6 min)
-#   bash scripts/scale_gpu_check.sh emit   # KernelConfig.emit_kernel against XLA's emission:
-#                                          # arrays equal, ms (scripts/probe_emit.py)
 #   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
 #                                          # compile ahead twice and with a thread, each compiling
 #                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
@@ -35,12 +34,12 @@ build_gsplat() {
 scenes="${SCENES:-guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k}"
 case "${1:-grad}" in
   tests)
-    timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider -n 4 \
-      tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
-      tests/backends/test_gradients.py tests/backends/test_mosaic_staging.py \
-      tests/backends/test_pallas_emit.py \
-      -m 'slow or not slow' 2>&1 | tail -3 \
-      | tee "$out/tests.log" ;;
+    timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider \
+      -n "${TEST_WORKERS:-4}" tests/backends/test_backward_segments.py \
+      tests/backends/test_gaussian_grads.py tests/backends/test_gradients.py \
+      tests/backends/test_mosaic_staging.py \
+      -m 'slow or not slow' -rf --tb=short > "$out/tests.log" 2>&1
+    grep "^FAILED\|passed\|failed" "$out/tests.log" ;;
   grad)
     build_gsplat
     for s in $scenes; do
@@ -69,7 +68,7 @@ case "${1:-grad}" in
         ${AHEAD_ARGS:-} 2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
     done ;;
   compact)
-    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n 4 \
+    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n "${TEST_WORKERS:-4}" \
       tests/backends/test_mosaic_staging.py -m 'slow or not slow' -k compact 2>&1 | tail -3 \
       | tee "$out/compact_tests.log"
     for s in $scenes; do
@@ -84,9 +83,6 @@ case "${1:-grad}" in
         --repeat 5 --csv "$out/compact_grad_$s.csv" 2>&1 | quiet > "$out/compact_grad_$s.log"
     done
     grep -h "grad:" "$out"/compact_grad_*.log ;;
-  emit)
-    timeout "${EMIT_TIMEOUT:-200}" python3 scripts/probe_emit.py --data carry/data \
-      --scenes "$(echo $scenes | tr ' ' ',')" --repeat 10 2>&1 | quiet | tee "$out/emit.log" ;;
   determinism)
     for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
       name="${run%%:*}"; flag="${run#*:}"
@@ -100,5 +96,5 @@ case "${1:-grad}" in
 [h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
         "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|train|ahead|compact|emit|determinism" >&2; exit 2 ;;
+  *) echo "usage: $0 tests|grad|fwd|train|ahead|compact|determinism" >&2; exit 2 ;;
 esac

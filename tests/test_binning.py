@@ -197,3 +197,24 @@ def test_tile_sort_is_the_stable_order_with_16_and_32_bit_keys(n_tiles, seed):
     np.testing.assert_array_equal(got_gauss, gauss[want])
     assert got_tile.dtype == jnp.int32
     np.testing.assert_array_equal(end[-1], np.searchsorted(tile[want], n_tiles - 1, "right"))
+
+
+def test_slot_starts_past_int32_keep_the_nearest_pairs():
+    """Whole-image Gaussians at 4K (32400 tiles each) whose pairs pass 2^32: with 32-bit
+    integers the running slot starts wrap past 2^31 and again past 2^32 (rank 132,561 would
+    start at slot 9104), yet every slot of the capacity holds the nearest Gaussian's pairs
+    (an overflow drops the farthest ones, `TileBins.overflow`), never a Gaussian past the wrap."""
+    n, width, height, cap = 132_600, 3840, 2160, 16384
+    with jax.enable_x64(False):
+        ones = jnp.ones((n,), jnp.float32)
+        p = Projected(mean2d=jnp.tile(jnp.array([[1920.0, 1080.0]]), (n, 1)),
+                      cov2d=jnp.tile(jnp.array([[1e8, 0.0, 1e8]]), (n, 1)),
+                      conic=jnp.tile(jnp.array([[1e-8, 0.0, 1e-8]]), (n, 1)),
+                      depth=jnp.arange(1, n + 1, dtype=jnp.float32), opacity=0.9 * ones,
+                      rgb=jnp.zeros((n, 3)), valid=ones > 0, invalid=ones < 0)
+        e = jax.jit(binning.emit_pairs, static_argnums=(1, 2, 3))(p, width, height, cap)
+        assert int(e.total) == binning.MAX_PAIRS
+        np.testing.assert_array_equal(e.gauss, 0)
+        np.testing.assert_array_equal(e.tile, np.arange(cap))
+        assert (int(e.first[0]), int(e.count[0])) == (0, cap)
+        assert int(e.count[1:].max()) == 0
