@@ -55,6 +55,14 @@ def _number_at_least(low, kind=int):
     return parse
 
 
+def _fraction(text: str) -> float:
+    """An argparse type: a number in (0, 1]."""
+    v = _number_at_least(0.0, float)(text)
+    if not 0 < v <= 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1], got {v}")
+    return v
+
+
 def _int_at_least(low: int):
     """An argparse type: an int >= `low`."""
     return _number_at_least(low, int)
@@ -217,7 +225,8 @@ def _fit(args) -> int:
         raise UsageError(f"--out: {problem}")
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
                                    eval_every=args.eval_every, init_points=args.init_points,
-                                   convention=args.convention, pair_headroom=args.pair_headroom)
+                                   convention=args.convention, pair_headroom=args.pair_headroom,
+                                   row_fraction=args.row_fraction)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
     else:
@@ -314,6 +323,11 @@ def _fit_parser(sub, common) -> None:
                    help="pair buffer size as a multiple of a view's pairs, at the start and at "
                         "each growth (a recompile); larger: fewer recompiles, larger buffers "
                         f"(default: {Settings.pair_headroom:g})")
+    f.add_argument("--row-fraction", type=_fraction, default=Settings.row_fraction,
+                   help="rows of the Pallas backward's gradient buffer as a fraction of the "
+                        "pair buffer (0 < f <= 1); below 1 saves memory, a view walking more "
+                        "pairs grows the pair buffer (a recompile), the results are the same "
+                        f"(default: {Settings.row_fraction:g})")
     ahead = f.add_mutually_exclusive_group()
     ahead.add_argument("--compile-ahead-process", action="store_true",
                        help="compile the step for a grown pair buffer ahead in a child process, "

@@ -1,8 +1,9 @@
 """`fit`: train Gaussians on a capture, with a densification strategy, into a run directory.
 
 Per step s (0-based): the views of `data.views_for_step`, one `step.train_step` (redone with a
-larger pair capacity whenever a view overflows: no pair is dropped; the capacity starts at and
-grows to `pair_capacity(pairs, settings.pair_headroom)`, see `Settings`), then `step.refine` where
+larger pair capacity whenever a view overflows its pairs or the backward's rows: no pair is
+dropped; the capacity starts at and grows to `pair_capacity(pairs, settings.pair_headroom)`,
+see `Settings`, `pairs` covering the walked pairs' rows too), then `step.refine` where
 the strategy asks (the pool doubles when it needs room, up to `max_gaussians`: a recompile; both
 are logged).
 A step whose loss, gradients or parameters would not be finite is skipped (nothing changes),
@@ -17,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 import os
 import time
 
@@ -152,14 +154,28 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
         new = stepper.run(args, st.capacity, sig)
         stepper.prepare(args, st.capacity, sig)
         m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
-        if not m["overflow"]:
+        if not (m["overflow"] or m["row_overflow"]):
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
-        st.capacity, waited, ahead = stepper.grow(m["pairs"], sig)
+        need = _pairs_needed(m, setup.settings.row_fraction)
+        old, (st.capacity, waited, ahead) = st.capacity, stepper.grow(need, sig)
+        if st.capacity <= old:  # never loop on a capacity that cannot hold the step
+            raise RuntimeError(f"step {st.step + 1}: a capacity of {old} overflowed but "
+                               f"{need} pairs are needed")
         clock.waited(waited)
         say(f"step {st.step + 1}: pair capacity grown to {st.capacity} "
             + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)")
             + (f"; the compile ahead failed: {stepper.failure}" if stepper.failure else ""))
+
+
+def _pairs_needed(m: dict, row_fraction: float) -> int:
+    """The pair capacity a step's views need (metrics `m` of an overflowing step): their
+    pairs, and rows for their walked pairs, `step.row_capacity` of it being
+    ceil(row_fraction · capacity)."""
+    need = m["pairs"]
+    if m["row_overflow"]:
+        need = max(need, math.ceil(m["walked"] / row_fraction))
+    return min(need, binning.MAX_PAIRS)
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
@@ -224,11 +240,14 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          ("settings.init_points", settings.init_points, 1)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
             raise ValueError(f"{name}: expected an int >= {low}, got {v!r}")
-    h = settings.pair_headroom
-    number = isinstance(h, (int, float, np.integer, np.floating)) and not isinstance(h, bool)
-    if not (number and h >= 1):
+    h, f = settings.pair_headroom, settings.row_fraction
+    number = lambda v: isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(
+        v, bool)
+    if not (number(h) and h >= 1):
         raise ValueError(f"settings.pair_headroom: expected a number >= 1 (fewer slots than "
                          f"pairs would drop pairs), got {h!r}")
+    if not (number(f) and 0 < f <= 1):
+        raise ValueError(f"settings.row_fraction: expected a number in (0, 1], got {f!r}")
     for name, v, known in (("settings.convention", settings.convention, CONVENTIONS),
                            ("settings.ssim_padding", settings.ssim_padding, PADDINGS)):
         if v not in known:

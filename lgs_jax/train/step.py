@@ -6,8 +6,9 @@ the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = me
 for strategies that ask, w.r.t. zero screen offsets of the projected means: ∂loss/∂mean2d);
 one Adam update; then the strategy's per-step update. A step whose loss, gradients or new
 parameters (active slots) are not finite changes nothing: it returns its inputs with ok False
-(`fit` reports it). A view whose tile pairs overflow the capacity is reported (overflow,
-pairs): `fit` grows the capacity and runs the same step again, so no pair is ever dropped.
+(`fit` reports it). A view whose tile pairs overflow the capacity, or whose walked pairs
+overflow the backward's rows (`row_capacity`), is reported (overflow, pairs, row_overflow,
+walked): `fit` grows the capacity and runs the same step again, so no pair is ever dropped.
 
 Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
 among kernel configurations, reductions' included, by timing them while it compiles
@@ -19,6 +20,7 @@ idle, could round differently. Without autotuning a compile picks by fixed rules
 from __future__ import annotations
 
 import functools
+import math
 import types
 
 import jax
@@ -53,6 +55,13 @@ def _select(flag, new, old):
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
 
 
+def row_capacity(capacity: int, fraction: float) -> int | None:
+    """Rows of the backward's gradient buffer at pair capacity `capacity`
+    (`Settings.row_fraction`): ceil(fraction · capacity), or None (`render`'s default: a row
+    per pair slot) for a fraction of 1."""
+    return None if fraction >= 1 else max(math.ceil(fraction * capacity), 1)
+
+
 def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, background, step):
     """((loss, (mse, stats, visible)), (param grads, screen grads or None))."""
     s = setup
@@ -65,7 +74,8 @@ def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, back
 
         def one(cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
-                       config=RasterConfig(s.settings.convention), screen_offsets=off)
+                       config=RasterConfig(s.settings.convention), screen_offsets=off,
+                       row_capacity=row_capacity(capacity, s.settings.row_fraction))
             return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
 
@@ -92,7 +102,8 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx,
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
     (stacked) and `all_images` (T, H, W, 3); `key` is the run's. Returns (pool, opt_state,
     strategy_state, metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs
-    (largest per-view pair count), count (active Gaussians)."""
+    (largest per-view pair count), row_overflow, walked (largest per-view count of walked
+    pairs), count (active Gaussians)."""
     cams = jax.tree.map(lambda x: x[idx], all_cams)
     targets = all_images[idx]
     (loss, (mse, stats, visible)), (grads, grads2d) = _loss_and_grads(
@@ -112,6 +123,7 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx,
                                               (pool, opt_state, strategy_state))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
                    pairs=jnp.max(stats.pairs_required),
+                   row_overflow=jnp.any(stats.row_overflow), walked=jnp.max(stats.pairs_walked),
                    count=jnp.sum(pool.active, dtype=jnp.int32))
     return pool, opt_state, strategy_state, metrics
 

@@ -328,7 +328,11 @@ def test_training_renders_follow_the_convention():
     (dict(settings=train.Settings(ssim_padding="full")), "settings.ssim_padding"),
     (dict(settings=train.Settings(pair_headroom=0.9)), "settings.pair_headroom: expected a "
                                                        "number >= 1"),
-    (dict(settings=train.Settings(pair_headroom=float("nan"))), "settings.pair_headroom")])
+    (dict(settings=train.Settings(pair_headroom=float("nan"))), "settings.pair_headroom"),
+    (dict(settings=train.Settings(row_fraction=0.0)), "settings.row_fraction: expected a "
+                                                      r"number in \(0, 1\]"),
+    (dict(settings=train.Settings(row_fraction=1.5)), "settings.row_fraction"),
+    (dict(settings=train.Settings(row_fraction=float("nan"))), "settings.row_fraction")])
 def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
@@ -342,12 +346,50 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
         cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out", str(tmp_path),
                   "--resume", "--overwrite"])
     assert exit_.value.code == 2
-    for value in ("0.5", "inf", "x"):
-        with pytest.raises(SystemExit) as exit_:
-            cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out", str(tmp_path),
-                      "--pair-headroom", value])
-        assert exit_.value.code == 2
-        assert "--pair-headroom" in capsys.readouterr().err
+    for flag, values in (("--pair-headroom", ("0.5", "inf", "x")),
+                         ("--row-fraction", ("0", "1.5", "nan"))):
+        for value in values:
+            with pytest.raises(SystemExit) as exit_:
+                cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out",
+                          str(tmp_path), flag, value])
+            assert exit_.value.code == 2
+            assert flag in capsys.readouterr().err
+
+
+def test_row_fraction_sizes_the_rows_and_the_growth_they_need():
+    """`Settings.row_fraction`: ceil(fraction · capacity) rows (None, a row per pair slot, at
+    1); a view walking more pairs than the rows asks for a capacity whose rows hold them."""
+    from lgs_jax.train import loop, step
+
+    assert step.row_capacity(1000, 1.0) is None
+    assert (step.row_capacity(1000, 0.25), step.row_capacity(1001, 0.25)) == (250, 251)
+    assert step.row_capacity(3, 0.01) == 1
+    m = dict(pairs=100, row_overflow=False, walked=90)
+    assert loop._pairs_needed(m, 0.25) == 100
+    for walked, f, want in ((10, 0.25, 100), (60, 0.25, 240), (61, 0.25, 244), (7, 0.3, 100),
+                            (70, 0.3, 234), (2**31 - 1, 0.5, 2**31 - 1)):
+        need = loop._pairs_needed(dict(m, row_overflow=True, walked=walked), f)
+        assert need == want
+        assert need == 2**31 - 1 or step.row_capacity(need, f) >= walked
+
+
+@pytest.mark.slow
+def test_fewer_rows_grow_the_capacity_and_change_no_bit(skull, tmp_path):
+    """Training with the Pallas backward (interpret mode on a CPU) and rows for 5% of the pair
+    slots: the first step's walked pairs overflow them, the capacity grows and the step runs
+    again, and the run ends with the same bits as with a row per slot."""
+    sums = {}
+    for f in (1.0, 0.05):
+        logs = []
+        settings = train.Settings(eval_every=100, checkpoint_every=3, pair_headroom=1.5,
+                                  row_fraction=f)
+        train.fit(skull, 6, str(tmp_path / str(f)), strategy=STRATEGY, settings=settings,
+                  max_gaussians=1024, pool_size=1024, backend="pallas", log=logs.append)
+        z = np.load(tmp_path / str(f) / "checkpoint.npz")
+        sums[f] = {k: z[k] for k in z.files}
+        assert any("step 1: pair capacity grown" in line for line in logs) == (f < 1), logs
+    for k, v in sums[1.0].items():
+        np.testing.assert_array_equal(sums[0.05][k], v, err_msg=k)
 
 
 def test_progress_bar_redraws_while_a_step_runs():
@@ -439,8 +481,9 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     saved = checkpoint.config_of(setup, seed=0)
     assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
     other = checkpoint.config_of(dataclasses.replace(
-        setup, steps=5, backend="pallas", settings=train.Settings(pair_headroom=1.5)), 0)
-    # run length, backend and pair headroom may change
+        setup, steps=5, backend="pallas",
+        settings=train.Settings(pair_headroom=1.5, row_fraction=0.5)), 0)
+    # run length, backend, pair headroom and row fraction may change
     assert checkpoint.config_mismatch(saved, other) is None
     changed = checkpoint.config_of(
         dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
