@@ -275,10 +275,13 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission
     total = total_pairs(counts)
     order = depth_order(p)
     counts_sorted = counts[order]
-    starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact while the sums fit int32;
-    # past 2^31 − 1 (wrapped negative in int32, or large in int64) they become 2^31 − 1:
-    # non-decreasing and past every capacity
-    starts = lax.cummax(jnp.where(starts < 0, MAX_PAIRS, jnp.minimum(starts, MAX_PAIRS)))
+    starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact while the sums fit int32
+    # From the first rank past 2^31 − 1 on (in int32 the first such start wraps negative, the
+    # counts being < 2^24; later ones may wrap back into range) every start becomes 2^31 − 1:
+    # non-decreasing and past every capacity, by one reduction instead of a running maximum.
+    rank = jnp.arange(order.shape[0], dtype=jnp.int32)
+    wrapped = jnp.min(jnp.where(starts < 0, rank, order.shape[0]))
+    starts = jnp.where(rank < wrapped, jnp.minimum(starts, MAX_PAIRS), MAX_PAIRS)
     inside = (counts_sorted > 0) & (starts >= 0) & (starts < capacity)
     kept = jnp.where(inside, jnp.minimum(counts_sorted, capacity - starts), 0)
     rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)
