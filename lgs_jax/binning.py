@@ -226,8 +226,8 @@ class SlotPlan(NamedTuple):
 
     Per depth rank k: order[k] (the k-th Gaussian of `depth_order`), start[k] (its first slot:
     an exclusive prefix sum of the tile counts, 2^31 − 1 from where it passes that: so
-    non-decreasing) and kept[k] (its slots within the capacity; 0
-    for a Gaussian with no tile or starting past the capacity); per Gaussian index, rect =
+    non-decreasing) and kept[k] (its slots within the capacity; 0 for a Gaussian with no tile
+    or starting past the capacity); per Gaussian index, rect =
     (tx0, ty0, nx): its tile rectangle's corner and width (nx >= 1). Slot start[k] + i,
     i < kept[k], holds Gaussian order[k] and tile (ty0 + i // nx)·tiles_x + tx0 + i % nx; slots
     from `total` on are padding (tile n_tiles, Gaussian order[-1]).
@@ -285,8 +285,9 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission
     inside = (counts_sorted > 0) & (starts >= 0) & (starts < capacity)
     kept = jnp.where(inside, jnp.minimum(counts_sorted, capacity - starts), 0)
     rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)
-    tile, g = expand_slots(SlotPlan(order=order, start=starts, kept=kept, rect=rect, total=total,
-                              tiles_x=tiles_x, n_tiles=tiles_x * tiles_y, capacity=capacity))
+    tile, g = expand_slots(SlotPlan(order=order, start=starts, kept=kept, rect=rect,
+                                    total=total, tiles_x=tiles_x, n_tiles=tiles_x * tiles_y,
+                                    capacity=capacity))
     first_count = jnp.zeros((order.shape[0], 2), jnp.int32).at[order].set(
         jnp.stack([jnp.where(inside, starts, 0), kept], -1), unique_indices=True)
     return Emission(tile=tile, gauss=g, total=total,

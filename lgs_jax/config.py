@@ -87,9 +87,9 @@ class KernelConfig:
       mosaic_compact: the Local-GS Mosaic GPU forward (where its records are built from
         Gaussians, α is hoisted, blending is exact, warp_cull is on and mosaic_backward_segment
         is None or a multiple of 128; otherwise it walks every pair) keeps, of each staged
-        chunk of 128 pairs, only those whose strip mask has a bit in the block's strips, packed first in
-        shared memory (a stable partition: a ballot and a population count per warp, one
-        exchange across the warps), and walks those: block-level culling, the paper's
+        chunk of 128 pairs, only those whose strip mask has a bit in the block's strips, packed
+        first in shared memory (a stable partition: a ballot and a population count per warp,
+        one exchange across the warps), and walks those: block-level culling, the paper's
         warp-level skip at the granularity Pallas gives a kernel. The pairs it drops blend
         nothing in the block's pixels (the masks are conservative), so the outputs are the full
         walk's: bit for bit in interpret mode and in float32 on the H200 (images and

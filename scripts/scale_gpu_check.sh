@@ -68,7 +68,8 @@ case "${1:-grad}" in
         ${AHEAD_ARGS:-} 2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
     done ;;
   compact)
-    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider -n "${TEST_WORKERS:-4}" \
+    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider \
+      -n "${TEST_WORKERS:-4}" \
       tests/backends/test_mosaic_staging.py -m 'slow or not slow' -k compact 2>&1 | tail -3 \
       | tee "$out/compact_tests.log"
     for s in $scenes; do
