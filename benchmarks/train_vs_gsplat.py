@@ -2,7 +2,7 @@
 
     python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
         [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
-        [--backend NAME] [--convention 3dgs|gsplat] [--pair-headroom 3] [--row-fraction 1]
+        [--backend NAME] [--convention 3dgs|gsplat] [--pair-headroom 3] [--row-headroom H]
         [--no-gsplat] [--no-ours] [--inline]
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
@@ -99,9 +99,9 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--pair-headroom", type=float, default=Settings.pair_headroom,
                     help="our trainer's pair capacity over the pairs needed (Settings."
                          "pair_headroom; larger: fewer growths and recompiles, larger buffers)")
-    ap.add_argument("--row-fraction", type=float, default=Settings.row_fraction,
-                    help="our trainer's backward rows over the pair capacity (Settings."
-                         "row_fraction; smaller: less memory, possibly more growths)")
+    ap.add_argument("--row-headroom", type=float, default=None,
+                    help="our trainer's backward rows over the walked pairs (Settings."
+                         "row_headroom; default: a row per pair slot)")
     ap.add_argument("--no-ours", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
@@ -124,7 +124,7 @@ def scene_setup(args, scene: str):
         strategy = dataclasses.replace(strategy, refine_start_iter=args.refine_from)
     settings = train.Settings(eval_every=args.eval_every, checkpoint_every=max(args.steps, 1),
                               ssim_padding=args.ssim_padding, convention=args.convention,
-                              pair_headroom=args.pair_headroom, row_fraction=args.row_fraction)
+                              pair_headroom=args.pair_headroom, row_headroom=args.row_headroom)
     return d, cap, strategy, settings
 
 

@@ -55,14 +55,6 @@ def _number_at_least(low, kind=int):
     return parse
 
 
-def _fraction(text: str) -> float:
-    """An argparse type: a number in (0, 1]."""
-    v = _number_at_least(0.0, float)(text)
-    if not 0 < v <= 1:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1], got {v}")
-    return v
-
-
 def _int_at_least(low: int):
     """An argparse type: an int >= `low`."""
     return _number_at_least(low, int)
@@ -226,7 +218,7 @@ def _fit(args) -> int:
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
                                    eval_every=args.eval_every, init_points=args.init_points,
                                    convention=args.convention, pair_headroom=args.pair_headroom,
-                                   row_fraction=args.row_fraction)
+                                   row_headroom=args.row_headroom)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
     else:
@@ -323,11 +315,10 @@ def _fit_parser(sub, common) -> None:
                    help="pair buffer size as a multiple of a view's pairs, at the start and at "
                         "each growth (a recompile); larger: fewer recompiles, larger buffers "
                         f"(default: {Settings.pair_headroom:g})")
-    f.add_argument("--row-fraction", type=_fraction, default=Settings.row_fraction,
-                   help="rows of the Pallas backward's gradient buffer as a fraction of the "
-                        "pair buffer (0 < f <= 1); below 1 saves memory, a view walking more "
-                        "pairs grows the pair buffer (a recompile), the results are the same "
-                        f"(default: {Settings.row_fraction:g})")
+    f.add_argument("--row-headroom", type=_number_at_least(1.0, float), default=None,
+                   help="size the Pallas backward's gradient rows to this multiple of the "
+                        "walked pairs, growing them when a view walks more (a recompile each): "
+                        "less memory, the same results (default: a row per pair slot)")
     ahead = f.add_mutually_exclusive_group()
     ahead.add_argument("--compile-ahead-process", action="store_true",
                        help="compile the step for a grown pair buffer ahead in a child process, "

@@ -8,8 +8,9 @@ so the next capacity is predictable: the smallest one a growth can pick, `pair_c
 on (XLA compiles outside Python's global lock, and the main thread mostly waits on the device),
 and at the growth uses that executable if it holds the pairs and was compiled for the same
 argument shapes (a pool that grew since needs its own compile, as before), for every step at
-that capacity. It is the program `jax.jit` compiles for that capacity, compiled with XLA's
-autotuning off (`step.COMPILER_OPTIONS`), so that a compile beside running steps picks no other
+that capacity (and the same backward rows, `Sizes`: a growth of the rows, where `fit` sizes
+them, is compiled when it happens). It is the program `jax.jit` compiles for that capacity,
+compiled with XLA's autotuning off (`step.COMPILER_OPTIONS`), so that a compile beside running steps picks no other
 kernel configuration than one on an idle GPU: the same bits (tests/train: a run with and one
 without, bit for bit, on the CPU). On the H200, two skull runs at headroom 3 compiled ahead
 (thread, process) ended at 25.96 dB where four without compiling ahead ended at 26.81, before
@@ -35,6 +36,7 @@ Function broadcast_divide_fusion.5 not found", where the cache's own loading wor
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import os
 import pickle
 import subprocess
@@ -90,38 +92,67 @@ def _abstract(args):
     return jax.tree.map(one, args)
 
 
-class Stepper:
-    """Runs the step at a capacity (`run`), compiles the next capacity's step ahead
-    (`prepare`), and picks the capacity of a growth (`grow`).
+@dataclasses.dataclass(frozen=True)
+class Sizes:
+    """The static sizes of a training step, (pair capacity, backward rows), and how they grow.
 
-    `step(args, capacity)` is the jitted step; `lower(args, capacity)` its `jax.stages.Lowered`
-    (args may be `jax.ShapeDtypeStruct`s; for mode "process" `lower` must pickle: a module-level
-    function or a `functools.partial` of one). `mode`: "thread", "process" (module docstring) or
-    None, which only runs the jitted step and grows to `pair_capacity(pairs, headroom)`.
+    The rows are `render`'s row_capacity (None: a row per pair slot, which nothing overflows).
+    A step needs (pairs, walked): its views' largest pair count and largest count of walked
+    pairs. `following` is the size a growth of the pairs picks first (compiled ahead),
+    `grown` the size for a need the current size does not hold: what overflowed grows to
+    `pair_capacity(need, headroom)`, the rest stays.
     """
 
-    def __init__(self, step: Callable, lower: Callable, headroom: float,
+    pair_headroom: float
+    row_headroom: float | None = None
+
+    def following(self, size: tuple) -> tuple:
+        return pair_capacity(size[0] + 1, self.pair_headroom), size[1]
+
+    def holds(self, size: tuple, need: tuple) -> bool:
+        return size[0] >= need[0] and (size[1] is None or size[1] >= need[1])
+
+    def grown(self, size: tuple, need: tuple) -> tuple:
+        pairs, rows = size
+        if pairs < need[0]:
+            pairs = pair_capacity(need[0], self.pair_headroom)
+        if rows is not None and rows < need[1]:
+            rows = pair_capacity(need[1], self.row_headroom)
+        return pairs, rows
+
+
+class Stepper:
+    """Runs the step at a size (`run`), compiles the next size's step ahead (`prepare`), and
+    picks the size of a growth (`grow`); sizes are `Sizes`' (pair capacity, rows).
+
+    `step(args, size)` is the jitted step; `lower(args, size)` its `jax.stages.Lowered`
+    (args may be `jax.ShapeDtypeStruct`s; for mode "process" `lower` must pickle: a module-level
+    function or a `functools.partial` of one). `mode`: "thread", "process" (module docstring) or
+    None, which only runs the jitted step and grows to `sizes.grown`.
+    """
+
+    def __init__(self, step: Callable, lower: Callable, sizes: Sizes,
                  mode: str | None = "thread"):
         if mode not in (None, *MODES):
             raise ValueError(f"mode: expected one of {MODES} or None, got {mode!r}")
-        self._step, self._lower, self._headroom, self._mode = step, lower, headroom, mode
+        self._step, self._lower, self._sizes, self._mode = step, lower, sizes, mode
         self._threads = concurrent.futures.ThreadPoolExecutor(1) if mode else None
-        self._job = None  # (capacity, signature, future) of the background compile
+        self._job = None  # (size, signature, future) of the background compile
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
-        self._ready = None  # (capacity, signature, executable) taken from a finished job
+        self._ready = None  # (size, signature, executable) taken from a finished job
 
-    def run(self, args, capacity: int, sig: tuple):
-        """One step at `capacity`; `sig` = signature(args)."""
-        if self._ready is not None and self._ready[:2] == (capacity, sig):
+    def run(self, args, size: tuple, sig: tuple):
+        """One step at `size`; `sig` = signature(args)."""
+        if self._ready is not None and self._ready[:2] == (size, sig):
             return self._ready[2](*args)
-        return self._step(args, capacity)
+        return self._step(args, size)
 
-    def prepare(self, args, capacity: int, sig: tuple) -> None:
-        """Start compiling the step for the capacity after `capacity` (module docstring), unless
-        it is under way or done for these shapes."""
+    def prepare(self, args, size: tuple, sig: tuple) -> None:
+        """Start compiling the step for the size after `size` (`Sizes.following`, module
+        docstring), unless it is under way or done for these shapes."""
         if self._threads is None:
             return
-        following = pair_capacity(capacity + 1, self._headroom)
+        following = self._sizes.following(size)
         if self._job is not None:
             if self._job[:2] == (following, sig):
                 return
@@ -133,14 +164,14 @@ class Stepper:
             compile_ = lambda: self._lower(abstract, following).compile()
         self._job = (following, sig, self._threads.submit(compile_))
 
-    def grow(self, pairs: int, sig: tuple) -> tuple[int, float, bool]:
-        """(new capacity, seconds waited for the compile ahead, whether it was used) for a
-        step that needs `pairs` pairs: the prepared capacity if it holds them and fits the
-        shapes `sig` (waiting for its compile if unfinished), else `pair_capacity(pairs,
-        headroom)` (compiled by the next `run`; also when the compile ahead failed, which
-        `failure` then says, else None)."""
+    def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
+        """(new size, seconds waited for the compile ahead, whether it was used) for a step at
+        `size` that needs `need` = (pairs, walked): the prepared size if it holds them and fits
+        the shapes `sig` (waiting for its compile if unfinished), else `Sizes.grown` (compiled
+        by the next `run`; also when the compile ahead failed, which `failure` then says, else
+        None)."""
         job, self._job, self.failure = self._job, None, None
-        if job is not None and job[0] >= pairs and job[1] == sig:
+        if job is not None and self._sizes.holds(job[0], need) and job[1] == sig:
             t0 = time.perf_counter()
             try:
                 executable = job[2].result()  # None from a child: the jitted step loads it
@@ -148,7 +179,7 @@ class Stepper:
                 return job[0], time.perf_counter() - t0, True
             except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
                 self.failure = _reason(e)
-        return pair_capacity(pairs, self._headroom), 0.0, False
+        return self._sizes.grown(size, need), 0.0, False
 
     def close(self) -> None:
         """Forget the executables; a compile under way finishes in the background unwaited."""
@@ -163,12 +194,12 @@ def _reason(e: Exception) -> str:
     return lines[-1] if lines else f"{type(e).__name__}: {e}"
 
 
-def _compile_in_child(lower: Callable, abstract, capacity: int) -> None:
-    """Compile `lower(abstract, capacity)` in a child process (`ahead_child`) into the persistent
+def _compile_in_child(lower: Callable, abstract, size: tuple) -> None:
+    """Compile `lower(abstract, size)` in a child process (`ahead_child`) into the persistent
     compilation cache, with this process's `SHARED_CONFIG`; raises if the child fails."""
     config = {name: jax.config.values[name] for name in SHARED_CONFIG
               if name in jax.config.values}
     env = dict(os.environ, XLA_PYTHON_CLIENT_PREALLOCATE="false")  # this process holds the GPU
     subprocess.run([sys.executable, "-m", "lgs_jax.train.ahead_child"], env=env, check=True,
-                   input=pickle.dumps(config) + pickle.dumps((lower, abstract, capacity)),
+                   input=pickle.dumps(config) + pickle.dumps((lower, abstract, size)),
                    capture_output=True)

@@ -1,9 +1,9 @@
 """`fit`: train Gaussians on a capture, with a densification strategy, into a run directory.
 
 Per step s (0-based): the views of `data.views_for_step`, one `step.train_step` (redone with a
-larger pair capacity whenever a view overflows its pairs or the backward's rows: no pair is
-dropped; the capacity starts at and grows to `pair_capacity(pairs, settings.pair_headroom)`,
-see `Settings`, `pairs` covering the walked pairs' rows too), then `step.refine` where
+larger pair capacity whenever a view overflows: no pair is dropped; the capacity starts at and
+grows to `pair_capacity(pairs, settings.pair_headroom)`, see `Settings`; likewise the backward's
+rows where `settings.row_headroom` sizes them, `ahead.Sizes`), then `step.refine` where
 the strategy asks (the pool doubles when it needs room, up to `max_gaussians`: a recompile; both
 are logged).
 A step whose loss, gradients or parameters would not be finite is skipped (nothing changes),
@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import math
 import os
 import time
 
@@ -27,12 +26,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import binning
-from ..config import CONVENTIONS
+from ..config import CONVENTIONS, RasterConfig
 from ..io.ply import save_ply
 from ..projection import project
-from ..render import next_pow2, pair_capacity
+from ..render import next_pow2, pair_capacity, render
 from . import checkpoint, report
-from .ahead import Stepper, mode_of, signature
+from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, prepare, views_for_step
 from .init import start_gaussians
 from .losses import PADDINGS
@@ -53,6 +52,7 @@ class _State:
     capacity: int  # tile-Gaussian pairs per training view
     eval_capacity: int
     skipped: int = 0
+    rows: int | None = None  # the backward's rows per training view (None: one per pair slot)
 
 
 def _templates(setup: Setup, size: int, scene_scale: float, g=None):
@@ -75,9 +75,13 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
     pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
     capacity = pair_capacity(int(_pairs(pool, first)), setup.settings.pair_headroom)
+    rows = None
+    if setup.settings.row_headroom is not None:
+        rows = pair_capacity(_walked(setup, pool, first, jnp.asarray(rd.background), capacity),
+                             setup.settings.row_headroom)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
         f"{rd.scene_scale:.3f}")
-    return _State(pool, opt_state, sstate, 0, capacity, capacity)
+    return _State(pool, opt_state, sstate, 0, capacity, capacity, rows=rows)
 
 
 @jax.jit
@@ -85,6 +89,14 @@ def _pairs(pool: Pool, cam):
     """Tile-Gaussian pairs of the pool in one view."""
     return binning.count_pairs(project(render_gaussians(pool.params, pool.active), cam),
                                cam.width, cam.height)
+
+
+def _walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
+    """Pairs some pixel reached in one view (`RenderStats.pairs_walked`): a forward render."""
+    out = render(render_gaussians(pool.params, pool.active), cam, background=background,
+                 backend=setup.backend, capacity=capacity,
+                 config=RasterConfig(setup.settings.convention))
+    return int(out.stats.pairs_walked)
 
 
 def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
@@ -96,8 +108,9 @@ def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
     pool, opt_state, sstate = checkpoint.restore(out, templates)
     _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
     log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
+    rows = meta.get("rows") if setup.settings.row_headroom is not None else None
     return _State(pool, opt_state, sstate, meta["step"], meta["capacity"],
-                  meta["eval_capacity"], meta["skipped"])
+                  meta["eval_capacity"], meta["skipped"], rows)
 
 
 def _forget_after(path: str, step: int) -> None:
@@ -112,7 +125,7 @@ def _forget_after(path: str, step: int) -> None:
 
 
 def _save(out: str, setup: Setup, st: _State, seed: int) -> None:
-    meta = dict(step=st.step, capacity=st.capacity, eval_capacity=st.eval_capacity,
+    meta = dict(step=st.step, capacity=st.capacity, rows=st.rows, eval_capacity=st.eval_capacity,
                 pool_size=st.pool.size, skipped=st.skipped,
                 config=checkpoint.config_of(setup, seed))
     checkpoint.save(out, (st.pool, st.opt_state, st.strategy_state), meta)
@@ -129,17 +142,18 @@ def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
     return report.heldout_metrics(images, rd.test_images)
 
 
-def _lower_step(args, capacity: int, *, setup: Setup):
-    """`train_step` lowered for `args` at `capacity` (module level, so that `ahead`'s child
-    process can unpickle it)."""
-    return train_step.lower(*args, setup=setup, capacity=capacity)
+def _lower_step(args, size: tuple, *, setup: Setup):
+    """`train_step` lowered for `args` at `size` = (capacity, rows) (module level, so that
+    `ahead`'s child process can unpickle it)."""
+    return train_step.lower(*args, setup=setup, capacity=size[0], rows=size[1])
 
 
 def _stepper(setup: Setup, mode: str | None) -> Stepper:
     """`train_step` of this run behind an `ahead.Stepper` of `mode`."""
-    return Stepper(lambda a, c: train_step(*a, setup=setup, capacity=c),
-                   functools.partial(_lower_step, setup=setup), setup.settings.pair_headroom,
-                   mode)
+    s = setup.settings
+    return Stepper(lambda a, size: train_step(*a, setup=setup, capacity=size[0], rows=size[1]),
+                   functools.partial(_lower_step, setup=setup),
+                   Sizes(s.pair_headroom, s.row_headroom), mode)
 
 
 def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say,
@@ -151,31 +165,25 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
         args = (st.pool, st.opt_state, st.strategy_state, rd.train_cams, rd.train_images, idx,
                 background, st.step, key)
         sig = signature(args)
-        new = stepper.run(args, st.capacity, sig)
-        stepper.prepare(args, st.capacity, sig)
+        size = (st.capacity, st.rows)
+        new = stepper.run(args, size, sig)
+        stepper.prepare(args, size, sig)
         m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
         if not (m["overflow"] or m["row_overflow"]):
             st.pool, st.opt_state, st.strategy_state = new[:3]
             return m
-        need = _pairs_needed(m, setup.settings.row_fraction)
-        old, (st.capacity, waited, ahead) = st.capacity, stepper.grow(need, sig)
-        if st.capacity <= old:  # never loop on a capacity that cannot hold the step
-            raise RuntimeError(f"step {st.step + 1}: a capacity of {old} overflowed but "
-                               f"{need} pairs are needed")
+        need = (m["pairs"], m["walked"])
+        (st.capacity, st.rows), waited, ahead = stepper.grow(size, need, sig)
+        if (st.capacity, st.rows) == size:  # never loop on a size that cannot hold the step
+            raise RuntimeError(f"step {st.step + 1}: (pairs, rows) {size} overflowed, "
+                               f"{need} needed")
         clock.waited(waited)
-        say(f"step {st.step + 1}: pair capacity grown to {st.capacity} "
+        grown = [f"{what} grown to {new_size}" for what, new_size, old_size in
+                 (("pair capacity", st.capacity, size[0]), ("backward rows", st.rows, size[1]))
+                 if new_size != old_size]
+        say(f"step {st.step + 1}: {' and '.join(grown)} "
             + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)")
             + (f"; the compile ahead failed: {stepper.failure}" if stepper.failure else ""))
-
-
-def _pairs_needed(m: dict, row_fraction: float) -> int:
-    """The pair capacity a step's views need (metrics `m` of an overflowing step): their
-    pairs, and rows for their walked pairs, `step.row_capacity` of it being
-    ceil(row_fraction · capacity)."""
-    need = m["pairs"]
-    if m["row_overflow"]:
-        need = max(need, math.ceil(m["walked"] / row_fraction))
-    return min(need, binning.MAX_PAIRS)
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
@@ -240,14 +248,14 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          ("settings.init_points", settings.init_points, 1)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
             raise ValueError(f"{name}: expected an int >= {low}, got {v!r}")
-    h, f = settings.pair_headroom, settings.row_fraction
     number = lambda v: isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(
         v, bool)
+    h, r = settings.pair_headroom, settings.row_headroom
     if not (number(h) and h >= 1):
         raise ValueError(f"settings.pair_headroom: expected a number >= 1 (fewer slots than "
                          f"pairs would drop pairs), got {h!r}")
-    if not (number(f) and 0 < f <= 1):
-        raise ValueError(f"settings.row_fraction: expected a number in (0, 1], got {f!r}")
+    if not (r is None or (number(r) and r >= 1)):
+        raise ValueError(f"settings.row_headroom: expected None or a number >= 1, got {r!r}")
     for name, v, known in (("settings.convention", settings.convention, CONVENTIONS),
                            ("settings.ssim_padding", settings.ssim_padding, PADDINGS)):
         if v not in known:

@@ -30,16 +30,14 @@ class Settings:
     against 8 and 244 s at 1.5, the steps themselves within 2% (9.70 against 9.54 ms;
     BENCHMARKS.md §7, "Dec 2, midday"). Smaller values mean fewer pair slots and more
     recompiles. Not part of the checkpointed recipe (it changes no result).
-    row_fraction (in (0, 1]): the Pallas backward's buffer of per-pair gradient rows holds
-    `step.row_capacity(capacity, row_fraction)` rows, ceil(row_fraction · capacity): 48 bytes
-    per row and block of a tile, the largest buffer of a step at scale. Only the pairs some
+    row_headroom (None or >= 1): the Pallas backward's buffer of per-pair gradient rows (48
+    bytes per row and block of a tile, the largest buffer of a step at scale). None (the
+    default): a row per pair slot, which nothing can overflow. A number h: only the pairs some
     pixel reached take a row (`render`'s `stats.pairs_walked`: 15–30% of the pairs at 1M–10M
-    Gaussians, BENCHMARKS.md §7), so a fraction below 1 saves memory; a view that walks more
-    pairs than the rows grows the pair capacity (and with it the rows) and redoes the step, as
-    an overflow of pairs does, so nothing is dropped and the results are the same bits. It pays
-    only where few of the pairs are walked: on Lego's first 500 steps (most pairs walked) 0.25
-    grew the pair buffer and raised the peak memory from 659 to 861 MB (H200, BENCHMARKS.md
-    §7). 1 (the default): rows for every pair slot, no such growth. Not part of the
+    Gaussians, BENCHMARKS.md §7), so the buffer starts at `pair_capacity(walked, h)` of the
+    first training view's walked pairs (one forward render before the first step) and grows the
+    same way whenever a view walks more (the step is redone, a recompile, logged, as for the
+    pairs; `ahead.Sizes`): less memory, the same bits, a compile per growth. Not part of the
     checkpointed recipe.
     """
 
@@ -61,7 +59,7 @@ class Settings:
     init_points: int = 100_000
     init_extent: float | None = None
     pair_headroom: float = 3.0
-    row_fraction: float = 1.0
+    row_headroom: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,14 +1,15 @@
 """The jitted pieces of a run: one training step, one refinement (with pool growth), renders.
 
-`train_step` (one jit per Setup, pair capacity and pool size): render the batch of views from
-the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean over views of
-(1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's regulariser; gradients w.r.t. the parameters (and,
-for strategies that ask, w.r.t. zero screen offsets of the projected means: ∂loss/∂mean2d);
-one Adam update; then the strategy's per-step update. A step whose loss, gradients or new
-parameters (active slots) are not finite changes nothing: it returns its inputs with ok False
-(`fit` reports it). A view whose tile pairs overflow the capacity, or whose walked pairs
-overflow the backward's rows (`row_capacity`), is reported (overflow, pairs, row_overflow,
-walked): `fit` grows the capacity and runs the same step again, so no pair is ever dropped.
+`train_step` (one jit per Setup, pair capacity, backward rows and pool size): render the batch
+of views from the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean
+over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's regulariser; gradients w.r.t. the
+parameters (and, for strategies that ask, w.r.t. zero screen offsets of the projected means:
+∂loss/∂mean2d); one Adam update; then the strategy's per-step update. A step whose loss,
+gradients or new parameters (active slots) are not finite changes nothing: it returns its inputs
+with ok False (`fit` reports it). A view whose tile pairs overflow the capacity, or whose
+walked pairs overflow the backward's rows (`render`'s row_capacity), is reported (overflow,
+pairs, row_overflow, walked): `fit` grows what overflowed and runs the same step again, so no
+pair is ever dropped.
 
 Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
 among kernel configurations, reductions' included, by timing them while it compiles
@@ -20,7 +21,6 @@ idle, could round differently. Without autotuning a compile picks by fixed rules
 from __future__ import annotations
 
 import functools
-import math
 import types
 
 import jax
@@ -55,14 +55,8 @@ def _select(flag, new, old):
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
 
 
-def row_capacity(capacity: int, fraction: float) -> int | None:
-    """Rows of the backward's gradient buffer at pair capacity `capacity`
-    (`Settings.row_fraction`): ceil(fraction · capacity), or None (`render`'s default: a row
-    per pair slot) for a fraction of 1."""
-    return None if fraction >= 1 else max(math.ceil(fraction * capacity), 1)
-
-
-def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, background, step):
+def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
+                    background, step):
     """((loss, (mse, stats, visible)), (param grads, screen grads or None))."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
@@ -75,7 +69,7 @@ def _loss_and_grads(setup: Setup, capacity: int, pool: Pool, cams, targets, back
         def one(cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=RasterConfig(s.settings.convention), screen_offsets=off,
-                       row_capacity=row_capacity(capacity, s.settings.row_fraction))
+                       row_capacity=rows)
             return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
 
@@ -95,19 +89,19 @@ def step_keys(key, step):
     return jax.random.split(jax.random.fold_in(key, step))
 
 
-@functools.partial(jax.jit, static_argnames=("setup", "capacity"),
+@functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows"),
                    compiler_options=COMPILER_OPTIONS)
 def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx, background,
-               step, key, *, setup: Setup, capacity: int):
+               step, key, *, setup: Setup, capacity: int, rows: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
-    (stacked) and `all_images` (T, H, W, 3); `key` is the run's. Returns (pool, opt_state,
-    strategy_state, metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs
-    (largest per-view pair count), row_overflow, walked (largest per-view count of walked
-    pairs), count (active Gaussians)."""
+    (stacked) and `all_images` (T, H, W, 3); `key` is the run's; `rows`: the backward's row
+    buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, metrics): loss,
+    psnr (training views), ok (finite, applied), overflow, pairs (largest per-view pair count),
+    row_overflow, walked (largest per-view count of walked pairs), count (active Gaussians)."""
     cams = jax.tree.map(lambda x: x[idx], all_cams)
     targets = all_images[idx]
     (loss, (mse, stats, visible)), (grads, grads2d) = _loss_and_grads(
-        setup, capacity, pool, cams, targets, background, step)
+        setup, capacity, rows, pool, cams, targets, background, step)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     updates, new_opt = opt.update(grads, opt_state, pool.params)
     new_pool = Pool(optax.apply_updates(pool.params, updates), pool.active)

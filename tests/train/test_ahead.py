@@ -17,9 +17,9 @@ def _scaled(x, capacity):
     return jnp.cumsum(jnp.sin(x) * capacity)
 
 
-def _lower_scaled(args, capacity):
+def _lower_scaled(args, size):
     """Module level, so that the child process can unpickle it."""
-    return _scaled.lower(*args, capacity)
+    return _scaled.lower(*args, size[0])
 
 
 @pytest.fixture
@@ -38,13 +38,14 @@ def empty_cache(tmp_path):
 
 
 def test_a_child_compile_is_the_growths_cache_hit(empty_cache):
-    stepper = ahead.Stepper(lambda a, c: _scaled(*a, c), _lower_scaled, 1.5, "process")
+    stepper = ahead.Stepper(lambda a, c: _scaled(*a, c[0]), _lower_scaled, ahead.Sizes(1.5),
+                            "process")
     args = (jnp.linspace(0, 1, 5),)
     sig = ahead.signature(args)
-    first = stepper.run(args, 1024, sig)
-    stepper.prepare(args, 1024, sig)  # pair_capacity(1025, 1.5) = 2048, in a child process
-    capacity, waited, taken = stepper.grow(1100, sig)
-    assert (capacity, taken) == (2048, True) and waited >= 0
+    first = stepper.run(args, (1024, None), sig)
+    stepper.prepare(args, (1024, None), sig)  # pair_capacity(1025, 1.5) = 2048, in a child
+    capacity, waited, taken = stepper.grow((1024, None), (1100, 0), sig)
+    assert (capacity, taken) == ((2048, None), True) and waited >= 0
     events = []
     listen = lambda event, **_: events.append(event)
     jax.monitoring.register_event_listener(listen)
@@ -59,16 +60,16 @@ def test_a_child_compile_is_the_growths_cache_hit(empty_cache):
 
 def test_a_failed_child_costs_only_the_compile(empty_cache):
     """A `lower` the child cannot unpickle (a lambda): the growth compiles in this process."""
-    stepper = ahead.Stepper(lambda a, c: _scaled(*a, c), lambda a, c: _lower_scaled(a, c), 1.5,
-                            "process")
+    stepper = ahead.Stepper(lambda a, c: _scaled(*a, c[0]), lambda a, c: _lower_scaled(a, c),
+                            ahead.Sizes(1.5), "process")
     args = (jnp.linspace(0, 1, 5),)
     sig = ahead.signature(args)
-    stepper.run(args, 1024, sig)
-    stepper.prepare(args, 1024, sig)
-    capacity, _, taken = stepper.grow(1100, sig)
-    assert capacity == 2048 and not taken
+    stepper.run(args, (1024, None), sig)
+    stepper.prepare(args, (1024, None), sig)
+    capacity, _, taken = stepper.grow((1024, None), (1100, 0), sig)
+    assert capacity == (2048, None) and not taken
     assert "pickle" in stepper.failure.lower(), stepper.failure  # the child's reason
-    assert jnp.array_equal(stepper.run(args, 2048, sig), _scaled(args[0], 2048))
+    assert jnp.array_equal(stepper.run(args, capacity, sig), _scaled(args[0], 2048))
     stepper.close()
 
 

@@ -10,6 +10,7 @@ import json
 import os
 import time
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -198,25 +199,43 @@ class _Lowered:
         return lambda *args: ("executable", self.capacity)
 
 
-@pytest.mark.parametrize("pairs,same_shapes,fail,want", [
-    (1100, True, False, ("executable", 2048)),  # the prepared capacity holds the pairs: taken
-    (2100, True, False, None),  # it does not: the jitted step at pair_capacity(2100, 1.5)
-    (1100, False, False, None),  # the pool grew since: the jitted step
-    (1100, True, True, None),  # its compile failed: the jitted step
+@pytest.mark.parametrize("need,same_shapes,fail,want", [
+    # the prepared size holds the pairs and walked pairs: taken
+    ((1100, 600), True, False, ("executable", (2048, 800))),
+    ((2100, 600), True, False, None),  # not the pairs: the jitted step at pair_capacity(2100)
+    ((1100, 900), True, False, None),  # not the walked pairs: the step with grown rows
+    ((1100, 600), False, False, None),  # the pool grew since: the jitted step
+    ((1100, 600), True, True, None),  # its compile failed: the jitted step
 ])
-def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(pairs, same_shapes, fail,
+def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(need, same_shapes, fail,
                                                                   want):
-    stepper = ahead.Stepper(lambda a, c: ("jit", c), lambda a, c: _Lowered(c, fail), 1.5)
+    sizes = ahead.Sizes(1.5, row_headroom=2.0)
+    stepper = ahead.Stepper(lambda a, c: ("jit", c), lambda a, c: _Lowered(c, fail), sizes)
     args = (jnp.zeros(3), 7)
     sig = ahead.signature(args)
-    assert stepper.run(args, 1024, sig) == ("jit", 1024)
-    stepper.prepare(args, 1024, sig)  # pair_capacity(1025, 1.5) = 2048
+    assert stepper.run(args, (1024, 800), sig) == ("jit", (1024, 800))
+    stepper.prepare(args, (1024, 800), sig)  # (pair_capacity(1025, 1.5), 800) = (2048, 800)
     other = sig if same_shapes else ahead.signature((jnp.zeros(4), 7))
-    capacity, waited, taken = stepper.grow(pairs, other)
+    size, waited, taken = stepper.grow((1024, 800), need, other)
     assert taken == (want is not None) and waited >= 0
-    assert capacity == (2048 if taken else lgs_jax.pair_capacity(pairs, 1.5))
-    assert stepper.run(args, capacity, other) == (want or ("jit", capacity))
+    if not taken:
+        assert size == sizes.grown((1024, 800), need)
+    assert stepper.run(args, size, other) == (want or ("jit", size))
     stepper.close()
+
+
+def test_sizes_grow_what_overflowed():
+    """`ahead.Sizes`: the pairs to `pair_capacity(pairs, pair_headroom)` and the rows to
+    `pair_capacity(walked, row_headroom)`, each only where it overflowed; rows of None (a row
+    per pair slot) never grow."""
+    sizes = ahead.Sizes(1.5, row_headroom=2.0)
+    cap = lgs_jax.pair_capacity
+    assert sizes.following((1024, 300)) == (cap(1025, 1.5), 300)
+    assert sizes.grown((1024, 300), (2000, 100)) == (cap(2000, 1.5), 300)
+    assert sizes.grown((1024, 300), (1000, 301)) == (1024, cap(301, 2.0))
+    assert sizes.grown((1024, 300), (2000, 5000)) == (cap(2000, 1.5), cap(5000, 2.0))
+    assert sizes.grown((1024, None), (1000, 5000)) == (1024, None)
+    assert sizes.holds((1024, None), (1024, 10**9)) and not sizes.holds((1024, 8), (1, 9))
 
 
 def test_a_non_finite_step_is_skipped_and_reported(skull, tmp_path):
@@ -329,10 +348,9 @@ def test_training_renders_follow_the_convention():
     (dict(settings=train.Settings(pair_headroom=0.9)), "settings.pair_headroom: expected a "
                                                        "number >= 1"),
     (dict(settings=train.Settings(pair_headroom=float("nan"))), "settings.pair_headroom"),
-    (dict(settings=train.Settings(row_fraction=0.0)), "settings.row_fraction: expected a "
-                                                      r"number in \(0, 1\]"),
-    (dict(settings=train.Settings(row_fraction=1.5)), "settings.row_fraction"),
-    (dict(settings=train.Settings(row_fraction=float("nan"))), "settings.row_fraction")])
+    (dict(settings=train.Settings(row_headroom=0.5)), "settings.row_headroom: expected None "
+                                                      "or a number >= 1"),
+    (dict(settings=train.Settings(row_headroom=float("nan"))), "settings.row_headroom")])
 def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
@@ -347,7 +365,7 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
                   "--resume", "--overwrite"])
     assert exit_.value.code == 2
     for flag, values in (("--pair-headroom", ("0.5", "inf", "x")),
-                         ("--row-fraction", ("0", "1.5", "nan"))):
+                         ("--row-headroom", ("0.5", "inf", "x"))):
         for value in values:
             with pytest.raises(SystemExit) as exit_:
                 cli.main(["fit", "--data", str(tmp_path), "--steps", "1", "--out",
@@ -356,40 +374,30 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
             assert flag in capsys.readouterr().err
 
 
-def test_row_fraction_sizes_the_rows_and_the_growth_they_need():
-    """`Settings.row_fraction`: ceil(fraction · capacity) rows (None, a row per pair slot, at
-    1); a view walking more pairs than the rows asks for a capacity whose rows hold them."""
-    from lgs_jax.train import loop, step
-
-    assert step.row_capacity(1000, 1.0) is None
-    assert (step.row_capacity(1000, 0.25), step.row_capacity(1001, 0.25)) == (250, 251)
-    assert step.row_capacity(3, 0.01) == 1
-    m = dict(pairs=100, row_overflow=False, walked=90)
-    assert loop._pairs_needed(m, 0.25) == 100
-    for walked, f, want in ((10, 0.25, 100), (60, 0.25, 240), (61, 0.25, 244), (7, 0.3, 100),
-                            (70, 0.3, 234), (2**31 - 1, 0.5, 2**31 - 1)):
-        need = loop._pairs_needed(dict(m, row_overflow=True, walked=walked), f)
-        assert need == want
-        assert need == 2**31 - 1 or step.row_capacity(need, f) >= walked
-
-
 @pytest.mark.slow
-def test_fewer_rows_grow_the_capacity_and_change_no_bit(skull, tmp_path):
-    """Training with the Pallas backward (interpret mode on a CPU) and rows for 5% of the pair
-    slots: the first step's walked pairs overflow them, the capacity grows and the step runs
-    again, and the run ends with the same bits as with a row per slot."""
+def test_rows_sized_to_the_walked_pairs_change_no_bit(skull, tmp_path, monkeypatch):
+    """Training with the Pallas backward (interpret mode on a CPU) and its rows sized to the
+    walked pairs (`Settings.row_headroom`), started at one row (as if the first view walked
+    one pair): the first step overflows them, they grow and the step runs again, and the run
+    ends with the same bits as with a row per pair slot."""
+    from lgs_jax.train import loop
+
+    monkeypatch.setattr(loop, "_walked", lambda *args: 1)
     sums = {}
-    for f in (1.0, 0.05):
+    for h in (None, 1.5):
         logs = []
         settings = train.Settings(eval_every=100, checkpoint_every=3, pair_headroom=1.5,
-                                  row_fraction=f)
-        train.fit(skull, 6, str(tmp_path / str(f)), strategy=STRATEGY, settings=settings,
+                                  row_headroom=h)
+        train.fit(skull, 6, str(tmp_path / str(h)), strategy=STRATEGY, settings=settings,
                   max_gaussians=1024, pool_size=1024, backend="pallas", log=logs.append)
-        z = np.load(tmp_path / str(f) / "checkpoint.npz")
-        sums[f] = {k: z[k] for k in z.files}
-        assert any("step 1: pair capacity grown" in line for line in logs) == (f < 1), logs
-    for k, v in sums[1.0].items():
-        np.testing.assert_array_equal(sums[0.05][k], v, err_msg=k)
+        z = np.load(tmp_path / str(h) / "checkpoint.npz")
+        sums[h] = {k: z[k] for k in z.files}
+        meta = json.loads((tmp_path / str(h) / "checkpoint.json").read_text())
+        assert (meta["rows"] is None) == (h is None)
+        grew = [line for line in logs if "step 1: backward rows grown to" in line]
+        assert len(grew) == (h is not None), logs
+    for k, v in sums[None].items():
+        np.testing.assert_array_equal(sums[1.5][k], v, err_msg=k)
 
 
 def test_progress_bar_redraws_while_a_step_runs():
@@ -482,8 +490,8 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
     other = checkpoint.config_of(dataclasses.replace(
         setup, steps=5, backend="pallas",
-        settings=train.Settings(pair_headroom=1.5, row_fraction=0.5)), 0)
-    # run length, backend, pair headroom and row fraction may change
+        settings=train.Settings(pair_headroom=1.5, row_headroom=2.0)), 0)
+    # run length, backend, pair and row headrooms may change
     assert checkpoint.config_mismatch(saved, other) is None
     changed = checkpoint.config_of(
         dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
@@ -492,3 +500,21 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     (tmp_path / "checkpoint.json").write_text(json.dumps(dict(step=3, capacity=8)))
     with pytest.raises(ValueError, match="older lgs_jax.train"):
         checkpoint.read_meta(str(tmp_path))
+
+
+def test_sized_rows_start_at_the_first_views_walked_pairs(skull):
+    """`Settings.row_headroom`: a run's rows start at `pair_capacity(walked, headroom)` of the
+    first training view's walked pairs (a forward render), at most its pairs; None: no rows."""
+    from lgs_jax.train import loop
+
+    rd = train_data.prepare(skull, 1, None)
+    for h in (None, 2.0):
+        setup = train.Setup(settings=train.Settings(row_headroom=h), backend="tiles", steps=10)
+        st = loop._fresh(setup, rd, 0, 1024, 1024, lambda m: None)
+        if h is None:
+            assert st.rows is None
+            continue
+        first = jax.tree.map(lambda x: x[0], rd.train_cams)
+        walked = loop._walked(setup, st.pool, first, jnp.asarray(rd.background), st.capacity)
+        assert 0 < walked <= int(loop._pairs(st.pool, first))
+        assert st.rows == lgs_jax.pair_capacity(walked, 2.0)
