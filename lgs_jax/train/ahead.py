@@ -1,22 +1,22 @@
 """The training step compiled for the next pair capacity before a step needs it.
 
-A step whose views need more tile–Gaussian pairs than the capacity grows it (`loop._one_step`),
-and the step is compiled again for the new capacity: about 20 s on an H200, three times in a
-7k-step skull run at the default headroom (BENCHMARKS.md §7). Pairs grow gradually (densification),
-so the next capacity is predictable: the smallest one a growth can pick, `pair_capacity(capacity
-+ 1, headroom)`. `Stepper` compiles the step for it in a background thread while training goes
-on (XLA compiles outside Python's global lock, and the main thread mostly waits on the device),
-and at the growth uses that executable if it holds the pairs and was compiled for the same
-argument shapes (a pool that grew since needs its own compile, as before), for every step at
-that capacity (and the same backward rows, `Sizes`: a growth of the rows, where `fit` sizes
-them, is compiled when it happens). It is the program `jax.jit` compiles for that capacity,
-compiled with XLA's autotuning off (`step.COMPILER_OPTIONS`), so that a compile beside running steps picks no other
-kernel configuration than one on an idle GPU: the same bits (tests/train: a run with and one
-without, bit for bit, on the CPU). On the H200, two skull runs at headroom 3 compiled ahead
-(thread, process) ended at 25.96 dB where four without compiling ahead ended at 26.81, before
-autotuning was turned off (BENCHMARKS.md §7, "Dec 2, midday"); with it off, skull runs of
-1500 steps, twice without and once with a compile ahead in a thread (two growths, one compiled
-ahead at step 604 and used for 800 steps), ended with the same checkpoint bits on the H200.
+A step whose views need more tile–Gaussian pairs than the capacity grows it (`loop._one_step`), and
+the step is compiled again for the new capacity: about 20 s on an H200, three times in a 7k-step
+skull run at the default headroom (BENCHMARKS.md §7). Pairs grow gradually (densification), so the
+next capacity is predictable: the smallest one a growth can pick, `pair_capacity(capacity + 1,
+headroom)`. `Stepper` compiles the step for it in a background thread while training goes on (XLA
+compiles outside Python's global lock, and the main thread mostly waits on the device), and at the
+growth uses that executable if it holds the pairs and was compiled for the same argument shapes (a
+pool that grew since needs its own compile, as before), for every step at that capacity (and the
+same backward rows, `Sizes`: a growth of the rows, where `fit` sizes them, is compiled when it
+happens). It is the program `jax.jit` compiles for that capacity, compiled with XLA's autotuning
+off (`step.COMPILER_OPTIONS`), so that a compile beside running steps picks no other kernel
+configuration than one on an idle GPU: the same bits (tests/train: a run with and one without, bit
+for bit, on the CPU). On the H200, two skull runs at headroom 3 compiled ahead (thread, process)
+ended at 25.96 dB where four without compiling ahead ended at 26.81, before autotuning was turned
+off (BENCHMARKS.md §7, "Dec 2, midday"); with it off, skull runs of 1500 steps, twice without and
+once with a compile ahead in a thread (two growths, one compiled ahead at step 604 and used for 800
+steps), ended with the same checkpoint bits on the H200.
 
 In a thread, tracing and lowering the step (Python: Mosaic GPU's layout inference, about 6 s
 per capacity, `scripts/lower_time.py`) hold Python's lock, and the training loop's steps ran
