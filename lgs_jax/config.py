@@ -85,7 +85,7 @@ class KernelConfig:
         at 5.8M Gaussians, 1080p (BENCHMARKS.md §7): 12.21 ms with 1024, 16.08 with None
         (gsplat: 10.95); with `render`'s row_capacity at the walked pairs 10.52 against 14.29.
       mosaic_compact: the Local-GS Mosaic GPU forward (where its records are built from
-        Gaussians, α is hoisted, blending is exact, warp_cull is on and mosaic_backward_segment
+        Gaussians, blending is exact, warp_cull is on and mosaic_backward_segment
         is None or a multiple of 128; otherwise it walks every pair) keeps, of each staged
         chunk of 128 pairs, only those whose strip mask has a bit in the block's strips, packed
         first in shared memory (a stable partition: a ballot and a population count per warp,

@@ -2,9 +2,13 @@
 # Scale GPU session (issues 17 and 18), one device call per part, each under 10 minutes:
 #   bash scripts/scale_gpu_check.sh tests  # the split backward's, walked rows' and staging
 #                                          # (compaction included) tests (about 6 min:
-#                                          # TEST_WORKERS=8 TEST_TIMEOUT=420)
+#                                          # TEST_WORKERS=8 TEST_TIMEOUT=420; TEST_ARGS
+#                                          # replaces the files, e.g. "FILE -k NAME")
 #   bash scripts/scale_gpu_check.sh grad   # forward + backward per scene (about 6 min)
 #   bash scripts/scale_gpu_check.sh fwd    # forward per scene
+#   bash scripts/scale_gpu_check.sh kernels  # every kernel's device time in one forward, ours
+#                                          # and gsplat's (scripts/kernel_times.py; SCENES
+#                                          # default guitar_x110_4k, KT_ARGS e.g. --grad)
 #   bash scripts/scale_gpu_check.sh train  # skull, 7k steps, ms per step (no gsplat; 5 min;
 #                                          # TRAIN_ARGS=--compile-ahead-process, --no-compile-ahead,
 #                                          # --pair-headroom 3; TRAIN_SCENES=lego)
@@ -35,9 +39,9 @@ scenes="${SCENES:-guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k}"
 case "${1:-grad}" in
   tests)
     timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider \
-      -n "${TEST_WORKERS:-4}" tests/backends/test_backward_segments.py \
+      -n "${TEST_WORKERS:-4}" ${TEST_ARGS:-tests/backends/test_backward_segments.py \
       tests/backends/test_gaussian_grads.py tests/backends/test_gradients.py \
-      tests/backends/test_mosaic_staging.py \
+      tests/backends/test_mosaic_staging.py} \
       -m 'slow or not slow' -rf --tb=short > "$out/tests.log" 2>&1
     grep "^FAILED\|passed\|failed" "$out/tests.log" ;;
   grad)
@@ -56,6 +60,13 @@ case "${1:-grad}" in
         --csv "$out/fwd_$s.csv" 2>&1 | quiet > "$out/fwd_$s.log"
     done
     grep -h " e2e " "$out"/fwd_*.log ;;
+  kernels)
+    build_gsplat
+    for s in ${SCENES:-guitar_x110_4k}; do
+      timeout "${SCENE_TIMEOUT:-240}" python3 scripts/kernel_times.py --data carry/data \
+        --scenes "$s" ${KT_ARGS:-} 2>&1 | quiet > "$out/kernels_$s.log"
+    done
+    grep -h "==" "$out"/kernels_*.log ;;
   train)
     timeout "${TRAIN_TIMEOUT:-500}" python3 benchmarks/train_vs_gsplat.py --data-root carry/data \
       --scenes ${TRAIN_SCENES:-skull} --steps "${STEPS:-7000}" --eval-every "${STEPS:-7000}" \
@@ -97,5 +108,5 @@ case "${1:-grad}" in
 [h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
         "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|train|ahead|compact|determinism" >&2; exit 2 ;;
+  *) echo "usage: $0 tests|grad|fwd|kernels|train|ahead|compact|determinism" >&2; exit 2 ;;
 esac

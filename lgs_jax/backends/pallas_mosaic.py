@@ -122,14 +122,12 @@ def staged(config: RasterConfig, dt) -> bool:
 def compacts(config: RasterConfig) -> bool:
     """Whether the Local-GS forward walks each chunk's pairs of its block only
     (`KernelConfig.mosaic_compact`, `mosaic_staging.compact_loop`): asked for, records built
-    from Gaussians, α in the hoisted form, exact blending (a pixel's stop pair), strip masks on
-    (`warp_cull`), and the split backward's entries (stored at the forward's chunk starts) at
-    multiples of 128. The difference form (hoist off) walks every pair: compacted, it lowers
-    but Mosaic GPU fails to translate it to LLVM on the H200 (an unrealized_conversion_cast
-    left over; BENCHMARKS.md §7, not traced further)."""
+    from Gaussians, exact blending (a pixel's stop pair), strip masks on (`warp_cull`), and the
+    split backward's entries (stored at the forward's chunk starts) at multiples of 128. Both
+    α forms (hoisted and difference) compact."""
     t = config.tuning
     segment = t.mosaic_backward_segment
-    return (t.mosaic_compact and t.mosaic_pair_source == "gaussians" and config.hoist
+    return (t.mosaic_compact and t.mosaic_pair_source == "gaussians"
             and config.blend == "exact" and config.warp_cull
             and (segment is None or segment % mosaic_staging.LANES == 0))
 

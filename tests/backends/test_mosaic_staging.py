@@ -234,13 +234,13 @@ def test_compacted_forward_gives_the_same_gradients_and_split_entries(backward_p
 
 def test_compaction_applies_where_its_conditions_hold():
     """`mosaic_compact` (the default) compacts the Local-GS forward where it can: records built
-    from Gaussians, the hoisted form, exact blending, strip masks, the split backward's entries
-    at chunk starts (segments of a multiple of 128 pairs, or whole walks); elsewhere the forward
-    walks every pair, in the block size it would have without."""
+    from Gaussians, exact blending, strip masks, the split backward's entries at chunk starts
+    (segments of a multiple of 128 pairs, or whole walks), in either α form; elsewhere the
+    forward walks every pair, in the block size it would have without."""
     assert pallas_mosaic.compacts(C())
+    assert pallas_mosaic.compacts(C(hoist=False))
     assert pallas_mosaic.compacts(C(tuning=K(mosaic_backward_segment=None)))
     for off in (C(tuning=K(mosaic_compact=False)), C(blend="fast"), C(warp_cull=False),
-                C(hoist=False),
                 C(tuning=K(mosaic_pair_source="records")),
                 C(tuning=K(mosaic_backward_segment=64))):
         assert not pallas_mosaic.compacts(off)
