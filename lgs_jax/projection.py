@@ -21,6 +21,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from .config import ALPHA_MIN
 from .scene import Camera, Gaussians
@@ -87,8 +88,16 @@ def project(g: Gaussians, cam: Camera) -> Projected:
     Written on per-Gaussian (N,) columns, every step elementwise (no stacked 3x3 matrices, no
     reductions over small axes), so that XLA fuses the projection and its autodiff backward
     into a few passes over the Gaussians; `jax.checkpoint` makes the backward recompute these
-    elementwise intermediates instead of storing them."""
-    return _project(g, cam)
+    elementwise intermediates instead of storing them.
+
+    The fields are materialised once (an optimization barrier), so every consumer (the pair
+    emission's tile rectangles, the depth order, the kernels' Gaussian table, the counts that
+    size the pair buffer) reads the same stored bits. Fused into each consumer instead, XLA
+    recomputed the projection per consumer (at 10M Gaussians and 4K on an H200 the table's
+    fusion alone took 1.84 ms of a 7.2 ms forward, 0.69 ms behind the barrier: BENCHMARKS.md §7
+    "Dec 2, night"), and each recomputation could contract multiplies and adds into FMAs its
+    own way, so two consumers could see different bits of one Gaussian's mean or conic."""
+    return lax.optimization_barrier(_project(g, cam))
 
 
 @jax.checkpoint

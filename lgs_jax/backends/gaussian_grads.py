@@ -155,17 +155,18 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
     return _finish(list(acc), opacity, config)
 
 
-def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, out_ref, *,
+def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, *out_refs,
             config: RasterConfig, tiles_x: int, n: int, blocks: int, lanes: int):
-    g = pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes)
-    gi = jnp.minimum(g, n - 1)
-    fields = (mean_ref[gi, 0], mean_ref[gi, 1], conic_ref[gi, 0], conic_ref[gi, 1],
-              conic_ref[gi, 2])
-    count = jnp.where(g < n, count_ref[gi], 0)
-    sums_ = _walk(rows_ref, blocks, first_ref[gi], count, fields, opacity_ref[gi], tiles_x,
-                  config)
-    for col, v in enumerate(sums_):
-        out_ref[g, col] = v  # rows n and up: padding (distinct rows, dropped)
+    # Lanes past the last Gaussian walk the last one again and store the same bits at its
+    # index: the outputs need no padding (a padded output's slice is a copy XLA cannot fuse
+    # away: 0.6 ms at 10M Gaussians on an H200, BENCHMARKS.md §7).
+    g = jnp.minimum(pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes), n - 1)
+    fields = (mean_ref[g, 0], mean_ref[g, 1], conic_ref[g, 0], conic_ref[g, 1],
+              conic_ref[g, 2])
+    sums_ = _walk(rows_ref, blocks, first_ref[g], count_ref[g], fields, opacity_ref[g],
+                  tiles_x, config)
+    for out_ref, v in zip(out_refs, sums_):
+        out_ref[g] = v
 
 
 def sums(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConfig,
@@ -180,13 +181,13 @@ def sums(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConf
     programs = pl.cdiv(n, lanes)
     kernel = functools.partial(_kernel, config=config, tiles_x=tiles_x, n=n, blocks=blocks,
                                lanes=lanes)
-    out = pl.pallas_call(
-        kernel, out_shape=jax.ShapeDtypeStruct((programs * lanes, COLUMNS), rows.dtype),
+    columns = pl.pallas_call(
+        kernel, out_shape=(jax.ShapeDtypeStruct((n,), rows.dtype),) * COLUMNS,
         grid=(programs,), interpret=interpret,
         compiler_params=plt.CompilerParams(num_warps=lanes // 32, num_stages=1),
         name="gaussian_grads",
     )(layout.first, layout.count, *_fields(p), rows)
-    return out[:n]
+    return jnp.stack(columns, -1)  # its consumers' column slices take the columns themselves
 
 
 def reference(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConfig):
