@@ -97,24 +97,30 @@ def project(g: Gaussians, cam: Camera) -> Projected:
     fusion alone took 1.84 ms of a 7.2 ms forward, 0.69 ms behind the barrier: BENCHMARKS.md §7
     "Dec 2, late evening"), and each recomputation could contract multiplies and adds into FMAs its
     own way, so two consumers could see different bits of one Gaussian's mean or conic."""
-    return lax.optimization_barrier(_project(g, cam))
+    return lax.optimization_barrier(project_columns(*gaussian_columns(g), cam))
+
+
+def gaussian_columns(g: Gaussians):
+    """The fields of `g` as (N,) columns, as `project_columns` takes them: (mean x, y, z),
+    (quaternion w, x, y, z), (log scales), the opacity logits, and the SH coefficients as
+    [basis][channel]."""
+    return ([g.means[:, i] for i in range(3)], [g.quats[:, i] for i in range(4)],
+            [g.log_scales[:, i] for i in range(3)], g.logit_opacities,
+            [[g.sh[:, k, c] for c in range(3)] for k in range(g.sh.shape[1])])
 
 
 @jax.checkpoint
-def _project(g: Gaussians, cam: Camera) -> Projected:
-    dt = g.dtype
+def project_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> Projected:
+    """`project` on `gaussian_columns`."""
+    dt = mean[0].dtype
     viewmat = jnp.asarray(cam.viewmat, dt)
     fx, fy, cx, cy, near, far = (jnp.asarray(v, dt) for v in
                                  (cam.fx, cam.fy, cam.cx, cam.cy, cam.near, cam.far))
-    mean = [g.means[:, i] for i in range(3)]
-    quat = [g.quats[:, i] for i in range(4)]
-    log_scale = [g.log_scales[:, i] for i in range(3)]
-    n_sh = g.sh.shape[1]
-    sh = [[g.sh[:, k, c] for c in range(3)] for k in range(n_sh)]
+    n_sh = len(sh)
     all_of = lambda xs: functools.reduce(jnp.logical_and, xs)
     input_ok = all_of([jnp.isfinite(x) for x in mean + quat]
                       + [~jnp.isnan(x) & (x != jnp.inf) for x in log_scale]
-                      + [~jnp.isnan(g.logit_opacities)]
+                      + [~jnp.isnan(logit_opacities)]
                       + [~jnp.isnan(x) for row in sh for x in row]
                       + [sum(q * q for q in quat) > 0])
     # Placeholders keep invalid rows finite so no NaN can leak through a masked arithmetic path.
@@ -150,7 +156,7 @@ def _project(g: Gaussians, cam: Camera) -> Projected:
     conic = (syy / det_safe, -sxy / det_safe, sxx / det_safe)
     mean2d = (fx * tx / tz_safe + cx, fy * ty / tz_safe + cy)
 
-    opacity = jax.nn.sigmoid(jnp.where(input_ok, g.logit_opacities, 0.0))
+    opacity = jax.nn.sigmoid(jnp.where(input_ok, logit_opacities, 0.0))
     centre = camera_center(viewmat)
     d = [mean[i] - centre[i] for i in range(3)]
     dnorm = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
