@@ -94,9 +94,10 @@ def project(g: Gaussians, cam: Camera) -> Projected:
     emission's tile rectangles, the depth order, the kernels' Gaussian table, the counts that
     size the pair buffer) reads the same stored bits. Fused into each consumer instead, XLA
     recomputed the projection per consumer (at 10M Gaussians and 4K on an H200 the table's
-    fusion alone took 1.84 ms of a 7.2 ms forward, 0.69 ms behind the barrier: BENCHMARKS.md §7
-    "Dec 2, late evening"), and each recomputation could contract multiplies and adds into FMAs its
-    own way, so two consumers could see different bits of one Gaussian's mean or conic."""
+    fusion alone took 1.84 ms of a 7.2 ms forward, 0.69 ms behind the barrier: BENCHMARKS.md
+    §7 "Dec 2, late evening"), and each recomputation could contract multiplies and adds into
+    FMAs its own way, so two consumers could see different bits of one Gaussian's mean or
+    conic."""
     return lax.optimization_barrier(project_columns(*gaussian_columns(g), cam))
 
 
