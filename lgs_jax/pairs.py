@@ -50,13 +50,21 @@ class PairGaussians:
 TABLE_COLUMNS = 14  # `gaussian_table`: μx, μy, a, b, c, o, r, g, b, z, τ, τ_pad, det_lo, unbounded
 
 
-def gaussian_table(p: Projected):
-    """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (the padded ellipse of
-    lgs_jax.binning included; `unbounded` as 0/1), materialised once: fused into the per-pair
-    consumers, XLA would recompute the rows (and read every field separately) for every pair."""
+def table_fields(p: Projected) -> tuple:
+    """The fields `gaussian_table` packs, as stored, in its column order: mean2d (N, 2),
+    conic (N, 3), opacity, rgb (N, 3), depth, and the padded ellipse of lgs_jax.binning (tau,
+    tau_pad, det_lo, unbounded as 0/1 in p's dtype), (N,) each."""
     e = padded_ellipse(p)
-    cols = [p.mean2d, p.conic, p.opacity[:, None], p.rgb, p.depth[:, None], e.tau[:, None],
-            e.tau_pad[:, None], e.det_lo[:, None], e.unbounded[:, None].astype(p.mean2d.dtype)]
+    return (p.mean2d, p.conic, p.opacity, p.rgb, p.depth, e.tau, e.tau_pad, e.det_lo,
+            e.unbounded.astype(p.mean2d.dtype))
+
+
+def gaussian_table(p: Projected):
+    """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (`table_fields`),
+    materialised once: fused into the per-pair consumers, XLA would recompute the rows (and
+    read every field separately) for every pair. On GPUs the kernels take the same values from
+    lgs_jax.backends.table_kernel, which writes them faster."""
+    cols = [f.reshape(f.shape[0], -1) for f in table_fields(p)]
     return lax.optimization_barrier(jnp.concatenate(cols, -1))
 
 

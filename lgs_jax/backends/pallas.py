@@ -58,7 +58,7 @@ from ..config import RasterConfig
 from ..layout import STRIPS, tile_grid
 from ..projection import Projected
 from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
-               pallas_triton)
+               pallas_triton, table_kernel)
 from .interface import Backend, RasterResult, stop_within
 
 
@@ -188,16 +188,17 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     """(forward kernel data, strip–Gaussian pairs, what the backward kernel reads).
 
     With `tuning.mosaic_pair_source` "gaussians" the Mosaic GPU kernels build their records
-    themselves from the pairs' Gaussian ids and `pairs.gaussian_table`
-    (lgs_jax.backends.mosaic_staging): the Local-GS forward gets (ids, table) and reports the
-    strip pairs as not counted (−1), and a Mosaic GPU backward reads (ids, table) too, so no
-    per-pair record is built in XLA. Otherwise (masks, records) from `_records` (the vanilla
+    themselves from the pairs' Gaussian ids and `pairs.gaussian_table` (written by
+    lgs_jax.backends.table_kernel, staged by lgs_jax.backends.mosaic_staging): the Local-GS
+    forward gets (ids, table) and reports the strip pairs as not counted (−1), and a Mosaic GPU
+    backward reads (ids, table) too, so no per-pair record is built in XLA. Otherwise (masks, records) from `_records` (the vanilla
     forward reads Gaussian rows by id; its backward, records of `_vanilla_model`, or (ids,
     table) on Mosaic GPU; it counts every strip of every pair)."""
     config = plan_.config
     model = _vanilla_model(config) if plan_.vanilla else config
     gaussians = config.tuning.mosaic_pair_source == "gaussians"
-    staged = (bins.gauss, pairs.gaussian_table(p)) if gaussians else None
+    staged = ((bins.gauss, table_kernel.gaussian_table(p, plan_.interpret)) if gaussians
+              else None)
     forward_staged = gaussians and not plan_.vanilla and plan_.forward == "mosaic"
     backward_staged = gaussians and plan_.backward == "mosaic"
     if forward_staged and backward_staged:
