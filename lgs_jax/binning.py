@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from . import slot_fill
 from .layout import TILE, tile_grid
 from .projection import Projected, depth_order
 
@@ -258,21 +259,15 @@ def expand_slots(plan: SlotPlan):
     return jnp.where(slot < plan.total, tile, plan.n_tiles), g
 
 
-def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission:
-    """Tile–Gaussian pairs in (depth, index) order.
-
-    Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
-    prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
-    row; slots past the total get tile = n_tiles (padding, sorts last): `expand_slots` fills
-    them from the per-Gaussian `SlotPlan`. Each Gaussian's (first slot, count within the
-    capacity) is stored at its index (a permutation: one writer per element).
-    """
+def slot_plan(p: Projected, width: int, height: int, capacity: int):
+    """The `SlotPlan` of `emit_pairs` (Gaussian k of the depth order owns slots [start[k],
+    start[k] + kept[k])), with each Gaussian's tile count and whether its run is within the
+    capacity (by depth rank), and its unbounded flag (by index)."""
     if not 0 < capacity <= MAX_PAIRS:
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
     tiles_x, tiles_y = tile_grid(width, height)
     tx0, ty0, nx, ny, unbounded = tile_rects(p, width, height)
     counts = nx * ny
-    total = total_pairs(counts)
     order = depth_order(p)
     counts_sorted = counts[order]
     starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact while the sums fit int32
@@ -285,12 +280,46 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission
     inside = (counts_sorted > 0) & (starts >= 0) & (starts < capacity)
     kept = jnp.where(inside, jnp.minimum(counts_sorted, capacity - starts), 0)
     rect = jnp.stack([tx0, ty0, jnp.maximum(nx, 1)], -1)
-    tile, g = expand_slots(SlotPlan(order=order, start=starts, kept=kept, rect=rect,
-                                    total=total, tiles_x=tiles_x, n_tiles=tiles_x * tiles_y,
-                                    capacity=capacity))
-    first_count = jnp.zeros((order.shape[0], 2), jnp.int32).at[order].set(
-        jnp.stack([jnp.where(inside, starts, 0), kept], -1), unique_indices=True)
-    return Emission(tile=tile, gauss=g, total=total,
+    plan = SlotPlan(order=order, start=starts, kept=kept, rect=rect, total=total_pairs(counts),
+                    tiles_x=tiles_x, n_tiles=tiles_x * tiles_y, capacity=capacity)
+    return plan, inside, unbounded
+
+
+def fill_slots(plan: SlotPlan, kernel: bool = False):
+    """(tile, gauss) of every slot: `expand_slots`, or with `kernel` lgs_jax.slot_fill's
+    kernel on GPUs (`expand_slots` elsewhere; the same integers)."""
+    if not kernel:
+        return expand_slots(plan)
+
+    def fill(order, start, kept, rect, _total):
+        return slot_fill.fill(order, start, kept, rect, plan.n_tiles, plan.tiles_x,
+                              plan.capacity)
+
+    def xla(*arrays):
+        return expand_slots(plan._replace(**dict(zip(_PLAN_ARRAYS, arrays))))
+
+    return lax.platform_dependent(*(getattr(plan, f) for f in _PLAN_ARRAYS), default=xla,
+                                  cuda=fill)
+
+
+_PLAN_ARRAYS = ("order", "start", "kept", "rect", "total")
+
+
+def emit_pairs(p: Projected, width: int, height: int, capacity: int,
+               fill_kernel: bool = False) -> Emission:
+    """Tile–Gaussian pairs in (depth, index) order.
+
+    Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
+    prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
+    row; slots past the total get tile = n_tiles (padding, sorts last): `fill_slots` fills
+    them from the per-Gaussian `SlotPlan` (`slot_plan`). Each Gaussian's (first slot, count
+    within the capacity) is stored at its index (a permutation: one writer per element).
+    """
+    plan, inside, unbounded = slot_plan(p, width, height, capacity)
+    tile, g = fill_slots(plan, fill_kernel)
+    first_count = jnp.zeros((plan.order.shape[0], 2), jnp.int32).at[plan.order].set(
+        jnp.stack([jnp.where(inside, plan.start, 0), plan.kept], -1), unique_indices=True)
+    return Emission(tile=tile, gauss=g, total=plan.total,
                     n_unbounded=jnp.sum(unbounded, dtype=jnp.int32),
                     first=first_count[:, 0], count=first_count[:, 1])
 
@@ -319,12 +348,12 @@ def sort_pairs(tile, gauss, n_tiles: int):
 
 
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
-                  row_capacity: int | None = None) -> TileBins:
+                  row_capacity: int | None = None, fill_kernel: bool = False) -> TileBins:
     """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
     pairs are emitted in depth order and the tile sort is stable. `row_capacity`: the
-    backward's row buffer (`TileBins.row_capacity`)."""
+    backward's row buffer (`TileBins.row_capacity`); `fill_kernel`: `emit_pairs`'."""
     tiles_x, tiles_y = tile_grid(width, height)
-    e = emit_pairs(p, width, height, capacity)
+    e = emit_pairs(p, width, height, capacity, fill_kernel)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
                     first=e.first, count=e.count, pairs_required=e.total,

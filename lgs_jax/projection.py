@@ -112,7 +112,7 @@ def gaussian_columns(g: Gaussians):
     per-column pads, which XLA fused into the projection's backward: it split that into two
     fusions with 32 (N,) arrays between them. Behind the barrier the backward writes (N,)
     columns only, with the same bits: at 10M Gaussians on an H200 it took 2.67 against
-    3.76 ms, at 0.96M with SH degree 3 2.92 against 4.52 (BENCHMARKS.md §7 "Dec 2, night").
+    3.76 ms, at 0.96M with SH degree 3 2.92 against 4.52 (BENCHMARKS.md §7 "Dec 2, late night").
     Being a `custom_vjp`, it has no forward-mode derivative (`jax.jvp`), as the rasterizers."""
     return _columns(g)
 

@@ -191,9 +191,10 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     themselves from the pairs' Gaussian ids and `pairs.gaussian_table` (written by
     lgs_jax.backends.table_kernel, staged by lgs_jax.backends.mosaic_staging): the Local-GS
     forward gets (ids, table) and reports the strip pairs as not counted (−1), and a Mosaic GPU
-    backward reads (ids, table) too, so no per-pair record is built in XLA. Otherwise (masks, records) from `_records` (the vanilla
-    forward reads Gaussian rows by id; its backward, records of `_vanilla_model`, or (ids,
-    table) on Mosaic GPU; it counts every strip of every pair)."""
+    backward reads (ids, table) too, so no per-pair record is built in XLA. Otherwise (masks,
+    records) from `_records` (the vanilla forward reads Gaussian rows by id; its backward,
+    records of `_vanilla_model`, or (ids, table) on Mosaic GPU; it counts every strip of every
+    pair)."""
     config = plan_.config
     model = _vanilla_model(config) if plan_.vanilla else config
     gaussians = config.tuning.mosaic_pair_source == "gaussians"
