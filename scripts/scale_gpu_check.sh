@@ -16,6 +16,9 @@
 #   bash scripts/scale_gpu_check.sh compact  # KernelConfig.mosaic_compact on the GPU: its tests,
 #                                          # then forward and forward + backward against the
 #                                          # full walks per scene, no gsplat (about 6 min)
+#   bash scripts/scale_gpu_check.sh fill   # KernelConfig.slot_fill="kernel" on the GPU: its
+#                                          # tests, then forward and forward + backward against
+#                                          # the XLA fill per scene, no gsplat (about 5 min)
 #   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
 #                                          # compile ahead twice and with a thread, each compiling
 #                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
@@ -95,6 +98,21 @@ case "${1:-grad}" in
         --repeat 5 --csv "$out/compact_grad_$s.csv" 2>&1 | quiet > "$out/compact_grad_$s.log"
     done
     grep -h "grad:" "$out"/compact_grad_*.log ;;
+  fill)
+    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider \
+      -n "${TEST_WORKERS:-4}" tests/test_slot_fill.py 2>&1 | tail -3 | tee "$out/fill_tests.log"
+    for s in $scenes; do
+      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --no-gsplat --data carry/data \
+        --scenes "$s" --rows localgs,localgs:fill --repeat 10 \
+        --csv "$out/fill_fwd_$s.csv" 2>&1 | quiet > "$out/fill_fwd_$s.log"
+    done
+    grep -h " e2e " "$out"/fill_fwd_*.log
+    for s in ${GRAD_SCENES:-guitar_x16_1080p guitar_x110_4k}; do
+      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --no-gsplat \
+        --data carry/data --scenes "$s" --rows localgs,localgs:fill --repeat 5 \
+        --csv "$out/fill_grad_$s.csv" 2>&1 | quiet > "$out/fill_grad_$s.log"
+    done
+    grep -h "grad:" "$out"/fill_grad_*.log ;;
   determinism)
     for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
       name="${run%%:*}"; flag="${run#*:}"
@@ -108,5 +126,5 @@ case "${1:-grad}" in
 [h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
         "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|kernels|train|ahead|compact|determinism" >&2; exit 2 ;;
+  *) echo "usage: $0 tests|grad|fwd|kernels|train|ahead|compact|fill|determinism" >&2; exit 2 ;;
 esac
