@@ -260,9 +260,9 @@ def expand_slots(plan: SlotPlan):
 
 
 def slot_plan(p: Projected, width: int, height: int, capacity: int):
-    """The `SlotPlan` of `emit_pairs` (Gaussian k of the depth order owns slots [start[k],
-    start[k] + kept[k])), with each Gaussian's tile count and whether its run is within the
-    capacity (by depth rank), and its unbounded flag (by index)."""
+    """(plan, inside, unbounded): the `SlotPlan` of `emit_pairs` (Gaussian k of the depth order
+    owns slots [start[k], start[k] + kept[k])), whether rank k's run starts within the capacity
+    (by depth rank), and `tile_rects`' unbounded flags (by Gaussian index)."""
     if not 0 < capacity <= MAX_PAIRS:
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
     tiles_x, tiles_y = tile_grid(width, height)

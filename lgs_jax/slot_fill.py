@@ -14,8 +14,8 @@ The runs tile [0, min(total, capacity)) without overlap (`binning.SlotPlan`), so
 one writer (deterministic, no atomics); slots from `total` on keep the padding the outputs start
 with (tile n_tiles, Gaussian order[-1]). The integers equal `expand_slots`' (a test compares
 them in interpret mode). A warp's lanes hold consecutive ranks, whose runs are consecutive, so
-its stores land close together; a warp loops to its longest run (an unbounded Gaussian's is the
-whole image: its warp takes that long, as in gsplat).
+its stores land close together; a program loops to its longest run (an unbounded Gaussian's is
+the whole image: its program takes that long, as a thread of gsplat's does).
 """
 
 from __future__ import annotations
