@@ -111,8 +111,10 @@ def gaussian_columns(g: Gaussians):
     the fields. Differentiated as plain slices instead, each field's cotangent is a sum of
     per-column pads, which XLA fused into the projection's backward: it split that into two
     fusions with 32 (N,) arrays between them. Behind the barrier the backward writes (N,)
-    columns only, with the same bits: at 10M Gaussians on an H200 it took 2.67 against
-    3.76 ms, at 0.96M with SH degree 3 2.92 against 4.52 (BENCHMARKS.md §7 "Dec 2, late night").
+    columns only: at 10M Gaussians on an H200 it took 2.67 against 3.76 ms, at 0.96M with SH
+    degree 3 2.92 against 4.52, with the same bits there. On a CPU XLA compiles the chain
+    differently from before, and the mean, rotation and scale gradients round differently
+    (BENCHMARKS.md §7 "Dec 2, late night").
     Being a `custom_vjp`, it has no forward-mode derivative (`jax.jvp`), as the rasterizers."""
     return _columns(g)
 
