@@ -290,19 +290,10 @@ def fill_slots(plan: SlotPlan, kernel: bool = False):
     kernel on GPUs (`expand_slots` elsewhere; the same integers)."""
     if not kernel:
         return expand_slots(plan)
-
-    def fill(order, start, kept, rect, _total):
-        return slot_fill.fill(order, start, kept, rect, plan.n_tiles, plan.tiles_x,
-                              plan.capacity)
-
-    def xla(*arrays):
-        return expand_slots(plan._replace(**dict(zip(_PLAN_ARRAYS, arrays))))
-
-    return lax.platform_dependent(*(getattr(plan, f) for f in _PLAN_ARRAYS), default=xla,
-                                  cuda=fill)
-
-
-_PLAN_ARRAYS = ("order", "start", "kept", "rect", "total")
+    return lax.platform_dependent(
+        default=lambda: expand_slots(plan),
+        cuda=lambda: slot_fill.fill(plan.order, plan.start, plan.kept, plan.rect, plan.n_tiles,
+                                    plan.tiles_x, plan.capacity))
 
 
 def emit_pairs(p: Projected, width: int, height: int, capacity: int,
