@@ -38,6 +38,24 @@ build_gsplat() {
   timeout 240 python3 -c "from gsplat.cuda._backend import _C; assert _C is not None" 2>&1 \
     | grep --line-buffered "set up\|rror" | tee "$out/gsplat_build.log"
 }
+# A switch's GPU check: its tests (pytest arguments $2), then benchmarks.scale per scene without
+# gsplat, the forward rows $3 and the forward + backward rows $4; logs named after $1.
+variant_check() {
+  eval "timeout \"${TEST_TIMEOUT:-200}\" python3 -m pytest -q -p no:cacheprovider \
+    -n \"${TEST_WORKERS:-4}\" $2" 2>&1 | tail -3 | tee "$out/$1_tests.log"
+  for s in $scenes; do
+    timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --no-gsplat --data carry/data \
+      --scenes "$s" --rows "$3" --repeat 10 \
+      --csv "$out/$1_fwd_$s.csv" 2>&1 | quiet > "$out/$1_fwd_$s.log"
+  done
+  grep -h " e2e \|raster" "$out"/"$1"_fwd_*.log
+  for s in ${GRAD_SCENES:-guitar_x16_1080p guitar_x110_4k}; do
+    timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --no-gsplat \
+      --data carry/data --scenes "$s" --rows "$4" \
+      --repeat 5 --csv "$out/$1_grad_$s.csv" 2>&1 | quiet > "$out/$1_grad_$s.log"
+  done
+  grep -h "grad:" "$out"/"$1"_grad_*.log
+}
 scenes="${SCENES:-guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k}"
 case "${1:-grad}" in
   tests)
@@ -82,37 +100,10 @@ case "${1:-grad}" in
         ${AHEAD_ARGS:-} 2>&1 | quiet | tee -a "$out/ahead.log" | tail -4
     done ;;
   compact)
-    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider \
-      -n "${TEST_WORKERS:-4}" \
-      tests/backends/test_mosaic_staging.py -m 'slow or not slow' -k compact 2>&1 | tail -3 \
-      | tee "$out/compact_tests.log"
-    for s in $scenes; do
-      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --no-gsplat --data carry/data \
-        --scenes "$s" --rows localgs:full,localgs,vanilla --repeat 10 \
-        --csv "$out/compact_fwd_$s.csv" 2>&1 | quiet > "$out/compact_fwd_$s.log"
-    done
-    grep -h " e2e \|raster" "$out"/compact_fwd_*.log
-    for s in ${GRAD_SCENES:-guitar_x16_1080p guitar_x110_4k}; do
-      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --no-gsplat \
-        --data carry/data --scenes "$s" --rows localgs:full,localgs,localgs:px128 \
-        --repeat 5 --csv "$out/compact_grad_$s.csv" 2>&1 | quiet > "$out/compact_grad_$s.log"
-    done
-    grep -h "grad:" "$out"/compact_grad_*.log ;;
+    variant_check compact "tests/backends/test_mosaic_staging.py -m 'slow or not slow' -k compact" \
+      localgs:full,localgs,vanilla localgs:full,localgs,localgs:px128 ;;
   fill)
-    timeout "${TEST_TIMEOUT:-200}" python3 -m pytest -q -p no:cacheprovider \
-      -n "${TEST_WORKERS:-4}" tests/test_slot_fill.py 2>&1 | tail -3 | tee "$out/fill_tests.log"
-    for s in $scenes; do
-      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --no-gsplat --data carry/data \
-        --scenes "$s" --rows localgs,localgs:fill --repeat 10 \
-        --csv "$out/fill_fwd_$s.csv" 2>&1 | quiet > "$out/fill_fwd_$s.log"
-    done
-    grep -h " e2e " "$out"/fill_fwd_*.log
-    for s in ${GRAD_SCENES:-guitar_x16_1080p guitar_x110_4k}; do
-      timeout "${SCENE_TIMEOUT:-120}" python3 -m benchmarks.scale --grad --no-gsplat \
-        --data carry/data --scenes "$s" --rows localgs,localgs:fill --repeat 5 \
-        --csv "$out/fill_grad_$s.csv" 2>&1 | quiet > "$out/fill_grad_$s.log"
-    done
-    grep -h "grad:" "$out"/fill_grad_*.log ;;
+    variant_check fill tests/test_slot_fill.py localgs,localgs:fill localgs,localgs:fill ;;
   determinism)
     for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
       name="${run%%:*}"; flag="${run#*:}"
