@@ -74,9 +74,6 @@ ROWS = {
     "localgs:records": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                        mosaic_pair_source="records"))),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
-    # the emission's slot fill by lgs_jax.slot_fill's kernel (KernelConfig.slot_fill)
-    "localgs:fill": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                    slot_fill="kernel"))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # block-size variants of the Mosaic GPU kernels (KernelConfig)

@@ -31,7 +31,6 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from . import slot_fill
 from .layout import TILE, tile_grid
 from .projection import Projected, depth_order
 
@@ -248,7 +247,12 @@ def expand_slots(plan: SlotPlan):
     """(tile, gauss) of every slot (`SlotPlan`) in XLA: `segment_of_slot` finds each slot's
     depth rank (no scatter-add, so deterministic on GPUs), then a row gather per slot of
     (start, Gaussian) and one of the Gaussian's rectangle (BENCHMARKS.md §7: one five-column
-    row per slot, the rectangles gathered in depth order first, was slower)."""
+    row per slot, the rectangles gathered in depth order first, was slower; so was a Pallas
+    Triton kernel writing each Gaussian's run, as gsplat's `isect_tiles`, "Dec 2, night").
+
+    The outputs are stored behind an optimization barrier: without it XLA fused the whole fill
+    into the tile sort's key conversion as well and computed it twice (H200, 10M Gaussians at
+    4K: two 0.25 ms passes)."""
     k = segment_of_slot(plan.start, plan.kept, plan.capacity)
     per_k = jnp.stack([plan.start, plan.order], -1)[k]  # one row gather per slot
     g = per_k[:, 1]
@@ -256,7 +260,7 @@ def expand_slots(plan: SlotPlan):
     slot = jnp.arange(plan.capacity, dtype=jnp.int32)
     local = slot - per_k[:, 0]
     tile = (rect[:, 1] + local // rect[:, 2]) * plan.tiles_x + rect[:, 0] + local % rect[:, 2]
-    return jnp.where(slot < plan.total, tile, plan.n_tiles), g
+    return lax.optimization_barrier((jnp.where(slot < plan.total, tile, plan.n_tiles), g))
 
 
 def slot_plan(p: Projected, width: int, height: int, capacity: int):
@@ -267,7 +271,10 @@ def slot_plan(p: Projected, width: int, height: int, capacity: int):
         raise ValueError(f"capacity: must be in [1, 2^31 - 1], got {capacity}")
     tiles_x, tiles_y = tile_grid(width, height)
     tx0, ty0, nx, ny, unbounded = tile_rects(p, width, height)
-    counts = nx * ny
+    # The counts are stored before the depth-order gather: fused into it, XLA recomputed each
+    # Gaussian's rectangle at its depth rank, six scattered reads per Gaussian (H200, 10M
+    # Gaussians: 0.55 ms).
+    counts = lax.optimization_barrier(nx * ny)
     order = depth_order(p)
     counts_sorted = counts[order]
     starts = jnp.cumsum(counts_sorted) - counts_sorted  # exact while the sums fit int32
@@ -285,29 +292,17 @@ def slot_plan(p: Projected, width: int, height: int, capacity: int):
     return plan, inside, unbounded
 
 
-def fill_slots(plan: SlotPlan, kernel: bool = False):
-    """(tile, gauss) of every slot: `expand_slots`, or with `kernel` lgs_jax.slot_fill's
-    kernel on GPUs (`expand_slots` elsewhere; the same integers)."""
-    if not kernel:
-        return expand_slots(plan)
-    return lax.platform_dependent(
-        default=lambda: expand_slots(plan),
-        cuda=lambda: slot_fill.fill(plan.order, plan.start, plan.kept, plan.rect, plan.n_tiles,
-                                    plan.tiles_x, plan.capacity))
-
-
-def emit_pairs(p: Projected, width: int, height: int, capacity: int,
-               fill_kernel: bool = False) -> Emission:
+def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission:
     """Tile–Gaussian pairs in (depth, index) order.
 
     Gaussian k of the depth order owns slots [starts[k], starts[k] + counts[k]) (an exclusive
     prefix sum of its tile counts); slot s is local tile s − starts[k] of its rectangle, row by
-    row; slots past the total get tile = n_tiles (padding, sorts last): `fill_slots` fills
+    row; slots past the total get tile = n_tiles (padding, sorts last): `expand_slots` fills
     them from the per-Gaussian `SlotPlan` (`slot_plan`). Each Gaussian's (first slot, count
     within the capacity) is stored at its index (a permutation: one writer per element).
     """
     plan, inside, unbounded = slot_plan(p, width, height, capacity)
-    tile, g = fill_slots(plan, fill_kernel)
+    tile, g = expand_slots(plan)
     first_count = jnp.zeros((plan.order.shape[0], 2), jnp.int32).at[plan.order].set(
         jnp.stack([jnp.where(inside, plan.start, 0), plan.kept], -1), unique_indices=True)
     return Emission(tile=tile, gauss=g, total=plan.total,
@@ -339,12 +334,12 @@ def sort_pairs(tile, gauss, n_tiles: int):
 
 
 def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
-                  row_capacity: int | None = None, fill_kernel: bool = False) -> TileBins:
+                  row_capacity: int | None = None) -> TileBins:
     """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
     pairs are emitted in depth order and the tile sort is stable. `row_capacity`: the
-    backward's row buffer (`TileBins.row_capacity`); `fill_kernel`: `emit_pairs`'."""
+    backward's row buffer (`TileBins.row_capacity`)."""
     tiles_x, tiles_y = tile_grid(width, height)
-    e = emit_pairs(p, width, height, capacity, fill_kernel)
+    e = emit_pairs(p, width, height, capacity)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
                     first=e.first, count=e.count, pairs_required=e.total,

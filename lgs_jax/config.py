@@ -99,13 +99,6 @@ class KernelConfig:
         its time without at 5.8M Gaussians (1080p), 0.76x at 1.45M, 0.83x at 10M (4K), 0.95x
         at 0.09M (720p).
 
-    Pair emission (every binned backend):
-      slot_fill: how the emitted pairs' slots get their tile and Gaussian: "xla"
-        (`binning.expand_slots`: a running maximum over the slots, then gathers per slot) or
-        "kernel" (lgs_jax.slot_fill's Pallas Triton kernel, one lane per Gaussian writing its
-        run, as gsplat's `isect_tiles`; on GPUs only, "xla" elsewhere). The same integers.
-        "xla" until the kernel is measured on a GPU (BENCHMARKS.md §7 "Dec 2, late night").
-
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
         blending mode tests its strip-wide stop once per batch).
@@ -127,7 +120,6 @@ class KernelConfig:
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
-    slot_fill: Literal["xla", "kernel"] = "xla"
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -145,7 +137,6 @@ class KernelConfig:
             _check_int("tuning.vanilla_from_pairs", self.vanilla_from_pairs, 1)
         _check_int("tuning.mosaic_chunk", self.mosaic_chunk, 0)
         _check("tuning.mosaic_pair_source", self.mosaic_pair_source, PAIR_SOURCES)
-        _check("tuning.slot_fill", self.slot_fill, ("xla", "kernel"))
         if self.mosaic_pair_source == "gaussians" and 128 % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_unroll_localgs: must divide the 128 pairs of a "
                              f"chunk staged from Gaussians, got {self.mosaic_unroll_localgs}")

@@ -189,8 +189,8 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
-    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity,
-                                  config.tuning.slot_fill == "kernel") if spec.binned else None)
+    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity)
+            if spec.binned else None)
     result = spec.rasterize(p, bins, width, height, config)
     state = PixelState(color=result.color, trans=result.trans, depth=result.depth, done=None)
     state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)

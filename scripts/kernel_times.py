@@ -2,15 +2,16 @@
 JAX's profiler (CUPTI), summed per kernel and per call (GPU).
 
     XLA_PYTHON_CLIENT_PREALLOCATE=false python scripts/kernel_times.py [--data DIR]
-        [--scenes guitar_x110_4k] [--rows localgs] [--grad] [--iters 5] [--top 25]
+        [--scenes guitar_x110_4k] [--rows localgs] [--grad] [--iters 5] [--top 25] [--host N]
 
 Per program (a `benchmarks.scale` row's jitted `render`, or its `value_and_grad` with --grad;
 gsplat's `rasterization`, with `backward()` under --grad): its calls are traced alone after a
 warm-up, then each kernel's time (CUPTI's device timestamps) is summed over the calls and
 divided by them. Kernels are named by their HLO op where XLA reports one (e.g. a sort's CUB
 custom call, a fusion), else by the CUDA kernel's name, shortened. Printed per program: the
-`--top` kernels by time, then the device-busy time per call (the sum of all kernels and copies)
-beside the call's wall time: what a stage costs on the device, launch gaps excluded.
+device-busy time per call (the sum of all kernels and copies) beside the call's wall time and
+the device's idle time (no stream busy), then the `--top` kernels by time, then the kernels the
+device sat idle longest before (the launch gaps: what the host's dispatch costs).
 """
 
 from __future__ import annotations
@@ -45,7 +46,8 @@ def _name(event) -> str:
 
 
 def traced(call, iters: int):
-    """(ms per call of each kernel on the device, wall ms per call) of `call` traced `iters`
+    """(ms per call of each kernel on the device, its launches per call, wall ms per call, idle
+    ms before each kernel, inclusive ms per call of each host event) of `call` traced `iters`
     times after one warm-up call."""
     call()
     with tempfile.TemporaryDirectory() as d:
@@ -59,7 +61,13 @@ def traced(call, iters: int):
         data = jax.profiler.ProfileData.from_file(path)
         per = collections.Counter()
         counts = collections.Counter()
+        spans = []
+        host = collections.Counter()
         for plane in data.planes:
+            if plane.name.startswith("/host:CPU"):
+                for line in plane.lines:
+                    for e in line.events:
+                        host[e.name[:100]] += e.duration_ns / 1e6 / iters
             if not plane.name.startswith("/device:GPU"):
                 continue
             for line in plane.lines:
@@ -68,15 +76,36 @@ def traced(call, iters: int):
                 for e in line.events:
                     per[_name(e)] += e.duration_ns / 1e6 / iters
                     counts[_name(e)] += 1
-    return per, counts, wall
+                    spans.append((e.start_ns, e.end_ns, _name(e)))
+    return per, counts, wall, idle_before(spans, iters), host
 
 
-def report(label: str, per, counts, wall: float, iters: int, top: int):
+def idle_before(spans, iters: int):
+    """ms per call the device sat idle (no stream busy) before each kernel, by kernel name: the
+    launch gaps. The gap before a call's first kernel is the host's time between calls."""
+    gaps = collections.Counter()
+    reach = None
+    for start, end, name in sorted(spans):
+        if reach is not None and start > reach:
+            gaps[name] += (start - reach) / 1e6 / iters
+        reach = end if reach is None else max(reach, end)
+    return gaps
+
+
+def report(label: str, per, counts, wall: float, gaps, host, iters: int, top: int,
+           host_top: int = 0):
     busy = sum(per.values())
     print(f"\n== {label}: device busy {busy:.3f} ms per call, wall {wall:.3f} ms "
-          f"({len(per)} kernels)", flush=True)
+          f"({len(per)} kernels), idle {sum(gaps.values()):.3f} ms", flush=True)
     for name, ms in per.most_common(top):
         print(f"  {ms:8.3f} ms  {ms / busy:5.1%}  x{counts[name] / iters:<4.0f} {name}")
+    print("  idle before (launch gaps, the first kernel's includes the time between calls):")
+    for name, ms in gaps.most_common(top // 2):
+        print(f"  {ms:8.3f} ms  before {name}")
+    if host_top:
+        print("  host events (inclusive, nested ones counted in each):")
+        for name, ms in host.most_common(host_top):
+            print(f"  {ms:8.3f} ms  {name}")
 
 
 def main(argv=None) -> int:
@@ -89,6 +118,7 @@ def main(argv=None) -> int:
     ap.add_argument("--iters", type=int, default=5)
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--host", type=int, default=0, help="print the N longest host events")
     args = ap.parse_args(argv)
     print(f"device {jax.devices()[0].device_kind}; JAX {jax.__version__}", flush=True)
     for scene in args.scenes.split(","):
@@ -108,14 +138,16 @@ def main(argv=None) -> int:
             else:
                 f = jax.jit(render)
                 call = lambda f=f: jax.block_until_ready(f(g, cam))
-            report(f"{scene} {row}", *traced(call, args.iters), args.iters, args.top)
+            report(f"{scene} {row}", *traced(call, args.iters), args.iters, args.top,
+                   args.host)
         if not args.no_gsplat:
             peer = gsplat_peer(g, cam)
             if peer is None:
                 continue
             call = (gsplat_grad_step(g, cam, np.asarray(weights)) if args.grad
                     else peer[0]["gsplat:e2e"])
-            report(f"{scene} gsplat", *traced(call, args.iters), args.iters, args.top)
+            report(f"{scene} gsplat", *traced(call, args.iters), args.iters, args.top,
+                   args.host)
     return 0
 
 

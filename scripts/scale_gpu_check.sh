@@ -16,9 +16,6 @@
 #   bash scripts/scale_gpu_check.sh compact  # KernelConfig.mosaic_compact on the GPU: its tests,
 #                                          # then forward and forward + backward against the
 #                                          # full walks per scene, no gsplat (about 6 min)
-#   bash scripts/scale_gpu_check.sh fill   # KernelConfig.slot_fill="kernel" on the GPU: its
-#                                          # tests, then forward and forward + backward against
-#                                          # the XLA fill per scene, no gsplat (about 5 min)
 #   bash scripts/scale_gpu_check.sh determinism  # skull, 1500 steps (two growths) without
 #                                          # compile ahead twice and with a thread, each compiling
 #                                          # afresh: the checkpoints' digests (about 6 min; DET_RUNS
@@ -102,8 +99,6 @@ case "${1:-grad}" in
   compact)
     variant_check compact "tests/backends/test_mosaic_staging.py -m 'slow or not slow' -k compact" \
       localgs:full,localgs,vanilla localgs:full,localgs,localgs:px128 ;;
-  fill)
-    variant_check fill tests/test_slot_fill.py localgs,localgs:fill localgs,localgs:fill ;;
   determinism)
     for run in ${DET_RUNS:-none:--no-compile-ahead none2:--no-compile-ahead thread:}; do
       name="${run%%:*}"; flag="${run#*:}"
@@ -117,5 +112,5 @@ case "${1:-grad}" in
 [h.update(z[k].tobytes()) for k in sorted(z.files)]; print(sys.argv[2], h.hexdigest()[:16])" \
         "build/det_$name/checkpoint.npz" "$name" | tee -a "$out/determinism.log"
     done ;;
-  *) echo "usage: $0 tests|grad|fwd|kernels|train|ahead|compact|fill|determinism" >&2; exit 2 ;;
+  *) echo "usage: $0 tests|grad|fwd|kernels|train|ahead|compact|determinism" >&2; exit 2 ;;
 esac
