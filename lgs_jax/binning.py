@@ -125,6 +125,10 @@ class TileBins:
         backward kernels) or gathered with the inverse permutation
         (backends.backward.per_gaussian_sum) are grouped per Gaussian without a second sort.
       tile_start, tile_end: (n_tiles,) int32 half-open ranges of each tile's pairs in `gauss`.
+      emitted_tile: (capacity,) the tile of each emission slot, the tile sort's key
+        (`sort_key`: uint16 up to `SORT16_TILES` tiles, else int32). A tile's pairs are its
+        slots in ascending order (the sort is stable), so whether a pair is among its tile's
+        first m follows from its slot alone (backends.gaussian_grads.walked_rows).
       first, count: (N,) int32 per Gaussian: its pairs fill emission slots [first, first + count)
         (count = 0 for a Gaussian with no pair within the capacity), in ascending tile order.
         The Pallas backward sums each Gaussian's pair rows there (backends.gaussian_grads).
@@ -141,6 +145,7 @@ class TileBins:
     slot: Any
     tile_start: Any
     tile_end: Any
+    emitted_tile: Any
     first: Any
     count: Any
     pairs_required: Any
@@ -310,6 +315,12 @@ def emit_pairs(p: Projected, width: int, height: int, capacity: int) -> Emission
                     first=first_count[:, 0], count=first_count[:, 1])
 
 
+def sort_key(tile, n_tiles: int):
+    """The tile sort's keys: `tile` as uint16 where the tiles and the padding value n_tiles fit
+    (`sort_pairs`), else `tile` itself."""
+    return tile.astype(jnp.uint16) if n_tiles <= SORT16_TILES else tile
+
+
 def sort_pairs(tile, gauss, n_tiles: int):
     """Stable sort of the emitted pairs by tile (each tile's list stays in (depth, index) order)
     and the tiles' ranges: (tile, gauss, slot, tile_start, tile_end), where slot is each sorted
@@ -327,8 +338,7 @@ def sort_pairs(tile, gauss, n_tiles: int):
     comparison sort (xla/service/gpu/transforms/sort_rewriter.cc).
     """
     slot = jnp.arange(tile.shape[0], dtype=jnp.int32)
-    key = tile.astype(jnp.uint16) if n_tiles <= SORT16_TILES else tile
-    key, slot = lax.sort((key, slot), num_keys=1, is_stable=True)
+    key, slot = lax.sort((sort_key(tile, n_tiles), slot), num_keys=1, is_stable=True)
     tile = key.astype(jnp.int32)
     return (tile, gauss[slot], slot) + tile_ranges(tile, n_tiles)
 
@@ -342,6 +352,7 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
     e = emit_pairs(p, width, height, capacity)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
+                    emitted_tile=sort_key(e.tile, tiles_x * tiles_y),
                     first=e.first, count=e.count, pairs_required=e.total,
                     overflow=e.total > capacity, n_unbounded=e.n_unbounded,
                     row_capacity=row_capacity)

@@ -88,11 +88,18 @@ def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     last = tile_last(stop, bins.tile_start, bins.tile_end)
     real = bins.tile < n_tiles
-    walked = real & (jnp.arange(capacity, dtype=jnp.int32)
-                     < last[jnp.where(real, bins.tile, 0)])
-    by_slot = jnp.zeros((capacity,), jnp.int32).at[bins.slot].set(
-        walked.astype(jnp.int32), unique_indices=True)
-    before = jnp.concatenate([jnp.zeros((1,), jnp.int32), jnp.cumsum(by_slot)])  # (capacity + 1,)
+    index = jnp.arange(capacity, dtype=jnp.int32)
+    walked = real & (index < last[jnp.where(real, bins.tile, 0)])  # by list index
+    # The same flags by slot, without permuting them (a scatter of 25M at random slots took
+    # 0.76 ms on an H200, 10M Gaussians at 4K): a tile's pairs are its slots in ascending
+    # order (`TileBins.emitted_tile`), so a slot is walked iff it is at most the slot of its
+    # tile's last walked pair (−1 where the tile walked none).
+    last_slot = jnp.where(last > bins.tile_start, bins.slot[jnp.maximum(last - 1, 0)], -1)
+    tile_of_slot = bins.emitted_tile.astype(jnp.int32)
+    emitted = tile_of_slot < n_tiles
+    by_slot = emitted & (index <= last_slot[jnp.where(emitted, tile_of_slot, 0)])
+    before = jnp.concatenate([jnp.zeros((1,), jnp.int32),
+                              jnp.cumsum(by_slot, dtype=jnp.int32)])  # (capacity + 1,)
     at = jnp.where(walked, jnp.minimum(before[bins.slot], row_capacity), row_capacity)
     # first + count <= capacity (`TileBins.first`, `count`: the pairs within the capacity)
     row_first = jnp.minimum(before[bins.first], row_capacity)
