@@ -253,11 +253,7 @@ def expand_slots(plan: SlotPlan):
     depth rank (no scatter-add, so deterministic on GPUs), then a row gather per slot of
     (start, Gaussian) and one of the Gaussian's rectangle (BENCHMARKS.md §7: one five-column
     row per slot, the rectangles gathered in depth order first, was slower; so was a Pallas
-    Triton kernel writing each Gaussian's run, as gsplat's `isect_tiles`, "Dec 2, night").
-
-    The outputs are stored behind an optimization barrier: without it XLA fused the whole fill
-    into the tile sort's key conversion as well and computed it twice (H200, 10M Gaussians at
-    4K: two 0.25 ms passes)."""
+    Triton kernel writing each Gaussian's run, as gsplat's `isect_tiles`, "Dec 2, night")."""
     k = segment_of_slot(plan.start, plan.kept, plan.capacity)
     per_k = jnp.stack([plan.start, plan.order], -1)[k]  # one row gather per slot
     g = per_k[:, 1]
@@ -265,7 +261,7 @@ def expand_slots(plan: SlotPlan):
     slot = jnp.arange(plan.capacity, dtype=jnp.int32)
     local = slot - per_k[:, 0]
     tile = (rect[:, 1] + local // rect[:, 2]) * plan.tiles_x + rect[:, 0] + local % rect[:, 2]
-    return lax.optimization_barrier((jnp.where(slot < plan.total, tile, plan.n_tiles), g))
+    return jnp.where(slot < plan.total, tile, plan.n_tiles), g
 
 
 def slot_plan(p: Projected, width: int, height: int, capacity: int):
