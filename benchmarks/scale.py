@@ -248,6 +248,25 @@ def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     return out
 
 
+def same_bits(scene: str, name: str, first, again) -> bool:
+    """Whether two calls' gradients have the same bits (NaNs included, which `array_equal`
+    calls unequal); where not, which fields differ, in how many elements and by how much, to
+    stderr."""
+    same = True
+    for (path, x), y in zip(jax.tree_util.tree_leaves_with_path(first), jax.tree.leaves(again)):
+        x, y = np.asarray(x), np.asarray(y)
+        differ = x.view(np.uint8).reshape(x.shape + (-1,)) != y.view(np.uint8).reshape(
+            y.shape + (-1,))
+        if differ.any():
+            same = False
+            n = int(differ.reshape(x.shape + (-1,)).any(-1).sum())
+            print(f"{scene} {name}: {jax.tree_util.keystr(path)} differs between two calls "
+                  f"in {n} of {x.size} elements (largest difference "
+                  f"{float(np.nanmax(np.abs(x - y), initial=0)):.3g}, NaNs {int(np.isnan(x).sum())}"
+                  f" / {int(np.isnan(y).sum())})", file=sys.stderr)
+    return same
+
+
 def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     g, cam = jax.device_put(g), jax.device_put(cam)
     w, h = cam.width, cam.height
@@ -269,9 +288,7 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
 
         f = jax.jit(jax.value_and_grad(loss, has_aux=True))
         (_, overflow), first = f(g, weights)
-        again = f(g, weights)[1]
-        same = all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree.leaves(first),
-                                                                 jax.tree.leaves(again)))
+        same = same_bits(scene, name, first, f(g, weights)[1])
         if bool(overflow):
             print(f"{scene} {name}: row capacity {row_cap} overflowed", file=sys.stderr)
         extra[name] = dict(capacity=cap, row_capacity=row_cap,
