@@ -78,14 +78,18 @@ def _emitted_and_binned(p, cap):
 
 
 def _check_slots(p: Projected, cap: int = 256):
-    """`TileBins.slot` is the tile sort's permutation of the emitted pairs; `first` and `count`
-    locate each Gaussian's pairs (256 >= M Gaussians x the 4x3 tiles of a W x H image; a
-    smaller `cap` drops the tail)."""
+    """`TileBins.slot` is the tile sort's permutation of the emitted pairs, `emitted_tile` the
+    emitted tiles (as the sort's keys), and a tile's pairs are its slots in ascending order;
+    `first` and `count` locate each Gaussian's pairs (256 >= M Gaussians x the 4x3 tiles of a
+    W x H image; a smaller `cap` drops the tail)."""
     e, bins = _emitted_and_binned(p, cap)
     slot = np.asarray(bins.slot)
     np.testing.assert_array_equal(np.sort(slot), np.arange(slot.size))
     np.testing.assert_array_equal(np.asarray(e.gauss)[slot], bins.gauss)
     np.testing.assert_array_equal(np.asarray(e.tile)[slot], bins.tile)
+    np.testing.assert_array_equal(bins.emitted_tile, np.asarray(e.tile).astype(np.uint16))
+    same_tile = np.asarray(bins.tile)[1:] == np.asarray(bins.tile)[:-1]
+    assert np.all(slot[1:][same_tile] > slot[:-1][same_tile])
     # Each Gaussian's pairs are the emission slots [first, first + count), and no others.
     gauss, first, count = np.asarray(e.gauss), np.asarray(bins.first), np.asarray(bins.count)
     real = np.asarray(e.tile) < bins.tile_start.shape[0]

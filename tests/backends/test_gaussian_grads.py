@@ -4,6 +4,7 @@ XLA path of the `tiles` backend (pairs.chain_hoisted_rows + backward.per_gaussia
 walked-rows layout (`walked_rows`) against numpy, and gradients with `render`'s `row_capacity`
 at the walked pairs against those of the default buffer (the pair capacity's), bit for bit."""
 
+import dataclasses
 import functools
 
 import jax
@@ -84,15 +85,20 @@ def test_kernel_equals_its_twin_and_the_xla_path_float64(name, capacity, blocks,
 
 
 @settings(max_examples=10)
-@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), spare=st.integers(-30, 5))
-def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, share, spare):
+@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), spare=st.integers(-30, 5),
+       wide_keys=st.booleans())
+def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, share, spare,
+                                                                      wide_keys):
     """Random stop pairs (a tile walks a random share of its list): a pair has a row iff it lies
     before its tile's latest stop; the rows of the walked pairs are 0, 1, ... in emission-slot
     order (so each Gaussian's are consecutive, [first, first + count)); with fewer rows than
     walked pairs (`spare` < 0) the pairs past them point at the spare row and the Gaussians'
-    ranges stop at it."""
+    ranges stop at it. `wide_keys`: the emitted tiles as int32, as the tile sort keys them
+    above `binning.SORT16_TILES` tiles."""
     g = scenes.cast(scenes.scene(seed), np.float64)
     _, bins = _projected_bins(g, scenes.camera(W, H), 1024)
+    if wide_keys:
+        bins = dataclasses.replace(bins, emitted_tile=bins.emitted_tile.astype(jnp.int32))
     rng = np.random.default_rng(seed)
     start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
     walk = np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
