@@ -254,16 +254,17 @@ def same_bits(scene: str, name: str, first, again) -> bool:
     stderr."""
     same = True
     for (path, x), y in zip(jax.tree_util.tree_leaves_with_path(first), jax.tree.leaves(again)):
-        x, y = np.asarray(x), np.asarray(y)
+        x, y = np.atleast_1d(np.asarray(x)), np.atleast_1d(np.asarray(y))
         differ = x.view(np.uint8).reshape(x.shape + (-1,)) != y.view(np.uint8).reshape(
             y.shape + (-1,))
         if differ.any():
             same = False
-            n = int(differ.reshape(x.shape + (-1,)).any(-1).sum())
+            nans = [int(np.isnan(v).sum()) if np.issubdtype(v.dtype, np.floating) else 0
+                    for v in (x, y)]
             print(f"{scene} {name}: {jax.tree_util.keystr(path)} differs between two calls "
-                  f"in {n} of {x.size} elements (largest difference "
-                  f"{float(np.nanmax(np.abs(x - y), initial=0)):.3g}, NaNs {int(np.isnan(x).sum())}"
-                  f" / {int(np.isnan(y).sum())})", file=sys.stderr)
+                  f"in {int(differ.any(-1).sum())} of {x.size} elements (largest difference "
+                  f"{float(np.nanmax(np.abs(x - y), initial=0)):.3g}, NaNs {nans[0]} / {nans[1]})",
+                  file=sys.stderr)
     return same
 
 
