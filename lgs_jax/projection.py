@@ -97,8 +97,18 @@ def project(g: Gaussians, cam: Camera) -> Projected:
     fusion alone took 1.84 ms of a 7.2 ms forward, 0.69 ms behind the barrier: BENCHMARKS.md
     §7 "Dec 2, late evening"), and each recomputation could contract multiplies and adds into
     FMAs its own way, so two consumers could see different bits of one Gaussian's mean or
-    conic."""
-    return lax.optimization_barrier(project_columns(*gaussian_columns(g), cam))
+    conic.
+
+    The checkpoint takes `g`'s fields whole and slices them into columns inside: JAX keeps a
+    checkpoint's inputs for the backward behind an optimization barrier, so with columns as
+    its inputs XLA copied each one out (16 copies of 38 MiB at 10M Gaussians, live at the
+    peak of the gradient's memory, BENCHMARKS.md §7 "Dec 3, second session")."""
+    return lax.optimization_barrier(_project(g, cam))
+
+
+@jax.checkpoint
+def _project(g: Gaussians, cam: Camera) -> Projected:
+    return project_columns(*gaussian_columns(g), cam)
 
 
 @jax.custom_vjp
@@ -139,7 +149,6 @@ def _columns_bwd(_, cts):
 gaussian_columns.defvjp(_columns_fwd, _columns_bwd)
 
 
-@jax.checkpoint
 def project_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> Projected:
     """`project` on `gaussian_columns`."""
     dt = mean[0].dtype

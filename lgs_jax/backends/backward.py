@@ -30,6 +30,7 @@ import functools
 import jax
 import jax.numpy as jnp
 from jax import lax
+from jax.custom_derivatives import SymbolicZero
 
 from .. import alpha as alpha_model
 from .. import hoist
@@ -219,7 +220,8 @@ def differentiable(forward, gradients, forward_for_gradients=None):
         PixelState, each pixel's stop pair index, anything else to return (`extra`) and what the
         backward reuses (`saved`, O(pairs)).
       gradients(p, bins, width, height, config, trans, stop_at, saved, (ḡ_C, ḡ_T, ḡ_D)) -> (N, 10)
-        per-Gaussian ∂L/∂(mean2d, conic, opacity, rgb, depth) (PAIR_COLUMNS order).
+        per-Gaussian ∂L/∂(mean2d, conic, opacity, rgb, depth) (PAIR_COLUMNS order); ḡ_D is
+        None where the loss does not reach the depth (a symbolic zero: `depth_cotangent`).
 
     `forward_for_gradients` (same signature; default `forward`) is the forward run when the
     backward will follow (under `jax.grad` / `jax.vjp`).
@@ -234,6 +236,8 @@ def differentiable(forward, gradients, forward_for_gradients=None):
         return state.color, state.trans, state.depth, stop_at, extra
 
     def composite_fwd(p, bins, width, height, config):
+        # symbolic_zeros: the leaves come as CustomVJPPrimal(value, perturbed)
+        p, bins = jax.tree.map(lambda x: x.value, (p, bins))
         state, stop_at, extra, saved = (forward_for_gradients or forward)(p, bins, width, height,
                                                                           config)
         return ((state.color, state.trans, state.depth, stop_at, extra),
@@ -241,10 +245,22 @@ def differentiable(forward, gradients, forward_for_gradients=None):
 
     def composite_bwd(width, height, config, residuals, cotangents):
         p, bins, trans, stop_at, saved = residuals
-        per = gradients(p, bins, width, height, config, trans, stop_at, saved, cotangents[:3])
+        g_color, g_trans, g_depth = cotangents[:3]
+        g_color, g_trans = (jnp.zeros(g.shape, g.dtype) if isinstance(g, SymbolicZero) else g
+                            for g in (g_color, g_trans))
+        g_depth = None if isinstance(g_depth, SymbolicZero) else g_depth
+        per = gradients(p, bins, width, height, config, trans, stop_at, saved,
+                        (g_color, g_trans, g_depth))
         grad_p = Projected(mean2d=per[:, 0:2], cov2d=None, conic=per[:, 2:5], depth=per[:, 9],
                            opacity=per[:, 5], rgb=per[:, 6:9], valid=None, invalid=None)
         return grad_p, None
 
-    composite.defvjp(composite_fwd, composite_bwd)
+    # Symbolic zeros: a loss of the image alone leaves the depth's cotangent a symbolic zero,
+    # which the Pallas backward then neither materialises nor reads (an image-sized plane).
+    composite.defvjp(composite_fwd, composite_bwd, symbolic_zeros=True)
     return composite
+
+
+def depth_cotangent(g_depth, trans):
+    """ḡ_D as an array: zeros shaped as `trans` where it is None (`differentiable`)."""
+    return jnp.zeros_like(trans) if g_depth is None else g_depth

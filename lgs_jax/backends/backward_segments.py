@@ -20,6 +20,13 @@ forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), a
 before hi enters with (T, 0) instead, which is exact for them (T and C stay constant after a
 pixel's stop) and needs no checkpoint (the forward may have exited before hi).
 
+With walked rows (`TileBins.row_capacity` R) the backward needs only the checkpoints inside
+the walked pairs, (last − start − 1) // L per tile, at most R // L in all (fewer walked pairs
+than rows: `stats.row_overflow` otherwise). The forward, which learns a tile's walked length
+only as it walks, still stores them at the list-length indices, and `compact` copies the
+needed ones into R // L + 1 rows right after it (`walked_checkpoints`), so the full buffer
+(capacity // L rows, 120 MiB at 10M Gaussians at 4K) is not live during the backward.
+
 Determinism: segments are disjoint, so each pair row still has one writer per block of pixels.
 """
 
@@ -40,6 +47,29 @@ def checkpoints(bins: TileBins, segment: int):
     return jnp.cumsum(per_tile) - per_tile, bins.gauss.shape[0] // segment + 1
 
 
+def walked_checkpoints(bins: TileBins, last, segment: int):
+    """((n_tiles,) int32 base index of each tile's checkpoints in the compacted buffer, its
+    rows): tile t keeps checkpoints m = 1 .. (last_t − start_t − 1) // segment, those of its
+    walked pairs [tile_start, last) (`RowLayout.end`), in row_capacity // segment + 1 rows.
+    Where more pairs were walked than `bins.row_capacity` (an overflow, reported) the last
+    tiles' indices run past the rows; `split` clips them."""
+    need = jnp.maximum(last - bins.tile_start - 1, 0) // segment
+    return jnp.cumsum(need) - need, bins.row_capacity // segment + 1
+
+
+def compact(saved, bins: TileBins, last, segment: int):
+    """The five (rows, 256) checkpoint buffers of `walked_checkpoints` from the forward's five
+    (`checkpoints`): row base'[t] + m − 1 = row base[t] + m − 1 for each tile t and each of
+    its needed checkpoints m (a gather; rows past the needed ones copy row 0)."""
+    full_base, _ = checkpoints(bins, segment)
+    base, rows = walked_checkpoints(bins, last, segment)
+    need = jnp.maximum(last - bins.tile_start - 1, 0) // segment
+    tile = segment_of_slot(base, need, rows)
+    m = jnp.arange(rows, dtype=jnp.int32) - base[tile]
+    source = jnp.where(m < need[tile], full_base[tile] + m, 0)
+    return tuple(x[source] for x in saved)
+
+
 def whole_tiles(order, bins: TileBins, last):
     """(n_tiles, COLUMNS): one segment per tile in `order`, its walked pairs [tile_start, last),
     no checkpoint."""
@@ -47,10 +77,12 @@ def whole_tiles(order, bins: TileBins, last):
                       jnp.full_like(order, -1)], -1)
 
 
-def split(bins: TileBins, last, segment: int):
+def split(bins: TileBins, last, segment: int, compacted: bool = False):
     """(n_tiles + capacity // segment, COLUMNS) segments of `segment` pairs of each tile's walked
     pairs [tile_start, last) (`RowLayout.end`; module docstring), longest first; rows past the
-    real segments are empty (lo = hi), as is the one segment of a tile that walked nothing."""
+    real segments are empty (lo = hi), as is the one segment of a tile that walked nothing.
+    Checkpoint indices into the forward's buffers (`checkpoints`) or, `compacted`, into
+    `compact`'s (`walked_checkpoints`; clipped to its rows)."""
     n_tiles, capacity = bins.tile_start.shape[0], bins.gauss.shape[0]
     start = bins.tile_start
     count = jnp.maximum((last - start + segment - 1) // segment, 1)
@@ -63,7 +95,11 @@ def split(bins: TileBins, last, segment: int):
     lo = jnp.where(real, start[tile] + m * segment, 0)
     hi = jnp.where(top, last[tile], lo + segment)
     hi = jnp.where(real, hi, 0)
-    base, _ = checkpoints(bins, segment)
-    index = jnp.where(real & ~top, base[tile] + m, -1)
+    if compacted:
+        base, rows = walked_checkpoints(bins, last, segment)
+        index = jnp.where(real & ~top, jnp.minimum(base[tile] + m, rows - 1), -1)
+    else:
+        base, _ = checkpoints(bins, segment)
+        index = jnp.where(real & ~top, base[tile] + m, -1)
     order = jnp.argsort(lo - hi, stable=True)
     return jnp.stack([tile, lo, hi, index], -1)[order]

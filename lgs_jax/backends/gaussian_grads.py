@@ -107,8 +107,11 @@ def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
     # first + count <= capacity (`TileBins.first`, `count`: the pairs within the capacity)
     row_first = jnp.minimum(before[bins.first], row_capacity)
     row_end = jnp.minimum(before[bins.first + bins.count], row_capacity)
-    return RowLayout(at=at, end=last, first=row_first, count=row_end - row_first,
-                     size=row_capacity + 1)
+    # Together: XLA would otherwise compute first and count (which only `sums` reads) after
+    # the backward kernel, keeping `before`, `bins.first` and what that is made of (230 MiB at
+    # 10M Gaussians) live through it, where the peak is.
+    at, row_first, count = lax.optimization_barrier((at, row_first, row_end - row_first))
+    return RowLayout(at=at, end=last, first=row_first, count=count, size=row_capacity + 1)
 
 
 def rows_of(bins: TileBins, stop) -> RowLayout:
@@ -141,8 +144,21 @@ def _finish(acc, opacity, config: RasterConfig):
     return acc[:5] + [d_o] + acc[6:]
 
 
-def _fields(p: Projected):
-    return p.mean2d, p.conic, p.opacity
+def _sources(fields):
+    """(arrays, spec) where Gaussian g's (μx, μy, a, b, c, o) are arrays[i][g, col] for
+    (i, col) in spec (arrays[i][g] where col is None): from a `Projected`, or from a table
+    (N, >= 6) whose first six columns are these (`pairs.gaussian_table`, which the Mosaic GPU
+    backward reads anyway: reading it here keeps the separate (N, 2), (N, 3) and (N,) fields
+    from living through the backward kernel, 229 MiB at 10M Gaussians)."""
+    if isinstance(fields, Projected):
+        return ((fields.mean2d, fields.conic, fields.opacity),
+                ((0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, None)))
+    return (fields,), tuple((0, i) for i in range(6))
+
+
+def _take(arrays, spec, g):
+    """Gaussian(s) g's (μx, μy, a, b, c, o) (`_sources`; g an index array or a full slice)."""
+    return [arrays[i][g] if col is None else arrays[i][g, col] for i, col in spec]
 
 
 def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
@@ -165,45 +181,46 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
     return _finish(list(acc), opacity, config)
 
 
-def _kernel(first_ref, count_ref, mean_ref, conic_ref, opacity_ref, rows_ref, *out_refs,
-            config: RasterConfig, tiles_x: int, n: int, blocks: int, lanes: int):
+def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: int, n: int,
+            blocks: int, lanes: int):
+    field_refs, rows_ref, out_refs = refs[:-COLUMNS - 1], refs[-COLUMNS - 1], refs[-COLUMNS:]
     # Lanes past the last Gaussian walk the last one again and store the same bits at its
     # index: the outputs need no padding (a padded output's slice is a copy XLA cannot fuse
     # away: 0.6 ms at 10M Gaussians on an H200, BENCHMARKS.md §7).
     g = jnp.minimum(pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes), n - 1)
-    fields = (mean_ref[g, 0], mean_ref[g, 1], conic_ref[g, 0], conic_ref[g, 1],
-              conic_ref[g, 2])
-    sums_ = _walk(rows_ref, blocks, first_ref[g], count_ref[g], fields, opacity_ref[g],
-                  tiles_x, config)
+    *fields, opacity = _take(field_refs, spec, g)
+    sums_ = _walk(rows_ref, blocks, first_ref[g], count_ref[g], fields, opacity, tiles_x,
+                  config)
     for out_ref, v in zip(out_refs, sums_):
         out_ref[g] = v
 
 
-def sums(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConfig,
+def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
          interpret: bool, lanes: int = LANES):
     """(N, COLUMNS) per-Gaussian gradients from the backward kernels' rows (blocks,
     layout.size, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
-    its lanes' longest count, so fewer lanes idle less where counts vary)."""
+    its lanes' longest count, so fewer lanes idle less where counts vary). `fields`: the
+    Gaussians' μ, conic and opacity, a `Projected` or a table (`_sources`)."""
     if lanes % 32:
         raise ValueError(f"lanes: expected a multiple of 32, got {lanes}")
-    n, blocks = p.mean2d.shape[0], rows.shape[0]
+    arrays, spec = _sources(fields)
+    n, blocks = arrays[0].shape[0], rows.shape[0]
     programs = pl.cdiv(n, lanes)
-    kernel = functools.partial(_kernel, config=config, tiles_x=tiles_x, n=n, blocks=blocks,
-                               lanes=lanes)
+    kernel = functools.partial(_kernel, spec=spec, config=config, tiles_x=tiles_x, n=n,
+                               blocks=blocks, lanes=lanes)
     columns = pl.pallas_call(
         kernel, out_shape=(jax.ShapeDtypeStruct((n,), rows.dtype),) * COLUMNS,
         grid=(programs,), interpret=interpret,
         compiler_params=plt.CompilerParams(num_warps=lanes // 32, num_stages=1),
         name="gaussian_grads",
-    )(layout.first, layout.count, *_fields(p), rows)
+    )(layout.first, layout.count, *arrays, rows)
     return jnp.stack(columns, -1)  # its consumers' column slices take the columns themselves
 
 
-def reference(rows, layout: RowLayout, p: Projected, tiles_x: int, config: RasterConfig):
+def reference(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig):
     """`sums` in jnp: every Gaussian at once, the same walk over its slots and the same
     arithmetic (`_walk`; tests compare the kernel with it in interpret mode)."""
-    mean, conic, opacity = _fields(p)
-    fields = (mean[:, 0], mean[:, 1], conic[:, 0], conic[:, 1], conic[:, 2])
-    return jnp.stack(_walk(rows, rows.shape[0], layout.first, layout.count, fields, opacity,
+    *values, opacity = _take(*_sources(fields), slice(None))
+    return jnp.stack(_walk(rows, rows.shape[0], layout.first, layout.count, values, opacity,
                            tiles_x, config), -1)

@@ -59,7 +59,7 @@ from ..layout import STRIPS, tile_grid
 from ..projection import Projected
 from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
                pallas_triton, table_kernel)
-from .interface import Backend, RasterResult, stop_within
+from .interface import Backend, RasterResult, stop_within, tile_last
 
 
 @dataclasses.dataclass(frozen=True)
@@ -240,10 +240,17 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
     else:
         outs = pallas_triton.forward(*args, tiles_x, order, bins, data, dt)
     r, g, b, t, d, stop_at = outs[:6]
-    entry = (r, g, b, d, *outs[6:]) if segment is not None else ()
+    stop_at = stop_within(stop_at, bins.tile_end)
+    entry = ()
+    if segment is not None:
+        saved_states = outs[6:]
+        if bins.row_capacity is not None:  # walked rows: the walked pairs' checkpoints only
+            last = tile_last(stop_at, bins.tile_start, bins.tile_end)
+            saved_states = backward_segments.compact(saved_states, bins, last, segment)
+        entry = (r, g, b, d, *saved_states)
     state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
                        done=jnp.zeros(t.shape, bool))
-    return state, stop_within(stop_at, bins.tile_end), strip_pairs, saved + (order, entry)
+    return state, stop_at, strip_pairs, saved + (order, entry)
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan, trans,
@@ -257,11 +264,13 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     tiles_x, _ = tile_grid(width, height)
     g_color, g_trans, g_depth = cotangents
     masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
-    lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans,
-                 g_depth)
+    lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans)
+    if g_depth is not None or plan_.backward != "mosaic":  # the Mosaic GPU kernel takes None
+        lane_rows += (backward.depth_cotangent(g_depth, trans),)
     layout = gaussian_grads.rows_of(bins, stop_at)
     if plan_.backward == "mosaic":
-        segments = (backward_segments.split(bins, layout.end, _segment(plan_)) if entry
+        segments = (backward_segments.split(bins, layout.end, _segment(plan_),
+                                            compacted=bins.row_capacity is not None) if entry
                     else backward_segments.whole_tiles(order, bins, layout.end))
         rows = pallas_mosaic.backward_rows(config, plan_.interpret, plan_.backward_pixels,
                                            tiles_x, segments, bins, layout, masks, records,
@@ -269,7 +278,11 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     else:
         rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, layout,
                                            masks, records, lane_rows, dt)
-    return gaussian_grads.sums(rows, layout, p, tiles_x, config, plan_.interpret)
+    # A staged Mosaic GPU backward's records are the Gaussian table, whose first columns are
+    # the fields `sums` reads (`_kernel_inputs`).
+    staged = plan_.backward == "mosaic" and config.tuning.mosaic_pair_source == "gaussians"
+    return gaussian_grads.sums(rows, layout, records if staged else p, tiles_x, config,
+                               plan_.interpret)
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):

@@ -286,14 +286,16 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
 
 def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *refs,
                     config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
-                    last_pair: int, interpret: bool, from_checkpoints: bool):
+                    last_pair: int, interpret: bool, from_checkpoints: bool,
+                    depth_cotangent: bool = True):
     """The backward walk (`kernel_steps.backward_step`) for one warpgroup over segment
     seg_ref[s] = (tile, lo, hi, checkpoint) (lgs_jax.backends.backward_segments: a tile's whole
     list by default): rows_ref[wg, r] = (pair j's gradient summed over this block's pixels, its
     tile) at the pair's row r = row_ref[j] (`gaussian_grads.RowLayout.at`), for the pairs in
     [lo, hi) before the block's last stop pair, and zero rows for the segment's pairs after it:
     every row is written once per block (the tile in every one), as `reduction` says
-    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D); with
+    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D; without D,
+    which is then zero, where not `depth_cotangent`); with
     `from_checkpoints` (split segments), the forward's final r, g, b, D and its five
     checkpoint buffers, which give a segment that is not its tile's last its entering carry;
     then rows_ref; then the scratch:
@@ -305,14 +307,16 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     built per chunk in shared memory (`mosaic_staging`, its buffers first in the scratch) and a
     pair's mask is read there once its chunk is built."""
     dt = rec_ref.dtype
-    n_in = 5 + (4 + 5 if from_checkpoints else 0)  # cotangents, final r g b D, checkpoints
-    cot_refs, entry_refs, rows_ref, scratch = refs[:5], refs[5:n_in], refs[n_in], refs[n_in + 1:]
+    n_cot = 5 if depth_cotangent else 4
+    n_in = n_cot + (4 + 5 if from_checkpoints else 0)  # cotangents, final r g b D, checkpoints
+    cot_refs, entry_refs, rows_ref, scratch = (refs[:n_cot], refs[n_cot:n_in], refs[n_in],
+                                               refs[n_in + 1:])
     sid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile, lo, hi, check = (seg_ref[sid, c] for c in range(backward_segments.COLUMNS))
     k, _, half = _lanes(wg, pixels)
     trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
-    lane = ks.backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at,
-                             [ref[tile, half] for ref in cot_refs])
+    cots = [ref[tile, half] for ref in cot_refs] + [jnp.zeros_like(trans)] * (5 - n_cot)
+    lane = ks.backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at, cots)
     block_last = jnp.max(stop_at)
     last = jnp.clip(block_last, lo, hi)
     mine = _strip_bits(wg, pixels)
@@ -352,7 +356,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
             carry, parity = step(j, mask_word, s, carry, parity)
         return following, carry, parity
 
-    entry = _entry(trans, stop_at, lo, entry_refs, tile, check, hi < block_last, half)
+    entry = _entry(trans, stop_at, hi, entry_refs, tile, check, hi < block_last, half)
     lax.fori_loop(0, last - lo, body, (ahead(last - 1), entry, jnp.int32(0)))
 
     def after(i, c):  # pairs no pixel of this block reached
@@ -362,14 +366,17 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     lax.fori_loop(0, hi - last, after, jnp.int32(0))
 
 
-def _entry(trans, stop_at, lo, entry_refs, tile, check, inside, half):
+def _entry(trans, stop_at, hi, entry_refs, tile, check, inside, half):
     """The walk's carry (T, S_r, S_g, S_b, S_Z) where it enters its segment [lo, hi): at the
     tile's end (T, 0, 0, 0, 0); inside the block's walk, from checkpoint `check`
-    (`backward_segments`: the forward's T there and C − C_hi, D − D_hi). A pixel whose stop
-    pair is at or before lo takes nothing from the segment, and its forward block may have
-    stopped before lo without writing the checkpoint (half-tile forward blocks under a
-    whole-tile backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K), so it
-    enters with (T, 0, 0, 0, 0): its carry never takes that row's values."""
+    (`backward_segments`: the forward's T there and C − C_hi, D − D_hi). Only for a pixel that
+    blends pair hi (its stop pair is past hi), whose forward block walked past hi and so
+    stored the checkpoint. A pixel that stopped at or before hi is in its final state there,
+    so it enters with (T, 0, 0, 0, 0), exactly what the checkpoint would hold; its forward
+    block may have stopped before hi without storing it (half-tile forward blocks under a
+    whole-tile backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K). Until
+    Dec 3 the test was stop > lo, so those pixels with lo < stop <= hi took unwritten memory
+    (deterministic stale values, bitwise repeatable but wrong, as at 10M Gaussians at 4K)."""
     zero = jnp.zeros_like(trans)
     if not entry_refs:
         return trans, zero, zero, zero, zero
@@ -377,7 +384,7 @@ def _entry(trans, stop_at, lo, entry_refs, tile, check, inside, half):
 
     def from_checkpoint():
         c = jnp.maximum(check, 0)
-        reached = stop_at > lo
+        reached = stop_at > hi
         sums = [jnp.where(reached, final[i][tile, half] - saved[i][c, half], zero)
                 for i in range(3)]
         return (jnp.where(reached, saved[3][c, half], trans), *sums,
@@ -446,16 +453,17 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     rows no pair has are left unwritten (no Gaussian's rows reach them). `segments`: the
     (n, backward_segments.COLUMNS) table (`backward_segments.whole_tiles` or `split`);
     `entry`: with split segments, the forward's final r, g, b, D and its checkpoints (r, g, b,
-    T, D). `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D).
-    (masks, records): the pairs' (Gaussian ids, `pairs.gaussian_table`) with
-    `tuning.mosaic_pair_source` "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
+    T, D). `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D; D
+    left out where it is zero, a symbolic zero not materialised). (masks, records): the
+    pairs' (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source`
+    "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
     "transposed" on the GPU, "terms" in interpret mode)."""
     reduction = mosaic_rows.resolve(reduction, interpret)
     capacity = bins.gauss.shape[0]
     n = TILE_PIXELS // pixels
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                reduction=reduction, last_pair=capacity - 1, interpret=interpret,
-                               from_checkpoints=bool(entry))
+                               from_checkpoints=bool(entry), depth_cotangent=len(lane_rows) == 7)
     out = jax.ShapeDtypeStruct((n, layout.size, ks.ROW_WIDTH), dt)
     scratch = ()
     if config.tuning.mosaic_pair_source == "gaussians":

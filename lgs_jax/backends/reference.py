@@ -62,8 +62,10 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
                trans, stop_at, saved, cotangents):
+    g_color, g_trans, g_depth = cotangents
     rows = backward.pair_rows(_fields(p), bins, tile_pixels(width, height, p.mean2d.dtype),
-                              config, trans, stop_at, *cotangents)
+                              config, trans, stop_at, g_color, g_trans,
+                              backward.depth_cotangent(g_depth, trans))
     return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
 
 

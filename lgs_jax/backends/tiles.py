@@ -258,7 +258,9 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     if config.warp_cull:
         strip = k // STRIP_PIXELS
         gate = lambda kk: ((masks[kk][:, None] >> strip[None]) & 1) == 1
-    common = (bins, p.rgb, p.depth, trans, stop_at) + tuple(cotangents)
+    g_color, g_trans, g_depth = cotangents
+    common = (bins, p.rgb, p.depth, trans, stop_at, g_color, g_trans,
+              backward.depth_cotangent(g_depth, trans))
     if not config.hoist:
         rows = backward.walk(*common, backward.difference_alpha(
             p.mean2d, p.conic, p.opacity, (px, py), config, gate), 6)

@@ -4,6 +4,8 @@ segment table against numpy; gradients against the whole walk's (float64 to 1e-1
 scale: the sums behind a segment are C − C_hi instead of a running sum, so the float32 bits
 differ); the split kernels lower for the GPU."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -57,6 +59,40 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
     assert np.all(np.diff(length) <= 0)
 
 
+@settings(max_examples=10)
+@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0.3, 1), segment=st.sampled_from([4, 8]))
+def test_compact_keeps_each_tiles_walked_checkpoints_where_split_reads_them(seed, share,
+                                                                            segment):
+    """Random walks, rows for exactly the walked pairs: `compact` holds, at the index the
+    compacted `split` gives each segment, the forward's checkpoint row that the full `split`
+    gives it, in row_capacity // segment + 1 rows (tiles of tens of pairs: some segments enter
+    from checkpoints, asserted)."""
+    g = scenes.saturating(seed, 200, np.float64)
+    cam = scenes.camera(W, H)
+    bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
+    rng = np.random.default_rng(seed)
+    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
+    last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
+    bins = dataclasses.replace(bins, row_capacity=max(int(np.sum(last - start)), 1))
+    _, n_full = backward_segments.checkpoints(bins, segment)
+    full = tuple(rng.normal(size=(n_full, 256)) for _ in range(5))
+
+    @jax.jit
+    def run(bins, last, full):
+        return (backward_segments.compact(full, bins, last, segment),
+                backward_segments.split(bins, last, segment),
+                backward_segments.split(bins, last, segment, compacted=True))
+
+    compacted, table, table_c = run(bins, jnp.asarray(last), full)
+    assert compacted[0].shape == (bins.row_capacity // segment + 1, 256)
+    np.testing.assert_array_equal(np.asarray(table)[:, :3], np.asarray(table_c)[:, :3])
+    src, dst = np.asarray(table)[:, 3], np.asarray(table_c)[:, 3]
+    np.testing.assert_array_equal(src >= 0, dst >= 0)
+    assert np.any(src >= 0)
+    for a, b in zip(full, compacted):
+        np.testing.assert_array_equal(np.asarray(b)[dst[dst >= 0]], a[src[src >= 0]])
+
+
 def _grads(g, cam, w, config, row_capacity=None):
     @jax.jit
     def grads(g):
@@ -71,8 +107,8 @@ def _grads(g, cam, w, config, row_capacity=None):
 
 
 @pytest.mark.parametrize("dtype,pixels,rows,size", [
-    (np.float64, 128, False, 16),
-    pytest.param(np.float64, 256, True, 32, marks=pytest.mark.slow),
+    (np.float64, 128, True, 16), (np.float64, (128, 256), False, 16),
+    pytest.param(np.float64, 256, False, 32, marks=pytest.mark.slow),
     pytest.param(np.float32, 128, True, 32, marks=[pytest.mark.slow, gpu_only(
         "CI time: the float64 cases check the same kernels in interpret mode")])])
 @settings(max_examples=1)  # interpret mode
@@ -80,17 +116,25 @@ def _grads(g, cam, w, config, row_capacity=None):
 def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, size, seed):
     """Segments of 16 pairs (tiles walk tens of pairs, asserted): the gradients equal those of
     the whole walk to 1e-12 of their scale in float64 (5e-5 in float32), half and whole
-    tiles, rows in a buffer of the pair capacity or of the walked pairs, on one tile (default
-    set) or four."""
+    tiles (and half-tile forward blocks under whole-tile backward blocks, as at 4K, where a
+    pixel that stops inside a segment may belong to a forward block that never reached the
+    segment's checkpoint: interpret mode fills unwritten memory with NaN), rows in a buffer of the pair capacity or of the walked pairs (the checkpoints
+    compacted), on one tile (default set) or four; with one row fewer than the walked pairs
+    (an overflow, reported), finite gradients."""
     g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(size, size, dtype=dtype)
     w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
+    forward, backward = pixels if isinstance(pixels, tuple) else (pixels, pixels)
     config = lambda segment: C(kernel="mosaic", tuning=K(
-        mosaic_forward_pixels=pixels, mosaic_backward_pixels=pixels,
+        mosaic_forward_pixels=forward, mosaic_backward_pixels=backward,
         mosaic_backward_segment=segment))
     whole, stats = _grads(g, cam, w, config(None))
     walked = int(stats.pairs_walked)
     assert walked > 2 * 16 * (size // 16) ** 2  # more than two segments per tile on average
     split, _ = _grads(g, cam, w, config(16), walked if rows else None)
+    if rows:
+        short, short_stats = _grads(g, cam, w, config(16), walked - 1)
+        assert bool(short_stats.row_overflow)
+        assert all(np.all(np.isfinite(x)) for x in jax.tree.leaves(short))
     tol = 1e-12 if dtype == np.float64 else 5e-5
     for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
         a, b = np.asarray(a), np.asarray(b)

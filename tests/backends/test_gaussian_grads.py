@@ -33,12 +33,16 @@ def _projected_bins(g, cam, capacity):
 
 
 @functools.partial(jax.jit, static_argnums=(3,))
-def _three_ways(rows, bins, p, config):
-    """(kernel, jnp twin, XLA path) per-Gaussian gradients of emission-order `rows`: every pair
-    walked (each tile's pixels stop at its list's end), so pair rows are numbered by slot."""
+def _four_ways(rows, bins, p, config):
+    """(kernel, kernel reading the Gaussian table, jnp twin, XLA path) per-Gaussian gradients
+    of emission-order `rows`: every pair walked (each tile's pixels stop at its list's end), so
+    pair rows are numbered by slot."""
     stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
     layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
     kernel = gaussian_grads.sums(rows, layout, p, TILES_X, config, interpret=True)
+    # the fields from the Gaussian table, as the Mosaic GPU backward passes them
+    from_table = gaussian_grads.sums(rows, layout, pairs.gaussian_table(p), TILES_X, config,
+                                     interpret=True)
     twin = gaussian_grads.reference(rows, layout, p, TILES_X, config)
     sorted_rows = jnp.sum(rows[:, bins.slot, :ks.GRAD_VALUES], 0)  # the blocks added
     if config.hoist:
@@ -47,7 +51,7 @@ def _three_ways(rows, bins, p, config):
     else:
         per_pair = jnp.concatenate([sorted_rows[:, :6], sorted_rows[:, 7:]], -1)
     xla = backward.per_gaussian_sum(per_pair, bins, p.mean2d.shape[0])
-    return kernel, twin, xla
+    return kernel, from_table, twin, xla
 
 
 CONFIGS = {"hoisted": C(), "center": C(origin="center"), "global": C(local_coords=False),
@@ -65,8 +69,9 @@ SLOW = pytest.mark.slow
 def test_kernel_equals_its_twin_and_the_xla_path_float64(name, capacity, blocks, seed, yaw):
     """Random rows at every real pair's emission slot, the pair's tile in the tile column, NaN
     in padding slots (which no Gaussian may read), one or two blocks per tile, a capacity that
-    holds every pair or drops the tail: the kernel equals its jnp twin bit for bit and the
-    XLA path's per-pair chain and segmented sum to float64 rounding."""
+    holds every pair or drops the tail: the kernel equals its jnp twin bit for bit (reading
+    the Gaussians' fields from the Projected or from the Gaussian table) and the XLA path's
+    per-pair chain and segmented sum to float64 rounding."""
     g = scenes.cast(scenes.scene(seed), np.float64)
     p, bins = _projected_bins(g, scenes.camera(W, H, yaw=yaw), capacity)
     assert bool(bins.overflow) == (capacity == 40)
@@ -76,8 +81,10 @@ def test_kernel_equals_its_twin_and_the_xla_path_float64(name, capacity, blocks,
     slot = np.asarray(bins.slot)[real]
     rows[:, slot, :ks.GRAD_VALUES] = rng.normal(size=(blocks, slot.size, ks.GRAD_VALUES))
     rows[:, slot, ks.TILE_COLUMN] = np.asarray(bins.tile)[real]
-    kernel, twin, xla = (np.asarray(x) for x in _three_ways(rows, bins, p, CONFIGS[name]))
+    kernel, from_table, twin, xla = (np.asarray(x)
+                                     for x in _four_ways(rows, bins, p, CONFIGS[name]))
     np.testing.assert_array_equal(kernel, twin)
+    np.testing.assert_array_equal(from_table, kernel)
     assert np.all(np.isfinite(kernel))
     scale = np.max(np.abs(xla), 0) + 1e-300
     np.testing.assert_allclose(kernel / scale, xla / scale, rtol=0, atol=1e-12)

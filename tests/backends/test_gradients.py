@@ -224,3 +224,30 @@ def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
         assert np.all(np.isfinite(got)) and np.all(got[invalid] == 0), field
         assert_close_to_scale(got, want, GRAD_F64_REL, field)
     assert_close_to_scale(bgp, bgr, GRAD_F64_REL)
+
+
+@pytest.mark.parametrize("backend,config", [
+    ("tiles", C()), ("pallas", C(kernel="mosaic")),
+    pytest.param("pallas", C(kernel="triton"), marks=SLOW),
+    pytest.param("reference", C(), marks=SLOW)])
+def test_a_loss_without_depth_gives_the_gradients_of_a_zero_depth_weight(backend, config):
+    """A loss of image and alpha alone leaves the depth's cotangent a symbolic zero, which the
+    Mosaic GPU backward neither materialises nor reads (`backward.differentiable`): its
+    gradients equal those of the same loss plus Σ depth·0 with the zeros an argument (a real
+    zero plane read by the kernel)."""
+    g, cam = scenes.scene(3), scenes.camera(dtype=np.float64)
+    bg = jnp.asarray(scenes.BACKGROUND, np.float64)
+    wi, wa, _ = _weights(np.float64)
+
+    def loss(g, zeros):
+        out = lgs_jax.render(g, cam, background=bg, backend=backend, config=config,
+                             capacity=scenes.CAPACITY)
+        image_alpha = jnp.sum(out.image * wi) + jnp.sum(out.alpha * wa)
+        return image_alpha if zeros is None else image_alpha + jnp.sum(out.depth * zeros)
+
+    without = jax.jit(jax.grad(lambda g: loss(g, None)))(g)
+    with_zeros = jax.jit(jax.grad(loss))(g, jnp.zeros((H, W), np.float64))
+    for field in FIELDS:
+        got, want = np.asarray(getattr(without, field)), np.asarray(getattr(with_zeros, field))
+        np.testing.assert_array_equal(got, want, field)
+        assert np.any(got != 0), field
