@@ -6,6 +6,8 @@ Reads the dump's -buffer-assignment.txt (values, their allocations and byte rang
 -live-range.txt (each value's live range in the schedule), sums the bytes live at each step
 (per allocation, the union of live values' byte ranges; parameters left out, as XLA's
 temp + output sizes do) and prints the peak's step, instruction and live values by size.
+`--temp` leaves the outputs' allocations out too (what XLA can pack into its temporary
+allocation), `--timeline` prints the live MiB at every step.
 """
 
 import argparse
@@ -18,6 +20,9 @@ def main():
     ap.add_argument("prefix")
     ap.add_argument("--top", type=int, default=40)
     ap.add_argument("--timeline", action="store_true", help="the live MiB at every step")
+    ap.add_argument("--temp", action="store_true",
+                    help="the temporary allocation only (outputs' allocations left out: XLA's "
+                         "memory analysis adds their whole size)")
     a = ap.parse_args()
     values, params = {}, set()
     alloc = None
@@ -25,7 +30,8 @@ def main():
         m = re.match(r"allocation (\d+): size (\d+)(.*)", line)
         if m:
             alloc = int(m.group(1))
-            if "parameter" in m.group(3) or "constant" in m.group(3):
+            if ("parameter" in m.group(3) or "constant" in m.group(3)
+                    or (a.temp and "maybe-live-out" in m.group(3))):
                 params.add(alloc)
             continue
         m = re.match(r" value: <\d+ (\S+) @\d+> \(size=(\d+),offset=(\d+)\): (.*)", line)
