@@ -16,9 +16,11 @@ would have there (lgs_jax.backends.backward):
 
 where C_hi, D_hi and T_hi are the forward's state before pair hi, which the Local-GS Mosaic GPU
 forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), at index
-`base[tile] + m − 1` of (n_checkpoints, 256) buffers. A block whose pixels all stopped at or
-before hi enters with (T, 0) instead, which is exact for them (T and C stay constant after a
-pixel's stop) and needs no checkpoint (the forward may have exited before hi).
+`base[tile] + m − 1` of (n_checkpoints, 256) buffers. A pixel that stopped at or before hi
+enters with (T, 0) instead, which is exact for it (T and C stay constant after a pixel's stop)
+and needs no checkpoint: its forward block may have exited before hi without storing one
+(`pallas_mosaic._entry`; a pixel stopping inside the segment read that unwritten memory until
+Dec 3).
 
 With walked rows (`TileBins.row_capacity` R) the backward needs only the checkpoints inside
 the walked pairs, (last − start − 1) // L per tile, at most R // L in all (fewer walked pairs
