@@ -55,8 +55,13 @@ def walked_checkpoints(bins: TileBins, last, segment: int):
     walked pairs [tile_start, last) (`RowLayout.end`), in row_capacity // segment + 1 rows.
     Where more pairs were walked than `bins.row_capacity` (an overflow, reported) the last
     tiles' indices run past the rows; `split` clips them."""
-    need = jnp.maximum(last - bins.tile_start - 1, 0) // segment
+    need = _walked_need(bins, last, segment)
     return jnp.cumsum(need) - need, bins.row_capacity // segment + 1
+
+
+def _walked_need(bins: TileBins, last, segment: int):
+    """(n_tiles,) checkpoints inside each tile's walked pairs [tile_start, last)."""
+    return jnp.maximum(last - bins.tile_start - 1, 0) // segment
 
 
 def compact(saved, bins: TileBins, last, segment: int):
@@ -65,7 +70,7 @@ def compact(saved, bins: TileBins, last, segment: int):
     its needed checkpoints m (a gather; rows past the needed ones copy row 0)."""
     full_base, _ = checkpoints(bins, segment)
     base, rows = walked_checkpoints(bins, last, segment)
-    need = jnp.maximum(last - bins.tile_start - 1, 0) // segment
+    need = _walked_need(bins, last, segment)
     tile = segment_of_slot(base, need, rows)
     m = jnp.arange(rows, dtype=jnp.int32) - base[tile]
     source = jnp.where(m < need[tile], full_base[tile] + m, 0)

@@ -184,6 +184,13 @@ def _records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
     return masks, kernel_steps.pair_records(pg, bins, tiles_x, config, masks), strip_pairs
 
 
+def _backward_staged(plan_: Plan) -> bool:
+    """Whether the backward kernel reads (Gaussian ids, `pairs.gaussian_table`) as its
+    (masks, records): a Mosaic GPU backward with `tuning.mosaic_pair_source` "gaussians"."""
+    return (plan_.backward == "mosaic"
+            and plan_.config.tuning.mosaic_pair_source == "gaussians")
+
+
 def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     """(forward kernel data, strip–Gaussian pairs, what the backward kernel reads).
 
@@ -201,7 +208,7 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     staged = ((bins.gauss, table_kernel.gaussian_table(p, plan_.interpret)) if gaussians
               else None)
     forward_staged = gaussians and not plan_.vanilla and plan_.forward == "mosaic"
-    backward_staged = gaussians and plan_.backward == "mosaic"
+    backward_staged = _backward_staged(plan_)
     if forward_staged and backward_staged:
         return staged, jnp.int32(-1), staged
     vanilla_data = (bins.gauss, kernel_steps.gaussian_rows(p))
@@ -278,11 +285,10 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     else:
         rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, layout,
                                            masks, records, lane_rows, dt)
-    # A staged Mosaic GPU backward's records are the Gaussian table, whose first columns are
-    # the fields `sums` reads (`_kernel_inputs`).
-    staged = plan_.backward == "mosaic" and config.tuning.mosaic_pair_source == "gaussians"
-    return gaussian_grads.sums(rows, layout, records if staged else p, tiles_x, config,
-                               plan_.interpret)
+    # A staged backward's records are the Gaussian table, whose first columns are the fields
+    # `sums` reads.
+    return gaussian_grads.sums(rows, layout, records if _backward_staged(plan_) else p,
+                               tiles_x, config, plan_.interpret)
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):
