@@ -23,6 +23,17 @@ C, K = lgs_jax.RasterConfig, lgs_jax.KernelConfig
 W = H = 32
 
 
+def _random_walks(g, seed: int, share: float):
+    """(bins of g on a W x H image, tile starts, random walk ends `last` in [start, start +
+    share·length], the rng that drew them)."""
+    cam = scenes.camera(W, H)
+    bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
+    rng = np.random.default_rng(seed)
+    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
+    last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
+    return bins, start, last, rng
+
+
 @settings(max_examples=10)
 @given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]))
 def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment):
@@ -31,11 +42,7 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
     for pair lo + segment), the last one the rest, no checkpoint; the table's other rows are
     empty; segments come longest first."""
     g = scenes.cast(scenes.scene(seed), np.float64)
-    cam = scenes.camera(W, H)
-    bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
-    rng = np.random.default_rng(seed)
-    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
-    last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
+    bins, start, last, rng = _random_walks(g, seed, share)
     table = np.asarray(jax.jit(backward_segments.split, static_argnums=2)(
         bins, jnp.asarray(last), segment))
     base, n_rows = jax.jit(backward_segments.checkpoints, static_argnums=1)(bins, segment)
@@ -68,11 +75,7 @@ def test_compact_keeps_each_tiles_walked_checkpoints_where_split_reads_them(seed
     gives it, in row_capacity // segment + 1 rows (tiles of tens of pairs: some segments enter
     from checkpoints, asserted)."""
     g = scenes.saturating(seed, 200, np.float64)
-    cam = scenes.camera(W, H)
-    bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
-    rng = np.random.default_rng(seed)
-    start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
-    last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
+    bins, start, last, rng = _random_walks(g, seed, share)
     bins = dataclasses.replace(bins, row_capacity=max(int(np.sum(last - start)), 1))
     _, n_full = backward_segments.checkpoints(bins, segment)
     full = tuple(rng.normal(size=(n_full, 256)) for _ in range(5))
@@ -118,8 +121,8 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
     the whole walk to 1e-12 of their scale in float64 (5e-5 in float32), half and whole
     tiles (and half-tile forward blocks under whole-tile backward blocks, as at 4K, where a
     pixel that stops inside a segment may belong to a forward block that never reached the
-    segment's checkpoint: interpret mode fills unwritten memory with NaN), rows in a buffer of the pair capacity or of the walked pairs (the checkpoints
-    compacted), on one tile (default set) or four; with one row fewer than the walked pairs
+    segment's checkpoint: interpret mode fills unwritten memory with NaN), rows in a buffer of
+    the pair capacity or of the walked pairs (the checkpoints compacted), on one tile (default set) or four; with one row fewer than the walked pairs
     (an overflow, reported), finite gradients."""
     g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(size, size, dtype=dtype)
     w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
