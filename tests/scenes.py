@@ -115,6 +115,25 @@ def saturating(seed: int, n: int, dtype) -> lgs_jax.Gaussians:
                                     logit_opacities=logit), dtype)
 
 
+def half_walled(seed: int, n: int, dtype) -> lgs_jax.Gaussians:
+    """Faint Gaussians (opacity 0.4-5%) filling a 16x16 image, a fifth of them replaced by
+    nearly opaque ones over its top half: on `camera(16, 16)` the top half's pixels stop after
+    about 280-450 pairs, the bottom half's walk most of the ~n pairs. So a half-tile forward
+    block (the top) stops hundreds of pairs before its whole-tile backward block does."""
+    g = scene(seed, kinds=("normal",), n=n)
+    rng = np.random.default_rng(seed)
+    means = np.stack([rng.uniform(-1.2, 1.2, n), rng.uniform(-1.2, 1.2, n),
+                      rng.uniform(2.0, 4.0, n)], -1)
+    log_scales, logit = rng.uniform(-0.3, 0.3, (n, 3)), rng.uniform(-5.5, -3, n)
+    wall = np.arange(n) % 5 == 0
+    means[wall] = np.stack([rng.uniform(-2, 2, n), rng.uniform(-1.7, -0.3, n),
+                            rng.uniform(2.8, 3.2, n)], -1)[wall]
+    log_scales[wall] = rng.uniform(-1.0, -0.5, (n, 3))[wall]
+    logit[wall] = rng.uniform(0, 3, n)[wall]
+    return cast(dataclasses.replace(g, means=means, log_scales=log_scales,
+                                    logit_opacities=logit), dtype)
+
+
 def cast(g: lgs_jax.Gaussians, dtype) -> lgs_jax.Gaussians:
     import jax
 

@@ -14,7 +14,7 @@ from hypothesis import given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax import binning
-from lgs_jax.backends import backward_segments
+from lgs_jax.backends import REGISTRY, backward_segments, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
 from tests.devices import gpu_only
@@ -122,8 +122,9 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
     tiles (and half-tile forward blocks under whole-tile backward blocks, as at 4K, where a
     pixel that stops inside a segment may belong to a forward block that never reached the
     segment's checkpoint: interpret mode fills unwritten memory with NaN), rows in a buffer of
-    the pair capacity or of the walked pairs (the checkpoints compacted), on one tile (default set) or four; with one row fewer than the walked pairs
-    (an overflow, reported), finite gradients."""
+    the pair capacity or of the walked pairs (the checkpoints compacted), on one tile (default
+    set) or four; with one row fewer than the walked pairs (an overflow, reported), finite
+    gradients."""
     g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(size, size, dtype=dtype)
     w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
     forward, backward = pixels if isinstance(pixels, tuple) else (pixels, pixels)
@@ -144,6 +145,32 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
         assert np.all(np.isfinite(b)), name
         np.testing.assert_allclose(b, a, rtol=0, atol=tol * (np.max(np.abs(a)) + 1e-300),
                                    err_msg=name)
+
+
+@pytest.mark.slow  # interpret mode, 700 pairs: about a minute
+def test_compacted_forward_under_whole_tile_backward_blocks_gives_the_whole_walks_gradients():
+    """Segments of 128 pairs, where the forward walks each chunk's own pairs
+    (`pallas_mosaic.compacts`), half-tile forward blocks under a whole-tile backward block:
+    the top half stops after 280-450 pairs, so its forward block stores no checkpoint past
+    them while pixels of it stop inside (384, 512] (asserted). With the walked rows (the
+    checkpoints compacted too) the gradients equal the whole walk's to 1e-12 of their scale;
+    before Dec 3's fix (a checkpoint for stop > lo) they were NaN here."""
+    size, dtype = 16, np.float64
+    g, cam = scenes.half_walled(0, 700, dtype), scenes.camera(size, size, dtype=dtype)
+    w = np.random.default_rng(0).normal(size=(size, size, 3)).astype(dtype)
+    config = lambda segment: C(kernel="mosaic", tuning=K(
+        mosaic_forward_pixels=128, mosaic_backward_pixels=256, mosaic_backward_segment=segment))
+    assert pallas_mosaic.compacts(config(128))
+    p = project(g, cam)
+    bins = binning.bin_gaussians(p, size, size, 2048)
+    stop = np.asarray(REGISTRY["pallas"].rasterize(p, bins, size, size, config(None)).stop)
+    top = stop.reshape(size, size)[:size // 2]
+    assert top.max() < 512 and np.any((top > 384) & (top <= 512))
+    whole, stats = _grads(g, cam, w, config(None))
+    split, _ = _grads(g, cam, w, config(128), int(stats.pairs_walked))
+    for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
+        a, b = np.asarray(a), np.asarray(b)
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.max(np.abs(a)), err_msg=name)
 
 
 def test_split_kernels_lower_for_the_gpu(monkeypatch):
