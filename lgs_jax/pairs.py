@@ -59,6 +59,13 @@ def table_fields(p: Projected) -> tuple:
             e.unbounded.astype(p.mean2d.dtype))
 
 
+def table_columns(p: Projected) -> list:
+    """`table_fields` as TABLE_COLUMNS (N,) columns, in the table's column order (slices of
+    `project`'s stacks, which XLA reads from its stored columns)."""
+    return [c for f in table_fields(p)
+            for c in ([f[:, i] for i in range(f.shape[1])] if f.ndim == 2 else [f])]
+
+
 def gaussian_table(p: Projected):
     """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (`table_fields`),
     materialised once: fused into the per-pair consumers, XLA would recompute the rows (and

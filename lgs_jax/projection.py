@@ -102,13 +102,26 @@ def project(g: Gaussians, cam: Camera) -> Projected:
     The checkpoint takes `g`'s fields whole and slices them into columns inside: JAX keeps a
     checkpoint's inputs for the backward behind an optimization barrier, so with columns as
     its inputs XLA copied each one out (16 copies of 38 MiB at 10M Gaussians, live at the
-    peak of the gradient's memory, BENCHMARKS.md §7 "Dec 3, second session")."""
-    return lax.optimization_barrier(_project(g, cam))
+    peak of the gradient's memory, BENCHMARKS.md §7 "Dec 3, second session").
+
+    The barrier holds the fields as (N,) columns, stacked into `Projected`'s (N, 2) and (N, 3)
+    fields after it: a consumer that reads columns (the Gaussian table's kernel, the emission's
+    fusions) then reads the stored columns, and no stacked copy is written unless a consumer
+    needs one whole. Behind the barrier the stacks were three XLA concatenates written and read
+    back (about 0.2 ms of a 10M-Gaussian 4K forward on an H200, BENCHMARKS.md §7 "Dec 3, third
+    session"), and in the backward the cotangents arrived stacked too."""
+    return _stacked(lax.optimization_barrier(_project(g, cam)))
 
 
 @jax.checkpoint
-def _project(g: Gaussians, cam: Camera) -> Projected:
-    return project_columns(*gaussian_columns(g), cam)
+def _project(g: Gaussians, cam: Camera) -> dict:
+    return _projected_columns(*gaussian_columns(g), cam)
+
+
+def _stacked(cols: dict) -> Projected:
+    """`Projected` of `_projected_columns`' columns (vector fields stacked on the last axis)."""
+    return Projected(**{k: jnp.stack(v, -1) if isinstance(v, tuple) else v
+                        for k, v in cols.items()})
 
 
 @jax.custom_vjp
@@ -151,6 +164,11 @@ gaussian_columns.defvjp(_columns_fwd, _columns_bwd)
 
 def project_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> Projected:
     """`project` on `gaussian_columns`."""
+    return _stacked(_projected_columns(mean, quat, log_scale, logit_opacities, sh, cam))
+
+
+def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> dict:
+    """`Projected`'s fields as (N,) columns: a tuple of them for each vector field."""
     dt = mean[0].dtype
     viewmat = jnp.asarray(cam.viewmat, dt)
     fx, fy, cx, cy, near, far = (jnp.asarray(v, dt) for v in
@@ -207,8 +225,8 @@ def project_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> 
     finite = all_of([jnp.isfinite(x) for x in mean2d + conic + tuple(rgb)])
     invalid = ~(input_ok & in_range & det_ok & finite)
     valid = ~invalid & (opacity >= jnp.asarray(ALPHA_MIN, dt))
-    keep = lambda xs, fill: jnp.stack([jnp.where(valid, x, f) for x, f in zip(xs, fill)], -1)
-    return Projected(
+    keep = lambda xs, fill: tuple(jnp.where(valid, x, f) for x, f in zip(xs, fill))
+    return dict(
         mean2d=keep(mean2d, (0.0, 0.0)),
         cov2d=keep((sxx, sxy, syy), (1.0, 0.0, 1.0)),
         conic=keep(conic, (1.0, 0.0, 1.0)),

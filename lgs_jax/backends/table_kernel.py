@@ -3,8 +3,8 @@
 XLA writes the table, a concatenate along the minor axis, one column at a time: a warp's 32
 stores of a column land 56 bytes apart, one memory sector each. At 10M Gaussians on an H200
 that pass took 0.69 ms, the forward's largest XLA pass after the kernels (BENCHMARKS.md §7
-"Dec 2, late evening"). Here each program reads `lanes` Gaussians' fields as they are stored
-(`pairs.table_fields`, the padded ellipse computed by XLA) and stores their rows as one
+"Dec 2, late evening"). Here each program reads `lanes` Gaussians' fields as (N,) columns
+(`pairs.table_columns`, the padded ellipse computed by XLA) and stores their rows as one
 (lanes, 16) block masked to the 14 columns, whose consecutive lanes write consecutive bytes.
 Every value is a copy: the table equals `pairs.gaussian_table`'s bit for bit (a test checks it
 in interpret mode).
@@ -28,12 +28,10 @@ WIDTH = 16  # the stored block's columns: TABLE_COLUMNS rounded up to a power of
 
 
 def _kernel(*refs, n: int, lanes: int):
-    *field_refs, table_ref = refs
+    *column_refs, table_ref = refs
     # Lanes past the last Gaussian copy it again (the same bits to the same row).
     g = jnp.minimum(pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes), n - 1)
-    cols = []
-    for ref in field_refs:
-        cols += [ref[g, i] for i in range(ref.shape[1])] if len(ref.shape) == 2 else [ref[g]]
+    cols = [ref[g] for ref in column_refs]
     c = lax.broadcasted_iota(jnp.int32, (lanes, WIDTH), 1)
     block = jnp.zeros((lanes, WIDTH), table_ref.dtype)
     for i, col in enumerate(cols):
@@ -46,7 +44,7 @@ def gaussian_table(p: Projected, interpret: bool = False, lanes: int = LANES):
     `lanes`: a multiple of 32)."""
     if lanes % 32:
         raise ValueError(f"lanes: expected a multiple of 32, got {lanes}")
-    fields = pairs.table_fields(p)
+    columns = pairs.table_columns(p)
     n, dt = p.mean2d.shape[0], p.mean2d.dtype
     return pl.pallas_call(
         functools.partial(_kernel, n=n, lanes=lanes),
@@ -54,4 +52,4 @@ def gaussian_table(p: Projected, interpret: bool = False, lanes: int = LANES):
         grid=(pl.cdiv(n, lanes),), interpret=interpret,
         compiler_params=plt.CompilerParams(num_warps=lanes // 32, num_stages=1),
         name="gaussian_table",
-    )(*fields)
+    )(*columns)
