@@ -189,8 +189,9 @@ def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: in
     # away: 0.6 ms at 10M Gaussians on an H200, BENCHMARKS.md §7).
     g = jnp.minimum(pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes), n - 1)
     *fields, opacity = _take(field_refs, spec, g)
-    sums_ = _walk(rows_ref, blocks, first_ref[g], count_ref[g], fields, opacity, tiles_x,
-                  config)
+    # Read before any store: the first two outputs may be these inputs' buffers (`sums`).
+    first, count = (lax.bitcast_convert_type(ref[g], jnp.int32) for ref in (first_ref, count_ref))
+    sums_ = _walk(rows_ref, blocks, first, count, fields, opacity, tiles_x, config)
     for out_ref, v in zip(out_refs, sums_):
         out_ref[g] = v
 
@@ -201,7 +202,13 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     layout.size, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
     its lanes' longest count, so fewer lanes idle less where counts vary). `fields`: the
-    Gaussians' μ, conic and opacity, a `Projected` or a table (`_sources`)."""
+    Gaussians' μ, conic and opacity, a `Projected` or a table (`_sources`).
+
+    In float32 the kernel takes `layout.first` and `count` as float32 bits and writes its
+    first two columns into their buffers (aliased outputs: a lane reads its Gaussian's first
+    and count before it stores), so two of the ten (N,) columns take no memory of their own
+    where nothing reads the layout afterwards (at 10M Gaussians the walked-rows backward's
+    peak is this kernel); XLA copies them first where something does."""
     if lanes % 32:
         raise ValueError(f"lanes: expected a multiple of 32, got {lanes}")
     arrays, spec = _sources(fields)
@@ -209,12 +216,17 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     programs = pl.cdiv(n, lanes)
     kernel = functools.partial(_kernel, spec=spec, config=config, tiles_x=tiles_x, n=n,
                                blocks=blocks, lanes=lanes)
+    dt = rows.dtype
+    aliased = jnp.dtype(dt).itemsize == jnp.dtype(layout.first.dtype).itemsize
+    first, count = ((lax.bitcast_convert_type(x, dt) for x in (layout.first, layout.count))
+                    if aliased else (layout.first, layout.count))
     columns = pl.pallas_call(
-        kernel, out_shape=(jax.ShapeDtypeStruct((n,), rows.dtype),) * COLUMNS,
+        kernel, out_shape=(jax.ShapeDtypeStruct((n,), dt),) * COLUMNS,
+        input_output_aliases={0: 0, 1: 1} if aliased else {},
         grid=(programs,), interpret=interpret,
         compiler_params=plt.CompilerParams(num_warps=lanes // 32, num_stages=1),
         name="gaussian_grads",
-    )(layout.first, layout.count, *arrays, rows)
+    )(first, count, *arrays, rows)
     return jnp.stack(columns, -1)  # its consumers' column slices take the columns themselves
 
 

@@ -91,6 +91,36 @@ def test_kernel_equals_its_twin_and_the_xla_path_float64(name, capacity, blocks,
     assert np.any(kernel != 0)
 
 
+@settings(max_examples=2)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_float32_kernel_writing_into_the_layouts_buffers_equals_its_twin(seed):
+    """In float32 the kernel takes the layout's first and count as float32 bits and writes
+    two columns into their buffers (aliased outputs): it still equals its twin bit for bit,
+    and the caller's layout is left as it was (XLA copies an aliased input that lives on).
+    Pallas' interpreter gives an aliased output a copy of its input, so the kernel's order
+    (each lane reads its first and count before any store) is exercised only on a GPU, by the
+    gradient tests, where the layout is an intermediate XLA can alias in place."""
+    g = scenes.cast(scenes.scene(seed), np.float32)
+    p, bins = _projected_bins(g, scenes.camera(W, H), 1024)
+    stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
+    layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
+    first, count = np.asarray(layout.first), np.asarray(layout.count)
+    rng = np.random.default_rng(seed)
+    rows = np.zeros((1, 1024, ks.ROW_WIDTH), np.float32)
+    real = np.asarray(bins.tile) < bins.tile_start.shape[0]
+    slot = np.asarray(bins.slot)[real]
+    rows[:, slot, :ks.GRAD_VALUES] = rng.normal(size=(1, slot.size, ks.GRAD_VALUES))
+    rows[:, slot, ks.TILE_COLUMN] = np.asarray(bins.tile)[real]
+    rows, table = jnp.asarray(rows), pairs.gaussian_table(p)
+    kernel = jax.jit(lambda r, l, t: gaussian_grads.sums(r, l, t, TILES_X, C(), True))(
+        rows, layout, table)
+    twin = gaussian_grads.reference(rows, layout, table, TILES_X, C())
+    np.testing.assert_array_equal(np.asarray(kernel), np.asarray(twin))
+    assert np.any(np.asarray(kernel) != 0)
+    np.testing.assert_array_equal(np.asarray(layout.first), first)
+    np.testing.assert_array_equal(np.asarray(layout.count), count)
+
+
 @settings(max_examples=10)
 @given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), spare=st.integers(-30, 5),
        wide_keys=st.booleans())
