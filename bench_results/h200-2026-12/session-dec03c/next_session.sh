@@ -1,4 +1,13 @@
 # Next GPU session (issues 17 and 18), from the repository root; each step one `run` call.
+# 0. This session's two unmeasured changes (the projection's columns behind the barrier,
+#    19a8f91; gaussian_grads writing two columns into the layout's first/count buffers,
+#    cb983cd) against the session's start, in one process (ab_pkg.py: copy it to carry/, and
+#    carry/old/lgs_old = `git archive 4a3f59a lgs_jax` renamed, as built on Dec 3):
+#      for s in guitar_x16_1080p guitar_x64_1080p guitar_x110_4k; do
+#        timeout 150 python3 carry/ab_pkg.py $s 7; done
+#    Expected: the same bits; x110 walked rows about 1591 against 1667 MiB; a few tenths of a
+#    ms less at x110 (three concatenates gone from the forward, the cotangents' from the
+#    backward). Revert whichever is slower.
 # 1. The projection's columns behind the barrier (landed on Dec 3, third session, unmeasured on a
 #    GPU): forward and forward + backward against gsplat, and the 4K forward's kernels, where the
 #    four input_concatenate fusions (0.26 ms) should be gone:
