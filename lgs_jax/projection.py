@@ -126,7 +126,7 @@ def _stacked(cols: dict) -> Projected:
 
 @jax.custom_vjp
 def gaussian_columns(g: Gaussians):
-    """The fields of `g` as (N,) columns, as `project_columns` takes them: (mean x, y, z),
+    """The fields of `g` as (N,) columns, as `_projected_columns` takes them: (mean x, y, z),
     (quaternion w, x, y, z), (log scales), the opacity logits, and the SH coefficients as
     [basis][channel].
 
@@ -162,13 +162,9 @@ def _columns_bwd(_, cts):
 gaussian_columns.defvjp(_columns_fwd, _columns_bwd)
 
 
-def project_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> Projected:
-    """`project` on `gaussian_columns`."""
-    return _stacked(_projected_columns(mean, quat, log_scale, logit_opacities, sh, cam))
-
-
 def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> dict:
-    """`Projected`'s fields as (N,) columns: a tuple of them for each vector field."""
+    """`project` on `gaussian_columns`: `Projected`'s fields as (N,) columns, a tuple of them
+    for each vector field."""
     dt = mean[0].dtype
     viewmat = jnp.asarray(cam.viewmat, dt)
     fx, fy, cx, cy, near, far = (jnp.asarray(v, dt) for v in
