@@ -54,6 +54,18 @@ def _four_ways(rows, bins, p, config):
     return kernel, from_table, twin, xla
 
 
+def _random_rows(bins, blocks: int, seed: int, fill, dtype):
+    """(blocks, capacity, ROW_WIDTH) rows: random gradient values and the pair's tile at every
+    real pair's emission slot, `fill` elsewhere."""
+    rows = np.full((blocks, bins.gauss.shape[0], ks.ROW_WIDTH), fill, dtype)
+    real = np.asarray(bins.tile) < bins.tile_start.shape[0]
+    slot = np.asarray(bins.slot)[real]
+    rng = np.random.default_rng(seed)
+    rows[:, slot, :ks.GRAD_VALUES] = rng.normal(size=(blocks, slot.size, ks.GRAD_VALUES))
+    rows[:, slot, ks.TILE_COLUMN] = np.asarray(bins.tile)[real]
+    return rows
+
+
 CONFIGS = {"hoisted": C(), "center": C(origin="center"), "global": C(local_coords=False),
            "difference": C(hoist=False)}
 
@@ -75,12 +87,7 @@ def test_kernel_equals_its_twin_and_the_xla_path_float64(name, capacity, blocks,
     g = scenes.cast(scenes.scene(seed), np.float64)
     p, bins = _projected_bins(g, scenes.camera(W, H, yaw=yaw), capacity)
     assert bool(bins.overflow) == (capacity == 40)
-    rng = np.random.default_rng(seed)
-    rows = np.full((blocks, capacity, ks.ROW_WIDTH), np.nan)
-    real = np.asarray(bins.tile) < bins.tile_start.shape[0]
-    slot = np.asarray(bins.slot)[real]
-    rows[:, slot, :ks.GRAD_VALUES] = rng.normal(size=(blocks, slot.size, ks.GRAD_VALUES))
-    rows[:, slot, ks.TILE_COLUMN] = np.asarray(bins.tile)[real]
+    rows = _random_rows(bins, blocks, seed, np.nan, np.float64)
     kernel, from_table, twin, xla = (np.asarray(x)
                                      for x in _four_ways(rows, bins, p, CONFIGS[name]))
     np.testing.assert_array_equal(kernel, twin)
@@ -105,13 +112,7 @@ def test_float32_kernel_writing_into_the_layouts_buffers_equals_its_twin(seed):
     stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
     layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
     first, count = np.asarray(layout.first), np.asarray(layout.count)
-    rng = np.random.default_rng(seed)
-    rows = np.zeros((1, 1024, ks.ROW_WIDTH), np.float32)
-    real = np.asarray(bins.tile) < bins.tile_start.shape[0]
-    slot = np.asarray(bins.slot)[real]
-    rows[:, slot, :ks.GRAD_VALUES] = rng.normal(size=(1, slot.size, ks.GRAD_VALUES))
-    rows[:, slot, ks.TILE_COLUMN] = np.asarray(bins.tile)[real]
-    rows, table = jnp.asarray(rows), pairs.gaussian_table(p)
+    rows, table = jnp.asarray(_random_rows(bins, 1, seed, 0, np.float32)), pairs.gaussian_table(p)
     kernel = jax.jit(lambda r, l, t: gaussian_grads.sums(r, l, t, TILES_X, C(), True))(
         rows, layout, table)
     twin = gaussian_grads.reference(rows, layout, table, TILES_X, C())
