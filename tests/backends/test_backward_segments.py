@@ -151,7 +151,7 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
 def test_compacted_forward_under_whole_tile_backward_blocks_gives_the_whole_walks_gradients():
     """Segments of 128 pairs, where the forward walks each chunk's own pairs
     (`pallas_mosaic.compacts`), half-tile forward blocks under a whole-tile backward block:
-    the top half stops after 280-450 pairs, so its forward block stores no checkpoint past
+    the top half stops after 281-455 pairs, so its forward block stores no checkpoint past
     them while pixels of it stop inside (384, 512] (asserted). With the walked rows (the
     checkpoints compacted too) the gradients equal the whole walk's to 1e-12 of their scale;
     before Dec 3's fix (a checkpoint for stop > lo) they were NaN here."""
