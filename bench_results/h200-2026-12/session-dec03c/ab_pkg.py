@@ -7,10 +7,11 @@ sys.path[:0] = [".", "carry/old"]
 import jax, jax.numpy as jnp, numpy as np
 import lgs_jax, lgs_old
 from benchmarks import scale
-from benchmarks.common import compiled_mib, load_scene, median_ms
+from benchmarks.common import compiled_mib, median_ms, parse_scene
 
 scene, repeat = sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 7
-g, cam = load_scene(scene, "carry/data")
+case = parse_scene(scene, "carry/data")  # a SCENES name, or e.g. synthetic:300@32x32
+g, cam = case.scene, case.camera
 g, cam = jax.device_put(g), jax.device_put(cam)
 cap = lgs_jax.pair_capacity(scale.count_pairs(g, cam))
 w = jax.random.normal(jax.random.key(0), (cam.height, cam.width, 3), jnp.float32)
