@@ -50,29 +50,23 @@ class PairGaussians:
 TABLE_COLUMNS = 14  # `gaussian_table`: μx, μy, a, b, c, o, r, g, b, z, τ, τ_pad, det_lo, unbounded
 
 
-def table_fields(p: Projected) -> tuple:
-    """The fields `gaussian_table` packs, as stored, in its column order: mean2d (N, 2),
-    conic (N, 3), opacity, rgb (N, 3), depth, and the padded ellipse of lgs_jax.binning (tau,
-    tau_pad, det_lo, unbounded as 0/1 in p's dtype), (N,) each."""
-    e = padded_ellipse(p)
-    return (p.mean2d, p.conic, p.opacity, p.rgb, p.depth, e.tau, e.tau_pad, e.det_lo,
-            e.unbounded.astype(p.mean2d.dtype))
-
-
 def table_columns(p: Projected) -> list:
-    """`table_fields` as TABLE_COLUMNS (N,) columns, in the table's column order (slices of
-    `project`'s stacks, which XLA reads from its stored columns)."""
-    return [c for f in table_fields(p)
-            for c in ([f[:, i] for i in range(f.shape[1])] if f.ndim == 2 else [f])]
+    """The TABLE_COLUMNS (N,) columns `gaussian_table` packs, in its column order: mean2d's
+    x, y, conic's a, b, c, opacity, rgb, depth, and the padded ellipse of lgs_jax.binning (tau,
+    tau_pad, det_lo, unbounded as 0/1 in p's dtype). The vector fields' columns are slices of
+    `project`'s stacks, which XLA reads from its stored columns."""
+    e = padded_ellipse(p)
+    return ([p.mean2d[:, i] for i in range(2)] + [p.conic[:, i] for i in range(3)]
+            + [p.opacity] + [p.rgb[:, i] for i in range(3)]
+            + [p.depth, e.tau, e.tau_pad, e.det_lo, e.unbounded.astype(p.mean2d.dtype)])
 
 
 def gaussian_table(p: Projected):
-    """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (`table_fields`),
+    """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (`table_columns`),
     materialised once: fused into the per-pair consumers, XLA would recompute the rows (and
     read every field separately) for every pair. On GPUs the kernels take the same values from
     lgs_jax.backends.table_kernel, which writes them faster."""
-    cols = [f.reshape(f.shape[0], -1) for f in table_fields(p)]
-    return lax.optimization_barrier(jnp.concatenate(cols, -1))
+    return lax.optimization_barrier(jnp.stack(table_columns(p), -1))
 
 
 def gather(p: Projected, gauss) -> PairGaussians:
