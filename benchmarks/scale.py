@@ -82,7 +82,9 @@ ROWS = {
     "localgs:px256": ("pallas", C("gsplat", tuning=K(
         mosaic_forward_pixels=256, mosaic_backward_pixels=256, vanilla_from_pairs=None))),
     "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(mosaic_forward_pixels=128))),
-    "localgs:bwd256": ("pallas", C("gsplat", tuning=K(mosaic_backward_pixels=256,
+    # half-tile backward blocks (the default was by tile count, half tiles below 8192, until
+    # Dec 3: whole tiles halve the backward's rows; BENCHMARKS.md §7)
+    "localgs:bwd128": ("pallas", C("gsplat", tuning=K(mosaic_backward_pixels=128,
                                                       vanilla_from_pairs=None))),
     # the backward's walks whole (one block per tile, the default before Dec 2), or split into
     # segments of 512 / 1024 (the default) / 2048 pairs

@@ -62,7 +62,14 @@ class KernelConfig:
       mosaic_unroll_localgs, mosaic_unroll_vanilla: pairs staged per loop iteration.
       mosaic_forward_pixels, mosaic_backward_pixels: pixels per block, 128 (half a tile, one per
         lane) or 256 (the whole tile, two per lane); None: by the image's tile count, whole
-        tiles from `mosaic_whole_tile_from` tiles on.
+        tiles from `mosaic_whole_tile_from` tiles on. The backward's default is 256: its
+        per-pair gradient rows are one per pair and block, so half tiles double them (48 bytes
+        per pair), and with the split backward whole tiles no longer cost time. H200,
+        forward + backward against half-tile blocks (BENCHMARKS.md §7, Dec 3, fourth
+        session): 1.59 against 1.60 ms and 64 against 79 MiB at 0.09M Gaussians (720p), 1.58
+        against 1.64 ms at 0.06M (800x800), 3.36 against 3.46 ms and 283 against 331 MiB at
+        1.45M (1080p, rows at the walked pairs), 7.06 against 6.93 ms and 1271 against 1751
+        MiB at 5.8M (1080p); 4K already ran whole tiles.
       mosaic_chunk: pair records per TMA copy into shared memory, in the Local-GS forward
         and in the backward kernel (double-buffered; float32 only, TMA has no 64-bit float
         type); 0 reads records from global memory. A multiple of mosaic_unroll_localgs (a
@@ -114,7 +121,7 @@ class KernelConfig:
     mosaic_unroll_localgs: int = 8
     mosaic_unroll_vanilla: int = 8
     mosaic_forward_pixels: int | None = None
-    mosaic_backward_pixels: int | None = None
+    mosaic_backward_pixels: int | None = 256
     mosaic_whole_tile_from: int = 8192
     mosaic_chunk: int = 64
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"

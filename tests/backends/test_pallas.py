@@ -275,8 +275,9 @@ def test_routed_render_is_vanillas_image_and_localgs_gradients():
 def test_plan_resolves_implementation_and_block_size():
     """kernel="auto" runs Mosaic GPU for every kernel on the GPU (`KernelConfig.auto_*`) and
     Triton in interpret mode; an explicit kernel runs everywhere; under differentiation "auto"
-    runs the backward's implementation forward. Mosaic blocks are whole tiles from
-    `mosaic_whole_tile_from` tiles on, half tiles below, unless fixed."""
+    runs the backward's implementation forward. Mosaic forward blocks are whole tiles from
+    `mosaic_whole_tile_from` tiles on, half tiles below, unless fixed; backward blocks whole
+    tiles unless set to None (then by the same rule)."""
     gpu = C(tuning=K(interpret=False))
     assert [pallas.plan(gpu, v, 1).forward for v in (False, True)] == ["mosaic", "mosaic"]
     mixed = C(tuning=K(interpret=False, auto_localgs="triton"))
@@ -296,9 +297,10 @@ def test_plan_resolves_implementation_and_block_size():
         assert [pallas.plan(config, vanilla, t).forward_pixels
                 for t in (1, 8191, 8192, 32400)] == [128, 128, 256, 256]
     assert [pallas.plan(gpu, False, t).forward_pixels for t in (1, 32400)] == [128, 128]
-    assert pallas.plan(gpu, False, 32400).backward_pixels == 256
-    fixed = C(tuning=K(mosaic_backward_pixels=256))
-    assert pallas.plan(fixed, False, 1).backward_pixels == 256
+    # the backward in whole tiles at every size by default (its rows: one per pair and block)
+    assert [pallas.plan(gpu, False, t).backward_pixels for t in (1, 8160, 32400)] == [256] * 3
+    by_tiles = C(tuning=K(mosaic_backward_pixels=None))
+    assert [pallas.plan(by_tiles, False, t).backward_pixels for t in (8191, 8192)] == [128, 256]
     with pytest.raises(ValueError, match="tuning.mosaic_chunk"):
         K(mosaic_chunk=12)
     with pytest.raises(ValueError, match="tuning.mosaic_forward_pixels"):
