@@ -33,7 +33,7 @@ from .backends import REGISTRY, RasterResult
 from .backends.interface import pairs_walked
 from .composite import PixelState, finish
 from .config import RasterConfig
-from .layout import tiles_to_image
+from .layout import tile_grid, tiles_to_image
 from .projection import Projected, project
 from .scene import (Camera, Gaussians, validate_background, validate_camera,
                     validate_gaussians)
@@ -189,7 +189,11 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
-    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity)
+    table = None
+    if spec.gaussian_table is not None:
+        tiles_x, tiles_y = tile_grid(width, height)
+        table = spec.gaussian_table(p, config, tiles_x * tiles_y, capacity)
+    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity, table)
             if spec.binned else None)
     result = spec.rasterize(p, bins, width, height, config)
     state = PixelState(color=result.color, trans=result.trans, depth=result.depth, done=None)

@@ -147,7 +147,7 @@ def main(argv=None) -> int:
     try:
         f.lower(*abstract).compile()
     except Exception as e:  # noqa: BLE001 - with CUB sorts XLA fails after buffer assignment
-        print(f"(no executable without a device: {str(e)[:100]})", flush=True)
+        print(f"(no executable without a device: {type(e).__name__}: {str(e)[:300]})", flush=True)
     new = [p for p in glob.glob(f"{dump}/*after_optimizations-buffer-assignment.txt")
            if os.path.getmtime(p) >= start]
     if not new:

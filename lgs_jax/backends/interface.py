@@ -67,6 +67,9 @@ class Backend:
         that run no backend (an empty scene).
       pair_rows: its backward stores per-pair gradient rows (the Pallas backends), sized by
         `TileBins.row_capacity`.
+      gaussian_table: (p, config, n_tiles, capacity) -> the per-Gaussian table its forward
+        kernel reads, or None; `render` builds it before binning and hands it over as
+        `TileBins.table` (None: the backend builds what it needs itself).
     """
 
     name: str
@@ -74,6 +77,7 @@ class Backend:
     binned: bool = True
     describe: Callable[[Any], tuple[str, bool]] = no_kernel
     pair_rows: bool = False
+    gaussian_table: Callable[..., Any] | None = None
 
 
 def stop_within(stop, tile_end):

@@ -191,6 +191,24 @@ def _backward_staged(plan_: Plan) -> bool:
             and plan_.config.tuning.mosaic_pair_source == "gaussians")
 
 
+def _forward_staged(plan_: Plan) -> bool:
+    """Whether the forward kernel reads (Gaussian ids, `pairs.gaussian_table`): a Local-GS
+    Mosaic GPU forward with `tuning.mosaic_pair_source` "gaussians"."""
+    return (plan_.config.tuning.mosaic_pair_source == "gaussians" and not plan_.vanilla
+            and plan_.forward == "mosaic")
+
+
+def gaussian_table(p: Projected, config: RasterConfig, n_tiles: int, capacity: int):
+    """`Backend.gaussian_table` of the `pallas` backend: the table a staged Local-GS forward
+    reads (lgs_jax.backends.table_kernel), built by `render` before binning (the backward reads
+    the same one), else None. Not differentiated: the backward kernel's gradients are the
+    projected fields' whole derivative."""
+    plan_ = plan(config, False, n_tiles, capacity)
+    if not _forward_staged(plan_):
+        return None
+    return table_kernel.gaussian_table(lax.stop_gradient(p), plan_.interpret)
+
+
 def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     """(forward kernel data, strip–Gaussian pairs, what the backward kernel reads).
 
@@ -205,9 +223,11 @@ def _kernel_inputs(p: Projected, bins: TileBins, tiles_x: int, plan_: Plan):
     config = plan_.config
     model = _vanilla_model(config) if plan_.vanilla else config
     gaussians = config.tuning.mosaic_pair_source == "gaussians"
-    staged = ((bins.gauss, table_kernel.gaussian_table(p, plan_.interpret)) if gaussians
-              else None)
-    forward_staged = gaussians and not plan_.vanilla and plan_.forward == "mosaic"
+    table = bins.table  # `render` built it where the forward reads it (`gaussian_table`)
+    if gaussians and table is None:
+        table = table_kernel.gaussian_table(p, plan_.interpret)
+    staged = (bins.gauss, table) if gaussians else None
+    forward_staged = _forward_staged(plan_)
     backward_staged = _backward_staged(plan_)
     if forward_staged and backward_staged:
         return staged, jnp.int32(-1), staged
@@ -309,6 +329,7 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
                         kernel=plan_.kernel_name, interpreted=plan_.interpret)
 
 
-LOCALGS = Backend("pallas", rasterize, describe=describe(False), pair_rows=True)
+LOCALGS = Backend("pallas", rasterize, describe=describe(False), pair_rows=True,
+                  gaussian_table=gaussian_table)
 VANILLA = Backend("pallas_vanilla", lambda *args: rasterize(*args, vanilla=True),
                   describe=describe(True), pair_rows=True)
