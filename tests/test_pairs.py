@@ -3,6 +3,7 @@
 evaluated form, on adversarial conics placed on the 1/255 ellipse edge and on projected scenes,
 and tight on a real scene."""
 
+import dataclasses
 import functools
 import os
 
@@ -102,3 +103,37 @@ def test_strip_masks_are_tight_on_a_real_scene(data_dir, capsys):
         print(f"\nlego 64x48 strip masks: {needed} strips needed, {kept} set "
               f"(tightness {needed / max(kept, 1):.3f})")
     assert needed / kept > 0.8
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@given(exponents=st.lists(st.floats(-120, 120), min_size=16, max_size=16),
+       flags=st.lists(st.booleans(), min_size=16, max_size=16))
+def test_signed_det_lo_gives_det_lo_and_unbounded_back_exactly(dtype, exponents, flags):
+    """The table's one column for (det_lo, unbounded): the same bits back, for every positive
+    det_lo the padded ellipse can hold (1 where unbounded)."""
+    det_lo = np.exp2(np.asarray(exponents)).astype(dtype)
+    unbounded = np.asarray(flags)
+    det_lo = np.where(unbounded, dtype(1), det_lo)  # binning.padded_ellipse's placeholder
+    got, got_flags = pairs.split_det_lo(pairs.signed_det_lo(det_lo, unbounded))
+    assert np.array_equal(np.asarray(got), det_lo) and np.asarray(got).dtype == dtype
+    assert np.array_equal(np.asarray(got_flags), unbounded)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_padded_ellipse_det_lo_is_positive_on_adversarial_scenes(seed):
+    """What `pairs.signed_det_lo` relies on: det_lo > 0 for every Gaussian the table holds
+    (NaN only where the projection is NaN: invalid rows, which no pair reaches), and exactly
+    1 where the ellipse cannot be bounded."""
+    g = scenes.scene(seed, kinds=scenes.KINDS, n=400)
+    p = project(g, scenes.camera(width=W, height=H))
+    # and singular or nearly singular conics (a·c = b², or 1 ulp off), which it cannot bound
+    conic = np.asarray(p.conic).copy()
+    conic[:40] = [1.0, 1.0, 1.0]
+    conic[40:80, 2] = np.nextafter(conic[40:80, 0] ** -1, np.inf) * conic[40:80, 1] ** 2
+    p = dataclasses.replace(p, conic=jnp.asarray(conic))
+    e = binning.padded_ellipse(p)
+    det_lo, unbounded = np.asarray(e.det_lo), np.asarray(e.unbounded)
+    assert unbounded.any()
+    assert not np.any(det_lo <= 0)
+    assert np.all(det_lo[unbounded] == 1)
+    assert np.all(np.isfinite(det_lo[np.asarray(p.valid)]))

@@ -251,3 +251,22 @@ def test_compaction_applies_where_its_conditions_hold():
     compact = C(kernel="mosaic")
     assert pallas.plan(compact, False, 10**5).forward_pixels == 128  # whole tiles otherwise
     assert pallas.plan(compact, True, 10**5).forward_pixels == 256  # the vanilla kernel's
+
+
+def test_table_render_builds_before_binning_is_the_one_the_backend_builds():
+    """`render` hands the `pallas` backend its Gaussian table (`Backend.gaussian_table`, built
+    before binning, `TileBins.table`) only where a staged Local-GS forward reads it; without
+    one in the bins the backend builds the same table itself: the same outputs, bit for bit."""
+    g = scenes.scene(3, kinds=DENSE, n=48)
+    cam = scenes.camera(dtype=np.float32, **TILE_CAMERA)
+    p = project(scenes.cast(g, np.float32), cam)
+    config = C(kernel="mosaic")
+    table = pallas.gaussian_table(p, config, 1, CAPACITY)
+    assert table is not None and table.shape == (g.num, pairs.TABLE_COLUMNS)
+    for other in (C(kernel="triton"), C(kernel="mosaic", tuning=K(mosaic_pair_source="records"))):
+        assert pallas.gaussian_table(p, other, 1, CAPACITY) is None
+    outs = [pallas.rasterize(p, binning.bin_gaussians(p, cam.width, cam.height, CAPACITY, None,
+                                                      t), cam.width, cam.height, config)
+            for t in (None, table)]
+    for a, b in zip(*(jax.tree.leaves((o.color, o.trans, o.depth, o.stop)) for o in outs)):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
