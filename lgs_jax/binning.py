@@ -352,8 +352,8 @@ def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
     which every per-Gaussian column of the emission reads): XLA would otherwise compute the
     emission's columns (depth keys, tile rectangles and counts) first and keep them live while
     the table is written, next to the table's own inputs, the peak of the temporaries at scale
-    (H200, forward + backward at 5.8M Gaussians, 1080p, walked rows: 930 → 886 MiB;
-    forward at 10M, 4K: 1297 → 1268 MiB; `scripts/gpu_memory_offline.py`)."""
+    (XLA's buffer assignment for the H200, `scripts/gpu_memory_offline.py`: forward + backward
+    at 5.8M Gaussians, 1080p, walked rows 930 → 886 MiB; forward at 10M, 4K 1297 → 1268)."""
     tiles_x, tiles_y = tile_grid(width, height)
     if table is not None:
         valid, table = lax.optimization_barrier((p.valid, table))
