@@ -5,7 +5,7 @@ stores of a column land 56 bytes apart, one memory sector each. At 10M Gaussians
 that pass took 0.69 ms, the forward's largest XLA pass after the kernels (BENCHMARKS.md §7
 "Dec 2, late evening"). Here each program reads `lanes` Gaussians' fields as (N,) columns
 (`pairs.table_columns`, the padded ellipse computed by XLA) and stores their rows as one
-(lanes, 16) block masked to the 14 columns, whose consecutive lanes write consecutive bytes.
+(lanes, 16) block masked to the TABLE_COLUMNS (13), whose consecutive lanes write consecutive bytes.
 Every value is a copy: the table equals `pairs.gaussian_table`'s bit for bit (a test checks it
 in interpret mode).
 """
