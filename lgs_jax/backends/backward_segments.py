@@ -16,7 +16,8 @@ would have there (lgs_jax.backends.backward):
 
 where C_hi, D_hi and T_hi are the forward's state before pair hi, which the Local-GS Mosaic GPU
 forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), at index
-`base[tile] + m − 1` of (n_checkpoints, 256) buffers. A pixel that stopped at or before hi
+`base[tile] + m − 1` of (n_checkpoints, 256) buffers; `entries` turns them into (T_hi, S_hi)
+after the forward. A pixel that stopped at or before hi
 enters with (T, 0) instead, which is exact for it (T and C stay constant after a pixel's stop)
 and needs no checkpoint: its forward block may have exited before hi without storing one
 (`pallas_mosaic._entry`; a pixel stopping inside the segment read that unwritten memory until
@@ -25,7 +26,7 @@ Dec 3).
 With walked rows (`TileBins.row_capacity` R) the backward needs only the checkpoints inside
 the walked pairs, (last − start − 1) // L per tile, at most R // L in all (fewer walked pairs
 than rows: `stats.row_overflow` otherwise). The forward, which learns a tile's walked length
-only as it walks, still stores them at the list-length indices, and `compact` copies the
+only as it walks, still stores them at the list-length indices, and `entries` gathers the
 needed ones into R // L + 1 rows right after it (`walked_checkpoints`), so the full buffer
 (capacity // L rows, 120 MiB at 10M Gaussians at 4K) is not live during the backward.
 
@@ -64,17 +65,34 @@ def _walked_need(bins: TileBins, last, segment: int):
     return jnp.maximum(last - bins.tile_start - 1, 0) // segment
 
 
-def compact(saved, bins: TileBins, last, segment: int):
-    """The five (rows, 256) checkpoint buffers of `walked_checkpoints` from the forward's five
-    (`checkpoints`): row base'[t] + m − 1 = row base[t] + m − 1 for each tile t and each of
-    its needed checkpoints m (a gather; rows past the needed ones copy row 0)."""
+def _compacted_rows(bins: TileBins, last, segment: int):
+    """(tile, source) of each of `walked_checkpoints`' rows: the tile it belongs to and the
+    forward's checkpoint row (`checkpoints`) it takes (row 0 for rows past the needed ones):
+    row base'[t] + m − 1 from row base[t] + m − 1 for each needed checkpoint m of tile t."""
     full_base, _ = checkpoints(bins, segment)
     base, rows = walked_checkpoints(bins, last, segment)
     need = _walked_need(bins, last, segment)
     tile = segment_of_slot(base, need, rows)
     m = jnp.arange(rows, dtype=jnp.int32) - base[tile]
-    source = jnp.where(m < need[tile], full_base[tile] + m, 0)
-    return tuple(x[source] for x in saved)
+    return tile, jnp.where(m < need[tile], full_base[tile] + m, 0)
+
+
+def entries(final, saved, bins: TileBins, segment: int, last=None):
+    """The carries a segment enters with (module docstring), per checkpoint row: (C − C_hi for
+    r, g, b; T_hi; D − D_hi), from the forward's final r, g, b, D (n_tiles, 256) and its five
+    checkpoint buffers (C_hi for r, g, b; T_hi; D_hi: `checkpoints`), in their rows, or with
+    `last` (`RowLayout.end`, walked rows) in `walked_checkpoints`' (a gather). Subtracted here once, so the final
+    planes need not live through the backward kernel (four image-sized planes: 127 MiB at
+    4K, where at 0.09M Gaussians they were a third of the gradient's memory); the same
+    float subtraction the kernel made, so the same bits."""
+    if last is None:
+        base, rows = checkpoints(bins, segment)
+        tile = segment_of_slot(base, _walked_need(bins, bins.tile_end, segment), rows)
+    else:
+        tile, source = _compacted_rows(bins, last, segment)
+        saved = tuple(x[source] for x in saved)
+    (f_r, f_g, f_b, f_d), (c_r, c_g, c_b, t_hi, d_hi) = final, saved
+    return f_r[tile] - c_r, f_g[tile] - c_g, f_b[tile] - c_b, t_hi, f_d[tile] - d_hi
 
 
 def whole_tiles(order, bins: TileBins, last):
@@ -89,7 +107,7 @@ def split(bins: TileBins, last, segment: int, compacted: bool = False):
     pairs [tile_start, last) (`RowLayout.end`; module docstring), longest first; rows past the
     real segments are empty (lo = hi), as is the one segment of a tile that walked nothing.
     Checkpoint indices into the forward's buffers (`checkpoints`) or, `compacted`, into
-    `compact`'s (`walked_checkpoints`; clipped to its rows)."""
+    `entries`' (`walked_checkpoints`; clipped to its rows)."""
     n_tiles, capacity = bins.tile_start.shape[0], bins.gauss.shape[0]
     start = bins.tile_start
     count = jnp.maximum((last - start + segment - 1) // segment, 1)

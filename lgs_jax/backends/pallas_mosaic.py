@@ -296,8 +296,8 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     every row is written once per block (the tile in every one), as `reduction` says
     (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D; without D,
     which is then zero, where not `depth_cotangent`); with
-    `from_checkpoints` (split segments), the forward's final r, g, b, D and its five
-    checkpoint buffers, which give a segment that is not its tile's last its entering carry;
+    `from_checkpoints` (split segments), the five buffers of the carries a segment that is not
+    its tile's last enters with (`backward_segments.entries`);
     then rows_ref; then the scratch:
     when `staged`, the shared-memory record buffers and their barriers
     (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`; the loop carries
@@ -308,7 +308,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     pair's mask is read there once its chunk is built."""
     dt = rec_ref.dtype
     n_cot = 5 if depth_cotangent else 4
-    n_in = n_cot + (4 + 5 if from_checkpoints else 0)  # cotangents, final r g b D, checkpoints
+    n_in = n_cot + (5 if from_checkpoints else 0)  # cotangents, entering carries
     cot_refs, entry_refs, rows_ref, scratch = (refs[:n_cot], refs[n_cot:n_in], refs[n_in],
                                                refs[n_in + 1:])
     sid, wg = lax.axis_index("tile"), lax.axis_index("wg")
@@ -369,8 +369,8 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
 def _entry(trans, stop_at, hi, entry_refs, tile, check, inside, half):
     """The walk's carry (T, S_r, S_g, S_b, S_Z) where it enters its segment [lo, hi): at the
     tile's end (T, 0, 0, 0, 0); inside the block's walk, from checkpoint `check`
-    (`backward_segments`: the forward's T there and C − C_hi, D − D_hi). Only for a pixel that
-    blends pair hi (its stop pair is past hi), whose forward block walked past hi and so
+    (`backward_segments.entries`: the forward's T there and C − C_hi, D − D_hi). Only for a
+    pixel that blends pair hi (its stop pair is past hi), whose forward block walked past hi and so
     stored the checkpoint. A pixel that stopped at or before hi is in its final state there,
     so it enters with (T, 0, 0, 0, 0), exactly what the checkpoint would hold; its forward
     block may have stopped before hi without storing it (half-tile forward blocks under a
@@ -380,15 +380,14 @@ def _entry(trans, stop_at, hi, entry_refs, tile, check, inside, half):
     zero = jnp.zeros_like(trans)
     if not entry_refs:
         return trans, zero, zero, zero, zero
-    final, saved = entry_refs[:4], entry_refs[4:]
+    s_r, s_g, s_b, t_hi, s_d = entry_refs
 
     def from_checkpoint():
         c = jnp.maximum(check, 0)
         reached = stop_at > hi
-        sums = [jnp.where(reached, final[i][tile, half] - saved[i][c, half], zero)
-                for i in range(3)]
-        return (jnp.where(reached, saved[3][c, half], trans), *sums,
-                jnp.where(reached, final[3][tile, half] - saved[4][c, half], zero))
+        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b)]
+        return (jnp.where(reached, t_hi[c, half], trans), *sums,
+                jnp.where(reached, s_d[c, half], zero))
 
     return lax.cond(inside & (check >= 0), from_checkpoint,
                     lambda: (trans, zero, zero, zero, zero))
@@ -452,9 +451,9 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     row (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
     rows no pair has are left unwritten (no Gaussian's rows reach them). `segments`: the
     (n, backward_segments.COLUMNS) table (`backward_segments.whole_tiles` or `split`);
-    `entry`: with split segments, the forward's final r, g, b, D and its checkpoints (r, g, b,
-    T, D). `lane_rows` = the per-tile final T, stop pairs and cotangents (r, g, b, T, D; D
-    left out where it is zero, a symbolic zero not materialised). (masks, records): the
+    `entry`: with split segments, `backward_segments.entries` (C − C_hi for r, g, b; T_hi;
+    D − D_hi per checkpoint). `lane_rows` = the per-tile final T, stop pairs and cotangents
+    (r, g, b, T, D; D left out where it is zero, a symbolic zero not materialised). (masks, records): the
     pairs' (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source`
     "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
     "transposed" on the GPU, "terms" in interpret mode)."""

@@ -68,32 +68,39 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
 
 @settings(max_examples=10)
 @given(seed=st.integers(0, 2**32 - 1), share=st.floats(0.3, 1), segment=st.sampled_from([4, 8]))
-def test_compact_keeps_each_tiles_walked_checkpoints_where_split_reads_them(seed, share,
-                                                                            segment):
-    """Random walks, rows for exactly the walked pairs: `compact` holds, at the index the
-    compacted `split` gives each segment, the forward's checkpoint row that the full `split`
-    gives it, in row_capacity // segment + 1 rows (tiles of tens of pairs: some segments enter
-    from checkpoints, asserted)."""
+def test_entries_hold_each_segments_carry_where_split_reads_it(seed, share, segment):
+    """Random walks, rows for exactly the walked pairs: at the index `split` gives each segment
+    that enters from a checkpoint, `entries` holds (C − C_hi for r, g, b; T_hi; D − D_hi) of its
+    tile's final planes and the forward's checkpoint row that the full `split` gives it: in the
+    forward's rows, and with walked rows compacted into row_capacity // segment + 1 rows
+    (tiles of tens of pairs: some segments enter from checkpoints, asserted)."""
     g = scenes.saturating(seed, 200, np.float64)
     bins, start, last, rng = _random_walks(g, seed, share)
     bins = dataclasses.replace(bins, row_capacity=max(int(np.sum(last - start)), 1))
     _, n_full = backward_segments.checkpoints(bins, segment)
+    n_tiles = bins.tile_start.shape[0]
+    final = tuple(rng.normal(size=(n_tiles, 256)) for _ in range(4))
     full = tuple(rng.normal(size=(n_full, 256)) for _ in range(5))
 
     @jax.jit
-    def run(bins, last, full):
-        return (backward_segments.compact(full, bins, last, segment),
+    def run(bins, last, final, full):
+        return (backward_segments.entries(final, full, bins, segment),
+                backward_segments.entries(final, full, bins, segment, last),
                 backward_segments.split(bins, last, segment),
                 backward_segments.split(bins, last, segment, compacted=True))
 
-    compacted, table, table_c = run(bins, jnp.asarray(last), full)
+    in_place, compacted, table, table_c = run(bins, jnp.asarray(last), final, full)
     assert compacted[0].shape == (bins.row_capacity // segment + 1, 256)
     np.testing.assert_array_equal(np.asarray(table)[:, :3], np.asarray(table_c)[:, :3])
     src, dst = np.asarray(table)[:, 3], np.asarray(table_c)[:, 3]
     np.testing.assert_array_equal(src >= 0, dst >= 0)
     assert np.any(src >= 0)
-    for a, b in zip(full, compacted):
-        np.testing.assert_array_equal(np.asarray(b)[dst[dst >= 0]], a[src[src >= 0]])
+    tile, src, dst = np.asarray(table)[src >= 0, 0], src[src >= 0], dst[dst >= 0]
+    expected = [final[0][tile] - full[0][src], final[1][tile] - full[1][src],
+                final[2][tile] - full[2][src], full[3][src], final[3][tile] - full[4][src]]
+    for want, a, b in zip(expected, in_place, compacted):
+        np.testing.assert_array_equal(np.asarray(a)[src], want)
+        np.testing.assert_array_equal(np.asarray(b)[dst], want)
 
 
 def _grads(g, cam, w, config, row_capacity=None):

@@ -1,0 +1,17 @@
+# Next GPU session (issues 17 and 18), from the repository root; each step one `run` call.
+# Set up carry/ as on Dec 3 (data, gsplat wheel), plus:
+#   carry/ab_pkg.py = this folder's ab_pkg.py; carry/old/lgs_old = `git archive cdc3380 lgs_jax`
+#   renamed lgs_old (cdc3380: before `backward_segments.entries`, the split backward's
+#   entering carries computed after the forward).
+# 0. The backward kernel's inputs changed (five entry buffers instead of nine): its GPU tests,
+#    then the A/B in one process (time, memory, same bits), forward + backward:
+#      TEST_WORKERS=8 bash scripts/scale_gpu_check.sh tests
+#      for s in guitar_4k guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k; do
+#        timeout 120 python3 carry/ab_pkg.py $s 7; done
+#    Expected (scripts/gpu_memory_offline.py, MiB): guitar_4k 408 -> 282, 720p 64 -> 50,
+#    x16 walked 278 -> 248, x64 walked 841 -> 841, x110 walked 1578 -> 1546; times within
+#    ~0.05 ms (one fusion over the checkpoint rows; the kernel reads 4 planes less per entry).
+# 1. The small scenes against gsplat (not measured since Dec 2):
+#      SCENES="lego_800 guitar_720p guitar_4k" GRAD_ROWS=localgs,localgs@walked \
+#        bash scripts/scale_gpu_check.sh grad
+# 2. Training unchanged? TRAIN_SCENES=lego bash scripts/scale_gpu_check.sh train
