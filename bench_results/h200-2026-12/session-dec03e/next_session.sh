@@ -8,9 +8,12 @@
 #      TEST_WORKERS=8 bash scripts/scale_gpu_check.sh tests
 #      for s in guitar_4k guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k; do
 #        timeout 120 python3 carry/ab_pkg.py $s 7; done
-#    Expected (scripts/gpu_memory_offline.py, MiB): guitar_4k 408 -> 282, 720p 64 -> 50,
-#    x16 walked 278 -> 248, x64 walked 841 -> 841, x110 walked 1578 -> 1546; times within
-#    ~0.05 ms (one fusion over the checkpoint rows; the kernel reads 4 planes less per entry).
+#    Expected (scripts/gpu_memory_offline.py, MiB): guitar_4k 408 -> 282 (measured: 282),
+#    720p 64 -> 50, x16 walked 278 -> 248, x64 walked 841 -> 841, x110 walked 1578 -> 1546.
+#    Time: at guitar_4k walked rows took ~0.2 ms more in two 5-round runs (8_entries/); find
+#    where with every kernel's time, this tree and a copy with the old package (as c23.sh):
+#      python3 scripts/kernel_times.py --grad --data carry/data --scenes guitar_4k \
+#        --rows localgs --iters 10 --top 40 --no-gsplat   (kernel_times has no @walked rows)
 # 1. The small scenes against gsplat (not measured since Dec 2):
 #      SCENES="lego_800 guitar_720p guitar_4k" GRAD_ROWS=localgs,localgs@walked \
 #        bash scripts/scale_gpu_check.sh grad
