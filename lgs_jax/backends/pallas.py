@@ -201,10 +201,13 @@ def _forward_staged(plan_: Plan) -> bool:
 def gaussian_table(p: Projected, config: RasterConfig, n_tiles: int, capacity: int):
     """`Backend.gaussian_table` of the `pallas` backend: the table a staged Local-GS forward
     reads (lgs_jax.backends.table_kernel), built by `render` before binning (the backward reads
-    the same one), else None. Not differentiated: the backward kernel's gradients are the
-    projected fields' whole derivative."""
+    the same one), else None. None too where the forward a backward follows does not read it
+    (a Triton backward: records built in XLA, `Plan.for_gradients`), which would leave it
+    unused under differentiation; such a forward alone builds it itself (`_kernel_inputs`).
+    Not differentiated: the backward kernel's gradients are the projected fields' whole
+    derivative."""
     plan_ = plan(config, False, n_tiles, capacity)
-    if not _forward_staged(plan_):
+    if not (_forward_staged(plan_) and _forward_staged(plan_.for_gradients())):
         return None
     return table_kernel.gaussian_table(lax.stop_gradient(p), plan_.interpret)
 

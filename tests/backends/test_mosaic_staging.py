@@ -255,7 +255,8 @@ def test_compaction_applies_where_its_conditions_hold():
 
 def test_table_render_builds_before_binning_is_the_one_the_backend_builds():
     """`render` hands the `pallas` backend its Gaussian table (`Backend.gaussian_table`, built
-    before binning, `TileBins.table`) only where a staged Local-GS forward reads it; without
+    before binning, `TileBins.table`) only where a staged Local-GS forward reads it, with or
+    without a backward after it (not with a Triton backward, which reads records); without
     one in the bins the backend builds the same table itself: the same outputs, bit for bit."""
     g = scenes.scene(3, kinds=DENSE, n=48)
     cam = scenes.camera(dtype=np.float32, **TILE_CAMERA)
@@ -263,7 +264,10 @@ def test_table_render_builds_before_binning_is_the_one_the_backend_builds():
     config = C(kernel="mosaic")
     table = pallas.gaussian_table(p, config, 1, CAPACITY)
     assert table is not None and table.shape == (g.num, pairs.TABLE_COLUMNS)
-    for other in (C(kernel="triton"), C(kernel="mosaic", tuning=K(mosaic_pair_source="records"))):
+    triton_backward = C(tuning=K(interpret=False, auto_backward="triton"))  # a Mosaic forward
+    assert pallas.plan(triton_backward, False, 1).forward == "mosaic"
+    for other in (C(kernel="triton"), C(kernel="mosaic", tuning=K(mosaic_pair_source="records")),
+                  triton_backward):
         assert pallas.gaussian_table(p, other, 1, CAPACITY) is None
     outs = [pallas.rasterize(p, binning.bin_gaussians(p, cam.width, cam.height, CAPACITY, None,
                                                       t), cam.width, cam.height, config)
