@@ -81,10 +81,10 @@ def entries(final, saved, bins: TileBins, segment: int, last=None):
     """The carries a segment enters with (module docstring), per checkpoint row: (C − C_hi for
     r, g, b; T_hi; D − D_hi), from the forward's final r, g, b, D (n_tiles, 256) and its five
     checkpoint buffers (C_hi for r, g, b; T_hi; D_hi: `checkpoints`), in their rows, or with
-    `last` (`RowLayout.end`, walked rows) in `walked_checkpoints`' (a gather). Subtracted here once, so the final
-    planes need not live through the backward kernel (four image-sized planes: 127 MiB at
-    4K, where at 0.09M Gaussians they were a third of the gradient's memory); the same
-    float subtraction the kernel made, so the same bits."""
+    `last` (`RowLayout.end`, walked rows) in `walked_checkpoints`' (a gather). Subtracted
+    here once, so the final planes need not live through the backward kernel (four
+    image-sized planes: 127 MiB at 4K, where at 0.09M Gaussians they were a third of the
+    gradient's memory); the same float subtraction the kernel made, so the same bits."""
     if last is None:
         base, rows = checkpoints(bins, segment)
         tile = segment_of_slot(base, _walked_need(bins, bins.tile_end, segment), rows)

@@ -453,9 +453,9 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     (n, backward_segments.COLUMNS) table (`backward_segments.whole_tiles` or `split`);
     `entry`: with split segments, `backward_segments.entries` (C − C_hi for r, g, b; T_hi;
     D − D_hi per checkpoint). `lane_rows` = the per-tile final T, stop pairs and cotangents
-    (r, g, b, T, D; D left out where it is zero, a symbolic zero not materialised). (masks, records): the
-    pairs' (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source`
-    "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
+    (r, g, b, T, D; D left out where it is zero, a symbolic zero not materialised). (masks,
+    records): the pairs' (Gaussian ids, `pairs.gaussian_table`) with
+    `tuning.mosaic_pair_source` "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
     "transposed" on the GPU, "terms" in interpret mode)."""
     reduction = mosaic_rows.resolve(reduction, interpret)
     capacity = bins.gauss.shape[0]

@@ -18,3 +18,8 @@
 #      SCENES="lego_800 guitar_720p guitar_4k" GRAD_ROWS=localgs,localgs@walked \
 #        bash scripts/scale_gpu_check.sh grad
 # 2. Training unchanged? TRAIN_SCENES=lego bash scripts/scale_gpu_check.sh train
+# 3. The 4K forward's host share (issue 17's 0.8x): session-dec03d/cb_probe.py with more variants,
+#    e.g. {"xla_gpu_graph_min_graph_size": 1} (since the table before binning, the Local-GS
+#    kernel runs outside XLA's command buffers: `mpmd_map.0` rather than `command_buffer_46` in
+#    3_which/kt_*.log) and the command buffer types with custom calls listed explicitly;
+#    `python3 cb_probe.py guitar_x110_4k 20`.
