@@ -17,9 +17,8 @@ would have there (lgs_jax.backends.backward):
 where C_hi, D_hi and T_hi are the forward's state before pair hi, which the Local-GS Mosaic GPU
 forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), at index
 `base[tile] + m − 1` of (n_checkpoints, 256) buffers; `entries` turns them into (T_hi, S_hi)
-after the forward. A pixel that stopped at or before hi
-enters with (T, 0) instead, which is exact for it (T and C stay constant after a pixel's stop)
-and needs no checkpoint: its forward block may have exited before hi without storing one
+after the forward. A pixel that stopped at or before hi enters with (T, 0) instead, which is
+exact for it (T and C stay constant after a pixel's stop) and needs no checkpoint: its forward block may have exited before hi without storing one
 (`pallas_mosaic._entry`; a pixel stopping inside the segment read that unwritten memory until
 Dec 3).
 
