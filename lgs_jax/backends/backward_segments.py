@@ -18,9 +18,9 @@ where C_hi, D_hi and T_hi are the forward's state before pair hi, which the Loca
 forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), at index
 `base[tile] + m − 1` of (n_checkpoints, 256) buffers; `entries` turns them into (T_hi, S_hi)
 after the forward. A pixel that stopped at or before hi enters with (T, 0) instead, which is
-exact for it (T and C stay constant after a pixel's stop) and needs no checkpoint: its forward block may have exited before hi without storing one
-(`pallas_mosaic._entry`; a pixel stopping inside the segment read that unwritten memory until
-Dec 3).
+exact for it (T and C stay constant after a pixel's stop) and needs no checkpoint: its forward
+block may have exited before hi without storing one (`pallas_mosaic._entry`; a pixel stopping
+inside the segment read that unwritten memory until Dec 3).
 
 With walked rows (`TileBins.row_capacity` R) the backward needs only the checkpoints inside
 the walked pairs, (last − start − 1) // L per tile, at most R // L in all (fewer walked pairs
