@@ -41,11 +41,17 @@ from ..binning import TileBins, segment_of_slot
 COLUMNS = 4  # a segment's (tile, lo, hi, checkpoint index or −1)
 
 
+def _checkpoints_within(bins: TileBins, last, segment: int):
+    """(n_tiles,) checkpoints inside each tile's pairs [tile_start, last): its walked pairs
+    (`RowLayout.end`), or with last = tile_end its whole list (`checkpoints`)."""
+    return jnp.maximum(last - bins.tile_start - 1, 0) // segment
+
+
 def checkpoints(bins: TileBins, segment: int):
     """((n_tiles,) int32 base index of each tile's checkpoints, number of checkpoint rows): tile
     t stores checkpoints m = 1 .. (len_t − 1) // segment (pairs start + m·segment inside its
     list), rows base[t] .. base[t] + count − 1; at most capacity // segment in all."""
-    per_tile = jnp.maximum(bins.tile_end - bins.tile_start - 1, 0) // segment
+    per_tile = _checkpoints_within(bins, bins.tile_end, segment)
     return jnp.cumsum(per_tile) - per_tile, bins.gauss.shape[0] // segment + 1
 
 
@@ -55,13 +61,8 @@ def walked_checkpoints(bins: TileBins, last, segment: int):
     walked pairs [tile_start, last) (`RowLayout.end`), in row_capacity // segment + 1 rows.
     Where more pairs were walked than `bins.row_capacity` (an overflow, reported) the last
     tiles' indices run past the rows; `split` clips them."""
-    need = _walked_need(bins, last, segment)
+    need = _checkpoints_within(bins, last, segment)
     return jnp.cumsum(need) - need, bins.row_capacity // segment + 1
-
-
-def _walked_need(bins: TileBins, last, segment: int):
-    """(n_tiles,) checkpoints inside each tile's walked pairs [tile_start, last)."""
-    return jnp.maximum(last - bins.tile_start - 1, 0) // segment
 
 
 def _compacted_rows(bins: TileBins, last, segment: int):
@@ -70,7 +71,7 @@ def _compacted_rows(bins: TileBins, last, segment: int):
     row base'[t] + m − 1 from row base[t] + m − 1 for each needed checkpoint m of tile t."""
     full_base, _ = checkpoints(bins, segment)
     base, rows = walked_checkpoints(bins, last, segment)
-    need = _walked_need(bins, last, segment)
+    need = _checkpoints_within(bins, last, segment)
     tile = segment_of_slot(base, need, rows)
     m = jnp.arange(rows, dtype=jnp.int32) - base[tile]
     return tile, jnp.where(m < need[tile], full_base[tile] + m, 0)
@@ -86,7 +87,7 @@ def entries(final, saved, bins: TileBins, segment: int, last=None):
     gradient's memory); the same float subtraction the kernel made, so the same bits."""
     if last is None:
         base, rows = checkpoints(bins, segment)
-        tile = segment_of_slot(base, _walked_need(bins, bins.tile_end, segment), rows)
+        tile = segment_of_slot(base, _checkpoints_within(bins, bins.tile_end, segment), rows)
     else:
         tile, source = _compacted_rows(bins, last, segment)
         saved = tuple(x[source] for x in saved)
