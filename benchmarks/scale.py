@@ -278,11 +278,11 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     fns, extra = {}, {}
     for name in rows:
         backend, config, cap = row_setup(name, n_pairs)
-        row_cap = None
+        row_cap = walked = None
         if name.endswith(WALKED):
-            walked = lgs_jax.render(g, cam, backend=backend, config=config,
-                                    capacity=cap).stats.pairs_walked
-            row_cap = lgs_jax.pair_capacity(int(walked))
+            walked = int(lgs_jax.render(g, cam, backend=backend, config=config,
+                                        capacity=cap).stats.pairs_walked)
+            row_cap = lgs_jax.pair_capacity(walked)
         # w is an argument: closed over, XLA would constant-fold the image-sized weights into
         # the backward (minutes of compilation at 4K).
         def loss(g, w, b=backend, cf=config, cap=cap, rc=row_cap):
@@ -294,7 +294,7 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
         same = same_bits(scene, name, first, f(g, weights)[1])
         if bool(overflow):
             print(f"{scene} {name}: row capacity {row_cap} overflowed", file=sys.stderr)
-        extra[name] = dict(capacity=cap, row_capacity=row_cap,
+        extra[name] = dict(capacity=cap, row_capacity=row_cap, pairs_walked=walked,
                            memory_mib=compiled_mib(f, g, weights), bitwise_repeatable=same)
         fns[name] = lambda f=f: jax.block_until_ready(f(g, weights))
     if with_gsplat:
@@ -352,8 +352,8 @@ def _format(r) -> str:
               f"gsplat" if "fwd_bwd_vs_gsplat" in r else "")
         same = {True: " bitwise", False: " NOT BITWISE"}.get(r.get("bitwise_repeatable"), "")
         cap = f" cap {r['capacity'] / 1e6:6.2f}M" if "capacity" in r else ""
-        if r.get("row_capacity"):
-            cap += f" rows {r['row_capacity'] / 1e6:6.2f}M"
+        if r.get("row_capacity"):  # the buffer, then the walked pairs it was sized for
+            cap += f" rows {r['row_capacity'] / 1e6:6.2f}M ({r['pairs_walked'] / 1e6:.2f}M)"
         return (f"{head} fwd+bwd {r['fwd_bwd_ms']:8.2f} ms mem {r['memory_mib']:8.0f} MiB{cap}"
                 f"{vs}{same}")
     vs = (f" | {r['e2e_vs_gsplat']:5.2f}x time {r['memory_vs_gsplat']:5.2f}x memory of gsplat, "

@@ -7,8 +7,10 @@
 #    with walked rows 1.06x). Every kernel of their forward + backward, ours and gsplat's:
 #      SCENES="synthetic10M_4k synthetic4M_1080p" KT_ARGS="--grad --rows localgs --iters 5 \
 #        --top 40" bash scripts/scale_gpu_check.sh kernels
-#    and the walked pairs there (the row buffer's slack under pair_capacity's grid): print
-#    int(render(...).stats.pairs_walked) for both (rows 10.49M and 3.67M were used).
+#    and the walked pairs there (the row buffer's slack under pair_capacity's grid; rows 10.49M
+#    and 3.67M were used): `benchmarks.scale --grad` prints them beside the rows now, e.g.
+#      SCENES="synthetic4M_1080p synthetic10M_4k" GRAD_ROWS=localgs@walked \
+#        bash scripts/scale_gpu_check.sh grad
 # 3. The 4K forward's host share (issue 17's 0.8x at x110, 0.90x now): session-dec03d/cb_probe.py
 #    with more variants, e.g. {"xla_gpu_graph_min_graph_size": 1}, and the command buffer types
 #    listed explicitly with custom calls; `python3 cb_probe.py guitar_x110_4k 20`.
