@@ -74,6 +74,9 @@ ROWS = {
     "localgs:records": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                        mosaic_pair_source="records"))),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
+    # the colour written as an image by the kernel (KernelConfig.mosaic_image_layout)
+    "localgs:image": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                     mosaic_image_layout=True))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # block-size variants of the Mosaic GPU kernels (KernelConfig)

@@ -105,6 +105,15 @@ class KernelConfig:
         mosaic_forward_pixels says otherwise. H200 (BENCHMARKS.md §7): the forward kernel 0.68x
         its time without at 5.8M Gaussians (1080p), 0.76x at 1.45M, 0.83x at 10M (4K), 0.95x
         at 0.09M (720p).
+      mosaic_image_layout: the Local-GS Mosaic GPU forward, in blocks of 128 pixels (what
+        mosaic_compact runs), writes its colour as one (H, W, 3) image (the tiles' rows, a
+        stride of 3 per channel) instead of three (n_tiles, 256) planes that XLA then
+        interleaves into the image: the planes and the image are never live together, and XLA
+        blends the background in place. Where the render's or the gradient's forward is another
+        kernel, the planes. The same bits. Forward memory for the H200, compiled offline
+        (scripts/gpu_memory_offline.py, BENCHMARKS.md §7): 0.09M Gaussians at 720p 32.9 -> 26.9
+        MiB (gsplat 29), at 4K 263.5 -> 200.2 (gsplat 180); lego_sh3 at 800x800 23 -> 18.7
+        (gsplat 20).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -127,6 +136,7 @@ class KernelConfig:
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
+    mosaic_image_layout: bool = False
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -154,7 +164,7 @@ class KernelConfig:
                                  f" is not a multiple of mosaic_unroll_localgs="
                                  f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
                                  f"whole walks)")
-        for name in ("mosaic_compact",):
+        for name in ("mosaic_compact", "mosaic_image_layout"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"tuning.{name}: expected a bool, got {getattr(self, name)!r}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:

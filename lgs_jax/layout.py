@@ -50,6 +50,18 @@ def image_to_tiles(x, width: int, height: int):
     return jnp.moveaxis(x, 2, 1).reshape((tiles_x * tiles_y, TILE_PIXELS) + rest)
 
 
+def image_tiles(image, tile, tiles_x: int):
+    """The channels of a (tiles_y·16, tiles_x·16, C) image at the pixels of tiles `tile` (any
+    shape): C arrays tile.shape + (256,), pixel k of a tile at row k // 16, column k % 16 (a
+    gather of those pixels only)."""
+    k = jnp.arange(TILE_PIXELS, dtype=jnp.int32)
+    tile = jnp.asarray(tile)[..., None]
+    y = (tile // tiles_x) * TILE + k // TILE
+    x = (tile % tiles_x) * TILE + k % TILE
+    pixels = image[y, x]
+    return tuple(pixels[..., c] for c in range(image.shape[-1]))
+
+
 def pixel_centres(tile, k, tiles_x: int, dtype):
     """Centres of pixels k (0..255, broadcast with `tile`) of tiles `tile`: tile-local (lx, ly)
     relative to the tile corner and global (px, py), each in `dtype`."""

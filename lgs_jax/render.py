@@ -196,8 +196,10 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
     bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity, table)
             if spec.binned else None)
     result = spec.rasterize(p, bins, width, height, config)
-    state = PixelState(color=result.color, trans=result.trans, depth=result.depth, done=None)
-    state = jax.tree.map(lambda x: tiles_to_image(x, width, height), state)
+    color = (result.color[:height, :width].reshape(height * width, 3) if result.image_color
+             else tiles_to_image(result.color, width, height))
+    state = PixelState(color=color, trans=tiles_to_image(result.trans, width, height),
+                       depth=tiles_to_image(result.depth, width, height), done=None)
     image, alpha, depth = finish(state, background)
     return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
                         depth=depth.reshape(height, width),

@@ -2,6 +2,7 @@
 
     build/gpu-offline/bin/python scripts/gpu_memory_offline.py SCENE [--grad] [--row localgs]
         [--capacity C] [--rows R|none] [--data DIR] [--dump DIR [--top 30]]
+        [--tuning NAME=VALUE ...]
 
 JAX compiles for a GPU it does not have ("deviceless" compilation:
 `jax.experimental.topologies.get_topology_desc(platform="cuda", target_config=...)`), given a
@@ -34,6 +35,7 @@ what sets its size).
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import glob
 import os
@@ -87,8 +89,9 @@ def program(args, sharding):
     capacity = args.capacity or lgs_jax.pair_capacity(scale.count_pairs(g, cam))
     rows = None if args.rows == "none" else int(args.rows)
     backend, config = scale.ROWS[args.row]
-    config = dataclasses.replace(config, tuning=dataclasses.replace(config.tuning,
-                                                                    interpret=False))
+    tuning = dict(interpret=False, **{k: ast.literal_eval(v) for k, v in
+                                      (item.split("=", 1) for item in args.tuning)})
+    config = dataclasses.replace(config, tuning=dataclasses.replace(config.tuning, **tuning))
     cam = jax.tree.map(np.asarray, cam)
     print(f"{args.scene}: {g.num} Gaussians, {cam.width}x{cam.height}, row {args.row}, "
           f"capacity {capacity}, row_capacity {rows}", flush=True)
@@ -133,6 +136,8 @@ def main(argv=None) -> int:
     ap.add_argument("--dump", help="XLA dump folder: then hlo_peak.py's peak is printed too")
     ap.add_argument("--top", type=int, default=30)
     ap.add_argument("--temp", action="store_true", help="hlo_peak.py --temp")
+    ap.add_argument("--tuning", action="append", default=[], metavar="NAME=VALUE",
+                    help="a KernelConfig field for the row, e.g. mosaic_image_layout=True")
     args = ap.parse_args(argv)
     os.environ.setdefault("CUDA_VISIBLE_DEVICES", "-1")
     dump = os.path.abspath(args.dump or os.path.join(ROOT, "build", "gpu-offline-dump"))

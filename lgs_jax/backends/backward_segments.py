@@ -17,10 +17,10 @@ would have there (lgs_jax.backends.backward):
 where C_hi, D_hi and T_hi are the forward's state before pair hi, which the Local-GS Mosaic GPU
 forward stores at every pair start + m·L of its walk (m >= 1: `checkpoints`), at index
 `base[tile] + m − 1` of (n_checkpoints, 256) buffers; `entries` turns them into (T_hi, S_hi)
-after the forward. A pixel that stopped at or before hi enters with (T, 0) instead, which is
-exact for it (T and C stay constant after a pixel's stop) and needs no checkpoint: its forward
-block may have exited before hi without storing one (`pallas_mosaic._entry`; a pixel stopping
-inside the segment read that unwritten memory until Dec 3).
+after the forward, and `enter` reads them in the kernel. A pixel that stopped at or before hi
+enters with (T, 0) instead, which is exact for it (T and C stay constant after a pixel's stop)
+and needs no checkpoint: its forward block may have exited before hi without storing one (a
+pixel stopping inside the segment read that unwritten memory until Dec 3).
 
 With walked rows (`TileBins.row_capacity` R) the backward needs only the checkpoints inside
 the walked pairs, (last − start − 1) // L per tile, at most R // L in all (fewer walked pairs
@@ -35,6 +35,7 @@ Determinism: segments are disjoint, so each pair row still has one writer per bl
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import lax
 
 from ..binning import TileBins, segment_of_slot
 
@@ -77,11 +78,13 @@ def _compacted_rows(bins: TileBins, last, segment: int):
     return tile, jnp.where(m < need[tile], full_base[tile] + m, 0)
 
 
-def entries(final, saved, bins: TileBins, segment: int, last=None):
+def entries(final_at, saved, bins: TileBins, segment: int, last=None):
     """The carries a segment enters with (module docstring), per checkpoint row: (C − C_hi for
-    r, g, b; T_hi; D − D_hi), from the forward's final r, g, b, D (n_tiles, 256) and its five
-    checkpoint buffers (C_hi for r, g, b; T_hi; D_hi: `checkpoints`), in their rows, or with
-    `last` (`RowLayout.end`, walked rows) in `walked_checkpoints`' (a gather). Subtracted
+    r, g, b; T_hi; D − D_hi), from the forward's final r, g, b, D at the pixels of given tiles
+    (`final_at(tile)`: four tile.shape + (256,) arrays, gathered from per-tile planes or from
+    the colour image) and its five checkpoint buffers (C_hi for r, g, b; T_hi; D_hi:
+    `checkpoints`), in their rows, or with `last` (`RowLayout.end`, walked rows) in
+    `walked_checkpoints`' (a gather). Subtracted
     here once, so the final planes need not live through the backward kernel (four
     image-sized planes: 127 MiB at 4K, where at 0.09M Gaussians they were a third of the
     gradient's memory); the same float subtraction the kernel made, so the same bits."""
@@ -91,8 +94,8 @@ def entries(final, saved, bins: TileBins, segment: int, last=None):
     else:
         tile, source = _compacted_rows(bins, last, segment)
         saved = tuple(x[source] for x in saved)
-    (f_r, f_g, f_b, f_d), (c_r, c_g, c_b, t_hi, d_hi) = final, saved
-    return f_r[tile] - c_r, f_g[tile] - c_g, f_b[tile] - c_b, t_hi, f_d[tile] - d_hi
+    (f_r, f_g, f_b, f_d), (c_r, c_g, c_b, t_hi, d_hi) = final_at(tile), saved
+    return f_r - c_r, f_g - c_g, f_b - c_b, t_hi, f_d - d_hi
 
 
 def whole_tiles(order, bins: TileBins, last):
@@ -128,3 +131,32 @@ def split(bins: TileBins, last, segment: int, compacted: bool = False):
         index = jnp.where(real & ~top, base[tile] + m, -1)
     order = jnp.argsort(lo - hi, stable=True)
     return jnp.stack([tile, lo, hi, index], -1)[order]
+
+
+def enter(trans, stop_at, hi, entry_refs, check, inside, half):
+    """The carry (T, S_r, S_g, S_b, S_Z) with which a block of the Mosaic GPU backward kernel
+    (lgs_jax.backends.pallas_mosaic) enters its segment [lo, hi), for its pixels (`half`, their
+    columns of a tile's row; final `trans`, `stop_at`): at the tile's end (T, 0, 0, 0, 0);
+    inside the block's walk, from checkpoint `check` (`entries`' rows `entry_refs`: the
+    forward's T there and C − C_hi, D − D_hi). Only for a pixel that blends pair hi (its stop
+    pair is past hi), whose forward block walked past hi and so stored the checkpoint. A pixel
+    that stopped at or before hi is in its final state there, so it enters with (T, 0, 0, 0,
+    0), exactly what the checkpoint would hold; its forward block may have stopped before hi
+    without storing it (half-tile forward blocks under a whole-tile backward block:
+    `KernelConfig.mosaic_compact`'s default blocks at 4K). Until Dec 3 the test was stop > lo,
+    so those pixels with lo < stop <= hi took unwritten memory (deterministic stale values,
+    bitwise repeatable but wrong, as at 10M Gaussians at 4K)."""
+    zero = jnp.zeros_like(trans)
+    if not entry_refs:
+        return trans, zero, zero, zero, zero
+    s_r, s_g, s_b, t_hi, s_d = entry_refs
+
+    def from_checkpoint():
+        c = jnp.maximum(check, 0)
+        reached = stop_at > hi
+        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b)]
+        return (jnp.where(reached, t_hi[c, half], trans), *sums,
+                jnp.where(reached, s_d[c, half], zero))
+
+    return lax.cond(inside & (check >= 0), from_checkpoint,
+                    lambda: (trans, zero, zero, zero, zero))

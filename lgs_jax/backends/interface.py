@@ -29,7 +29,8 @@ class RasterResult:
     column k % 16 (lgs_jax.layout).
 
     Attributes:
-      color: (n_tiles, 256, 3) Σ rgb·α·T over the blended Gaussians.
+      color: (n_tiles, 256, 3) Σ rgb·α·T over the blended Gaussians, or with `image_color`
+        (tiles_y·16, tiles_x·16, 3): the tiles' pixels as an image.
       trans: (n_tiles, 256) final transmittance T.
       depth: (n_tiles, 256) Σ z·α·T.
       stop: (n_tiles, 256) int32 pair index at which each pixel stopped (its stop test fired,
@@ -39,6 +40,7 @@ class RasterResult:
         warp culling), or None.
       kernel: name of the Pallas forward kernel that ran ("" for the XLA backends) (static).
       interpreted: the kernel ran in Pallas interpret mode (static).
+      image_color: `color` is laid out as an image (static; `KernelConfig.mosaic_image_layout`).
     """
 
     color: Any
@@ -48,6 +50,7 @@ class RasterResult:
     strip_pairs: Any = None
     kernel: str = dataclasses.field(default="", metadata=dict(static=True))
     interpreted: bool = dataclasses.field(default=False, metadata=dict(static=True))
+    image_color: bool = dataclasses.field(default=False, metadata=dict(static=True))
 
 
 def no_kernel(config) -> tuple[str, bool]:

@@ -55,7 +55,7 @@ from .. import pairs
 from ..binning import TileBins
 from ..composite import PixelState
 from ..config import RasterConfig
-from ..layout import STRIPS, tile_grid
+from ..layout import STRIPS, image_tiles, image_to_tiles, tile_grid
 from ..projection import Projected
 from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
                pallas_triton, table_kernel)
@@ -74,6 +74,9 @@ class Plan:
       forward, backward: "triton" or "mosaic", the forward and backward kernels' implementation.
       interpret: the kernels run in Pallas interpret mode.
       forward_pixels, backward_pixels: Mosaic GPU pixels per block (128 or 256).
+      image: the forward writes its colour as one (tiles_y·16, tiles_x·16, 3) image
+        (`KernelConfig.mosaic_image_layout`), else as per-tile planes; the same for a render
+        and for the forward a backward follows (custom_vjp's two must return alike).
     """
 
     config: RasterConfig
@@ -84,6 +87,7 @@ class Plan:
     forward_pixels: int
     backward_pixels: int
     routed: bool = False
+    image: bool = False
 
     @property
     def kernel_name(self) -> str:
@@ -141,11 +145,14 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
     forward_pixels = t.mosaic_forward_pixels
     if forward_pixels is None and not vanilla and pallas_mosaic.compacts(config):
         forward_pixels = 128  # compacted blocks: half tiles (KernelConfig.mosaic_compact)
-    return Plan(config=config, vanilla=vanilla, forward=forward, backward=backward_impl,
-                interpret=interpret,
-                forward_pixels=block_pixels(forward_pixels, n_tiles, config),
-                backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
-                routed=routed)
+    resolved = Plan(config=config, vanilla=vanilla, forward=forward, backward=backward_impl,
+                    interpret=interpret,
+                    forward_pixels=block_pixels(forward_pixels, n_tiles, config),
+                    backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
+                    routed=routed)
+    writes = lambda q: q.forward == "mosaic" and not q.vanilla and q.forward_pixels == 128
+    image = (t.mosaic_image_layout and writes(resolved) and writes(resolved.for_gradients()))
+    return dataclasses.replace(resolved, image=image)
 
 
 def describe(vanilla: bool):
@@ -265,23 +272,28 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
     args = (plan_.vanilla, plan_.config, plan_.interpret)
     if plan_.forward == "mosaic":
         outs = pallas_mosaic.forward(*args, plan_.forward_pixels, tiles_x, order, bins, data, dt,
-                                     segment=segment)
+                                     segment=segment, image=plan_.image)
     else:
         outs = pallas_triton.forward(*args, tiles_x, order, bins, data, dt)
-    r, g, b, t, d, stop_at = outs[:6]
+    if plan_.image:
+        (color, t, d, stop_at), checks = outs[:4], outs[4:]
+        final_at = lambda tile: (*image_tiles(color, tile, tiles_x), d[tile])
+    else:
+        (r, g, b, t, d, stop_at), checks = outs[:6], outs[6:]
+        color = jnp.stack([r, g, b], -1)
+        final_at = lambda tile: (r[tile], g[tile], b[tile], d[tile])
     stop_at = stop_within(stop_at, bins.tile_end)
     entry = ()
     if segment is not None:  # with walked rows, the walked pairs' checkpoints only
         last = (tile_last(stop_at, bins.tile_start, bins.tile_end)
                 if bins.row_capacity is not None else None)
-        entry = backward_segments.entries((r, g, b, d), outs[6:], bins, segment, last)
+        entry = backward_segments.entries(final_at, checks, bins, segment, last)
         # The entries before what reads the stop pairs after the forward: XLA would otherwise
         # subtract just before the backward kernel, keeping the four planes live next to the
         # cotangents (H200, 0.09M Gaussians at 4K: 348 -> 282 MiB; a barrier with the planes
         # themselves did as well there and cost 8 MiB at 5.8M Gaussians at 1080p).
         entry, stop_at = lax.optimization_barrier((entry, stop_at))
-    state = PixelState(color=jnp.stack([r, g, b], -1), trans=t, depth=d,
-                       done=jnp.zeros(t.shape, bool))
+    state = PixelState(color=color, trans=t, depth=d, done=jnp.zeros(t.shape, bool))
     return state, stop_at, strip_pairs, saved + (order, entry)
 
 
@@ -295,6 +307,8 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
     g_color, g_trans, g_depth = cotangents
+    if plan_.image:  # (tiles_y·16, tiles_x·16, 3) -> (n_tiles, 256, 3)
+        g_color = image_to_tiles(g_color.reshape(-1, 3), *g_color.shape[1::-1])
     masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
     lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans)
     if g_depth is not None or plan_.backward != "mosaic":  # the Mosaic GPU kernel takes None
@@ -331,7 +345,8 @@ def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: Ras
     plan_ = plan(config, vanilla, bins.tile_start.shape[0], bins.gauss.shape[0])
     color, trans, depth, stop, strip_pairs = _COMPOSITE(p, bins, width, height, plan_)
     return RasterResult(color=color, trans=trans, depth=depth, stop=stop, strip_pairs=strip_pairs,
-                        kernel=plan_.kernel_name, interpreted=plan_.interpret)
+                        kernel=plan_.kernel_name, interpreted=plan_.interpret,
+                        image_color=plan_.image)
 
 
 LOCALGS = Backend("pallas", rasterize, describe=describe(False), pair_rows=True,

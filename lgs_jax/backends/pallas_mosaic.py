@@ -73,7 +73,7 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import mosaic_gpu as plgpu
 
 from ..config import RasterConfig
-from ..layout import STRIP_PIXELS, TILE_PIXELS
+from ..layout import STRIP_PIXELS, TILE, TILE_PIXELS
 from . import kernel_steps as ks
 from . import backward_segments, mosaic_rows, mosaic_staging
 
@@ -101,6 +101,26 @@ def _store(refs, tile, cols, outputs):
     outputs."""
     for ref, x in zip(refs, outputs):
         ref[tile, cols] = x.astype(ref.dtype)
+
+
+def _image_store(tiles_x: int, wg, pixels: int):
+    """`_store` for (colour, T, D, stop) where the colour goes to a (tiles_y·16, tiles_x·16, 3)
+    image (`forward`'s `image`): block `wg` of tile `tile` holds rows wg·pixels/16 .. of the
+    tile, pixel k of the block at row k // 16, column k % 16 (lgs_jax.layout), so each channel
+    is one (pixels/16, 16) box, stored with a stride of 3 (one element per thread: blocks of
+    128 pixels; Mosaic GPU refuses a stride of 3 with two elements per thread)."""
+    rows = pixels // TILE
+
+    def store(refs, tile, cols, outputs):
+        color_ref, rest = refs[0], refs[1:]
+        y = (tile // tiles_x) * TILE + wg * rows
+        x = (tile % tiles_x) * TILE
+        for c in range(3):
+            color_ref[pl.ds(y, rows), pl.ds(x, TILE), c] = (
+                outputs[c].astype(color_ref.dtype).reshape(rows, TILE))
+        _store(rest, tile, cols, outputs[3:])
+
+    return store
 
 
 def _strip_bits(wg, pixels: int):
@@ -134,15 +154,17 @@ def compacts(config: RasterConfig) -> bool:
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
-                   interpret: bool, segment: int | None = None):
-    """The Local-GS forward for one warpgroup; `refs` = the six outputs, then, with a
+                   interpret: bool, segment: int | None = None, image: bool = False):
+    """The Local-GS forward for one warpgroup; `refs` = the six outputs (four with `image`:
+    the colour image, T, D, the stop pair; `_image_store`), then, with a
     `segment`, the five checkpoint outputs (r, g, b, T, D before every pair start + m·segment,
     m >= 1, at row ranges_ref[tile, 2] + m − 1: lgs_jax.backends.backward_segments), then, when
     `staged`, the shared-memory record buffers and their barriers. With
     `tuning.mosaic_pair_source` "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids,
     `pairs.gaussian_table`) and the scratch is lgs_jax.backends.mosaic_staging's."""
-    n_out = 6 if segment is None else 11
-    out_refs, check_refs, scratch = refs[:6], refs[6:n_out], refs[n_out:]
+    n_plain = 4 if image else 6
+    n_out = n_plain if segment is None else n_plain + 5
+    out_refs, check_refs, scratch = refs[:n_plain], refs[n_plain:n_out], refs[n_out:]
     dt = rec_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
     tile = order_ref[tid]
@@ -150,6 +172,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     k, strip, cols = _lanes(wg, pixels)
     frame, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
+    store = _image_store(tiles_x, wg, pixels) if image else _store
 
     def evaluate(rec, mask_word):
         alpha, hit, _ = ks.record_alpha(rec, frame, pixel, config)
@@ -161,7 +184,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     if segment is not None:
         checkpoint = _checkpoint(check_refs, ranges_ref[tile, 2], start, cols, segment)
     if compacts(config):
-        _store(out_refs, tile, cols, mosaic_staging.compact_loop(
+        store(out_refs, tile, cols, mosaic_staging.compact_loop(
             mask_ref, rec_ref, scratch, start, end, tile, tiles_x, _strip_bits(wg, pixels),
             evaluate, k.shape[0], dt, config, last_pair, interpret, checkpoint))
         return
@@ -180,10 +203,10 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
             return evaluate([rec_ref[fetched[0], c] for c in range(ks.REC - 1)], fetched[1])
 
         stage = None
-    _store(out_refs, tile, cols,
-           ks.staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha, config,
-                          config.tuning.mosaic_unroll_localgs, stage=stage,
-                          checkpoint=checkpoint))
+    store(out_refs, tile, cols,
+          ks.staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha, config,
+                         config.tuning.mosaic_unroll_localgs, stage=stage,
+                         checkpoint=checkpoint))
 
 
 def _checkpoint(refs, base, start, cols, segment: int):
@@ -250,18 +273,22 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
 
 
 def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, tiles_x: int,
-            order, bins, data, dt, segment: int | None = None):
+            order, bins, data, dt, segment: int | None = None, image: bool = False):
     """Run the vanilla (data = (Gaussian ids, rows)) or Local-GS (data = (masks, records), or
     (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians")
     forward kernel on a (n_tiles, 256 / pixels) grid of one-warpgroup blocks; outputs
-    (n_tiles, 256) each: r, g, b, T, D and the stop pair, then with a `segment` (Local-GS only)
-    the five (n_checkpoints, 256) checkpoint buffers of `backward_segments.checkpoints`."""
+    (n_tiles, 256) each: r, g, b, T, D and the stop pair, or with `image` (Local-GS, blocks of
+    128 pixels) the colour as one (tiles_y·16, tiles_x·16, 3) image and T, D, the stop pair;
+    then with a `segment` (Local-GS only) the five (n_checkpoints, 256) checkpoint buffers of
+    `backward_segments.checkpoints`."""
+    if image and (vanilla or pixels != 128):
+        raise ValueError("image: the Local-GS kernel's blocks of 128 pixels only")
     n_tiles = bins.tile_start.shape[0]
     common = dict(config=config, tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
                   pixels=pixels)
     kernel = (functools.partial(vanilla_kernel, **common) if vanilla else
               functools.partial(localgs_kernel, **common, interpret=interpret,
-                                segment=segment))
+                                segment=segment, image=image))
     columns = [bins.tile_start, bins.tile_end]
     checks = []
     if segment is not None:
@@ -278,7 +305,11 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
         scratch = (plgpu.SMEM((2, chunk, ks.REC), dt), plgpu.Barrier(num_barriers=2))
     out = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), dt)
     stop = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), jnp.int32)
-    return plgpu.kernel(kernel, out_type=[out] * 5 + [stop] + checks, scratch_types=scratch,
+    planes = [out] * 5
+    if image:
+        shape = (n_tiles // tiles_x * TILE, tiles_x * TILE, 3)
+        planes = [jax.ShapeDtypeStruct(shape, dt), out, out]
+    return plgpu.kernel(kernel, out_type=planes + [stop] + checks, scratch_types=scratch,
                         grid=(n_tiles, TILE_PIXELS // pixels), grid_names=("tile", "wg"),
                         interpret=_interpret_params(interpret),
                         kernel_name=kernel.func.__name__)(order, _ranges(*columns), *data)
@@ -356,7 +387,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
             carry, parity = step(j, mask_word, s, carry, parity)
         return following, carry, parity
 
-    entry = _entry(trans, stop_at, hi, entry_refs, tile, check, hi < block_last, half)
+    entry = backward_segments.enter(trans, stop_at, hi, entry_refs, check, hi < block_last, half)
     lax.fori_loop(0, last - lo, body, (ahead(last - 1), entry, jnp.int32(0)))
 
     def after(i, c):  # pairs no pixel of this block reached
@@ -364,33 +395,6 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
         return c
 
     lax.fori_loop(0, hi - last, after, jnp.int32(0))
-
-
-def _entry(trans, stop_at, hi, entry_refs, tile, check, inside, half):
-    """The walk's carry (T, S_r, S_g, S_b, S_Z) where it enters its segment [lo, hi): at the
-    tile's end (T, 0, 0, 0, 0); inside the block's walk, from checkpoint `check`
-    (`backward_segments.entries`: the forward's T there and C − C_hi, D − D_hi). Only for a
-    pixel that blends pair hi (its stop pair is past hi), whose forward block walked past hi and so
-    stored the checkpoint. A pixel that stopped at or before hi is in its final state there,
-    so it enters with (T, 0, 0, 0, 0), exactly what the checkpoint would hold; its forward
-    block may have stopped before hi without storing it (half-tile forward blocks under a
-    whole-tile backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K). Until
-    Dec 3 the test was stop > lo, so those pixels with lo < stop <= hi took unwritten memory
-    (deterministic stale values, bitwise repeatable but wrong, as at 10M Gaussians at 4K)."""
-    zero = jnp.zeros_like(trans)
-    if not entry_refs:
-        return trans, zero, zero, zero, zero
-    s_r, s_g, s_b, t_hi, s_d = entry_refs
-
-    def from_checkpoint():
-        c = jnp.maximum(check, 0)
-        reached = stop_at > hi
-        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b)]
-        return (jnp.where(reached, t_hi[c, half], trans), *sums,
-                jnp.where(reached, s_d[c, half], zero))
-
-    return lax.cond(inside & (check >= 0), from_checkpoint,
-                    lambda: (trans, zero, zero, zero, zero))
 
 
 def _backward_records(rec_ref, mask_ref, scratch, tile, tiles_x: int, start, last,

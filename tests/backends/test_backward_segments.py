@@ -84,8 +84,9 @@ def test_entries_hold_each_segments_carry_where_split_reads_it(seed, share, segm
 
     @jax.jit
     def run(bins, last, final, full):
-        return (backward_segments.entries(final, full, bins, segment),
-                backward_segments.entries(final, full, bins, segment, last),
+        final_at = lambda tile: tuple(x[tile] for x in final)
+        return (backward_segments.entries(final_at, full, bins, segment),
+                backward_segments.entries(final_at, full, bins, segment, last),
                 backward_segments.split(bins, last, segment),
                 backward_segments.split(bins, last, segment, compacted=True))
 

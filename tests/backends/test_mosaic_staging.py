@@ -122,7 +122,8 @@ def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, monkeypatch):
     """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
     lane-vector strip masks without floor or ceil, shared-memory stores, the barrier), float32
     and float64; the compacted forward (`mosaic_compact`: ballot, population counts, the
-    per-lane partition). Not what
+    per-lane partition) and, with it, the colour written as an image (`mosaic_image_layout`:
+    strided stores of (8, 16) boxes). Not what
     the GPU compiler's LLVM translation may still reject: the tests above run the kernels on a
     GPU."""
     from jax._src.pallas.triton import gpu_info  # gaussian_grads is a Triton kernel
@@ -130,7 +131,7 @@ def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, monkeypatch):
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
     config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_pair_source="gaussians",
-                                         mosaic_compact=compact))
+                                         mosaic_compact=compact, mosaic_image_layout=compact))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
                                         capacity=scenes.CAPACITY).image
@@ -217,7 +218,7 @@ def test_compacted_forward_gives_the_same_gradients_and_split_entries(backward_p
     starts, segments of 128) are those of the full walk: the same gradients to the bit
     (float32; H200: bit for bit), with half-tile backward blocks and with whole-tile ones over
     the half-tile forward blocks (the default at 4K: a half whose pixels all stopped before a
-    segment wrote no entry there, `pallas_mosaic._entry`)."""
+    segment wrote no entry there, `backward_segments.enter`)."""
     g, cam = _dense_tile(seed)
     g, cam = scenes.cast(g, np.float32), scenes.camera(dtype=np.float32, **TILE_CAMERA)
     w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
@@ -251,6 +252,71 @@ def test_compaction_applies_where_its_conditions_hold():
     compact = C(kernel="mosaic")
     assert pallas.plan(compact, False, 10**5).forward_pixels == 128  # whole tiles otherwise
     assert pallas.plan(compact, True, 10**5).forward_pixels == 256  # the vanilla kernel's
+
+
+def _image_layout(image: bool, segment=None):
+    return C(kernel="mosaic", tuning=K(mosaic_image_layout=image, mosaic_forward_pixels=128,
+                                       mosaic_backward_segment=segment))
+
+
+@settings(max_examples=1)  # interpret mode
+@given(seed=st.integers(0, 2**32 - 1))
+def test_image_layout_renders_the_planes_images(seed):
+    """`KernelConfig.mosaic_image_layout`: the Local-GS forward writing its colour as an image
+    gives the images of the per-tile planes, bit for bit (interpret mode; on the GPU too: the
+    same stores of the same values), on the suite's scenes (partial edge tiles) with their
+    background."""
+    g, cam = scenes.scene(seed), scenes.camera()
+    out = {image: lgs_jax.render(g, cam, background=np.asarray(scenes.BACKGROUND, np.float32),
+                                 backend="pallas", config=_image_layout(image),
+                                 capacity=scenes.CAPACITY) for image in (True, False)}
+    for field in ("image", "alpha", "depth"):
+        _assert_same(getattr(out[True], field), getattr(out[False], field), err_msg=field)
+
+
+@pytest.mark.slow  # interpret mode: about 50 s (the default is the planes)
+@settings(max_examples=1)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_image_layout_gives_the_planes_gradients(seed):
+    """With `mosaic_image_layout` the gradients of a loss of image, alpha and depth are the
+    planes', bit for bit, with split backward segments (their entries gathered from the image)
+    and the walked rows, on partial tiles (40x24) with a background."""
+    dtype = np.float32
+    g, cam = scenes.saturating(seed, 150, dtype), scenes.camera(40, 24, dtype=dtype)
+    w = np.random.default_rng(seed % 2**16).normal(size=(24, 40, 3)).astype(dtype)
+    render = lambda g, image, rows=None: lgs_jax.render(
+        g, cam, background=np.asarray([0.2, 0.5, 0.9], dtype), backend="pallas",
+        config=_image_layout(image, 16), capacity=2048, row_capacity=rows)
+    rows = int(render(g, False).stats.pairs_walked)
+    assert rows > 2 * 16 * 6  # segments to enter on the 3x2 tiles
+
+    def loss(g, image):
+        o = render(g, image, rows)
+        return (jax.numpy.sum(o.image * w) + jax.numpy.sum(o.alpha * w[..., 0])
+                + jax.numpy.sum(o.depth * w[..., 1])), (o.image, o.alpha, o.depth)
+
+    run = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+    assert pallas.plan(_image_layout(True, 16), False, 6).image
+    got, want = run(g, True), run(g, False)
+    for name, a, b in zip(scenes.FIELDS + ("image", "alpha", "depth"), jax.tree.leaves(got),
+                          jax.tree.leaves(want)):
+        _assert_same(a, b, err_msg=name)
+
+
+def test_image_layout_applies_where_its_conditions_hold():
+    """`mosaic_image_layout` where the render's forward and the one a gradient runs are both the
+    Local-GS Mosaic GPU kernel in blocks of 128 pixels (custom_vjp's two must return alike);
+    the planes elsewhere."""
+    on = lambda **kw: C(kernel="mosaic", tuning=K(mosaic_image_layout=True, **kw))
+    assert pallas.plan(on(), False, 10**5).image  # compacted: blocks of 128 pixels
+    assert not pallas.plan(on(), True, 10**5).image  # the vanilla kernel
+    assert not pallas.plan(on(mosaic_compact=False), False, 10**5).image  # whole tiles
+    assert not pallas.plan(dataclasses.replace(on(), kernel="triton"), False, 10**5).image
+    assert not pallas.plan(C(kernel="mosaic"), False, 10**5).image  # off by default
+    routed = C(tuning=K(mosaic_image_layout=True, vanilla_from_pairs=1, interpret=False))
+    assert not pallas.plan(routed, False, 10**5, capacity=2).image  # vanilla, Local-GS under grad
+    with pytest.raises(ValueError, match="tuning.mosaic_image_layout"):
+        K(mosaic_image_layout=1)
 
 
 def test_table_render_builds_before_binning_is_the_one_the_backend_builds():
