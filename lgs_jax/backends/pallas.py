@@ -307,8 +307,9 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
     g_color, g_trans, g_depth = cotangents
-    if plan_.image:  # (tiles_y·16, tiles_x·16, 3) -> (n_tiles, 256, 3)
-        g_color = image_to_tiles(g_color.reshape(-1, 3), *g_color.shape[1::-1])
+    if plan_.image:  # the colour image's cotangent, per tile: (n_tiles, 256, 3)
+        rows, cols = g_color.shape[:2]
+        g_color = image_to_tiles(g_color.reshape(rows * cols, 3), cols, rows)
     masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
     lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans)
     if g_depth is not None or plan_.backward != "mosaic":  # the Mosaic GPU kernel takes None
