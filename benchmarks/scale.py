@@ -77,6 +77,10 @@ ROWS = {
     # the colour written as an image by the kernel (KernelConfig.mosaic_image_layout)
     "localgs:image": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                      mosaic_image_layout=True))),
+    # and each block's latest stop pair instead of the pixels' (KernelConfig.mosaic_block_stops)
+    "localgs:lean": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                    mosaic_image_layout=True,
+                                                    mosaic_block_stops=True))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # block-size variants of the Mosaic GPU kernels (KernelConfig)

@@ -114,6 +114,13 @@ class KernelConfig:
         (scripts/gpu_memory_offline.py, BENCHMARKS.md §7): 0.09M Gaussians at 720p 32.9 -> 26.9
         MiB (gsplat 29), at 4K 263.5 -> 200.2 (gsplat 180); lego_sh3 at 800x800 23 -> 18.7
         (gsplat 20).
+      mosaic_block_stops: in a render no gradient follows, the Local-GS Mosaic GPU forward
+        stores each block's latest stop pair (a warpgroup maximum) instead of an int32 stop
+        pair per pixel, and `RasterResult.stop` holds per-block stops for every forward (the
+        one a gradient runs keeps its pixels' stops for the backward and reduces them alike):
+        `stats.pairs_walked` reads only each tile's latest. With mosaic_image_layout, forward
+        memory for the H200 at 0.09M Gaussians at 4K 200.2 -> 168.8 MiB (gsplat 180),
+        at 720p 26.9 -> 23.4 (29), lego_sh3 18.7 -> 16.2 (20).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -137,6 +144,7 @@ class KernelConfig:
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
     mosaic_image_layout: bool = False
+    mosaic_block_stops: bool = False
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -164,7 +172,7 @@ class KernelConfig:
                                  f" is not a multiple of mosaic_unroll_localgs="
                                  f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
                                  f"whole walks)")
-        for name in ("mosaic_compact", "mosaic_image_layout"):
+        for name in ("mosaic_compact", "mosaic_image_layout", "mosaic_block_stops"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"tuning.{name}: expected a bool, got {getattr(self, name)!r}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:

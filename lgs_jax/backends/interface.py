@@ -35,7 +35,8 @@ class RasterResult:
       depth: (n_tiles, 256) Σ z·α·T.
       stop: (n_tiles, 256) int32 pair index at which each pixel stopped (its stop test fired,
         or the first pair its program never processed; the tile's end if it ran through its
-        list); None for backends without pairs.
+        list), or (n_tiles, m) the latest of each group of a tile's pixels
+        (`KernelConfig.mosaic_block_stops`: m blocks); None for backends without pairs.
       strip_pairs: int32 strip–Gaussian pairs processed (Local-GS backends; 8·pairs without
         warp culling), or None.
       kernel: name of the Pallas forward kernel that ran ("" for the XLA backends) (static).

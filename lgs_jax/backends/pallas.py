@@ -21,7 +21,9 @@ ignores the Local-GS switches (it is the baseline the paper measures against) bu
 
 Programs run tiles in order of decreasing list length (longest-first scheduling: the slowest
 programs start first and short ones fill in behind them; each writes its own output row). Both
-kernels write each pixel's stop pair, which is all the backward needs besides the final T.
+kernels write each pixel's stop pair, which is all the backward needs besides the final T (a
+render no gradient follows may keep only each block's latest, `KernelConfig.mosaic_block_stops`,
+and may write the colour as an image, `mosaic_image_layout`: the forward's lean outputs).
 
 Backward (both backends): the backward kernel walks each tile's pairs back to front from the
 last pair any pixel blended, with the forward's own α arithmetic (hoisted V·B clamped at ln o, or
@@ -55,7 +57,7 @@ from .. import pairs
 from ..binning import TileBins
 from ..composite import PixelState
 from ..config import RasterConfig
-from ..layout import STRIPS, image_tiles, image_to_tiles, tile_grid
+from ..layout import STRIPS, TILE_PIXELS, image_tiles, image_to_tiles, tile_grid
 from ..projection import Projected
 from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
                pallas_triton, table_kernel)
@@ -77,6 +79,9 @@ class Plan:
       image: the forward writes its colour as one (tiles_y·16, tiles_x·16, 3) image
         (`KernelConfig.mosaic_image_layout`), else as per-tile planes; the same for a render
         and for the forward a backward follows (custom_vjp's two must return alike).
+      block_stops: the stop pairs returned are each block's latest, (n_tiles, 256 /
+        forward_pixels) (`KernelConfig.mosaic_block_stops`): written so by a render's Local-GS
+        Mosaic GPU forward, reduced so from the pixels' by the forward a backward follows.
     """
 
     config: RasterConfig
@@ -88,6 +93,7 @@ class Plan:
     backward_pixels: int
     routed: bool = False
     image: bool = False
+    block_stops: bool = False
 
     @property
     def kernel_name(self) -> str:
@@ -152,7 +158,8 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
                     routed=routed)
     writes = lambda q: q.forward == "mosaic" and not q.vanilla and q.forward_pixels == 128
     image = (t.mosaic_image_layout and writes(resolved) and writes(resolved.for_gradients()))
-    return dataclasses.replace(resolved, image=image)
+    block_stops = t.mosaic_block_stops and resolved.forward == "mosaic" and not resolved.vanilla
+    return dataclasses.replace(resolved, image=image, block_stops=block_stops)
 
 
 def describe(vanilla: bool):
@@ -261,10 +268,12 @@ def _segment(plan_: Plan) -> int | None:
 
 
 def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
-             segment: int | None = None):
-    """Per tile (n_tiles, 256): the state, each pixel's stop pair, the strip–Gaussian pairs the
-    kernel had to visit, and (masks, records, tile order, entry) for the backward; with a
-    `segment`, entry = the segments' entering carries (`backward_segments.entries`; else ())."""
+             segment: int | None = None, render: bool = False):
+    """Per tile (n_tiles, 256): the state, the stop pairs (each pixel's, or each block's latest
+    with `Plan.block_stops`), the strip–Gaussian pairs the kernel had to visit, and (masks,
+    records, tile order, entry, each pixel's stop pair) for the backward; with a `segment`,
+    entry = the segments' entering carries (`backward_segments.entries`; else ()). `render`:
+    no backward follows (the kernel writes block stops itself, and the pixels' are None)."""
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
     order = _longest_first(bins)
@@ -272,7 +281,8 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
     args = (plan_.vanilla, plan_.config, plan_.interpret)
     if plan_.forward == "mosaic":
         outs = pallas_mosaic.forward(*args, plan_.forward_pixels, tiles_x, order, bins, data, dt,
-                                     segment=segment, image=plan_.image)
+                                     segment=segment, image=plan_.image,
+                                     block_stops=plan_.block_stops and render)
     else:
         outs = pallas_triton.forward(*args, tiles_x, order, bins, data, dt)
     if plan_.image:
@@ -293,8 +303,13 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
         # cotangents (H200, 0.09M Gaussians at 4K: 348 -> 282 MiB; a barrier with the planes
         # themselves did as well there and cost 8 MiB at 5.8M Gaussians at 1080p).
         entry, stop_at = lax.optimization_barrier((entry, stop_at))
+    stops = stop_at
+    if plan_.block_stops and not render:  # the render's (n_tiles, blocks) from the pixels'
+        blocks = TILE_PIXELS // plan_.forward_pixels
+        stops = jnp.max(stop_at.reshape(stop_at.shape[0], blocks, -1), axis=-1)
     state = PixelState(color=color, trans=t, depth=d, done=jnp.zeros(t.shape, bool))
-    return state, stop_at, strip_pairs, saved + (order, entry)
+    pixel_stops = None if render and plan_.block_stops else stop_at
+    return state, stops, strip_pairs, saved + (order, entry, pixel_stops)
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan, trans,
@@ -302,7 +317,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth) from the backward
     kernel's pair rows."""
     plan_ = plan_.for_gradients()
-    masks, records, order, entry = saved
+    masks, records, order, entry, stop_at = saved  # the pixels' stop pairs
     config = _vanilla_model(plan_.config) if plan_.vanilla else plan_.config
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
@@ -336,7 +351,11 @@ def _forward_for_gradients(p, bins, width, height, plan_: Plan):
     return _forward(p, bins, width, height, plan_, _segment(plan_))
 
 
-_COMPOSITE = backward.differentiable(_forward, _gradients, _forward_for_gradients)
+def _render_forward(p, bins, width, height, plan_: Plan):
+    return _forward(p, bins, width, height, plan_, render=True)
+
+
+_COMPOSITE = backward.differentiable(_render_forward, _gradients, _forward_for_gradients)
 
 
 def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,

@@ -103,22 +103,32 @@ def _store(refs, tile, cols, outputs):
         ref[tile, cols] = x.astype(ref.dtype)
 
 
-def _image_store(tiles_x: int, wg, pixels: int):
-    """`_store` for (colour, T, D, stop) where the colour goes to a (tiles_y·16, tiles_x·16, 3)
-    image (`forward`'s `image`): block `wg` of tile `tile` holds rows wg·pixels/16 .. of the
-    tile, pixel k of the block at row k // 16, column k % 16 (lgs_jax.layout), so each channel
-    is one (pixels/16, 16) box, stored with a stride of 3 (one element per thread: blocks of
-    128 pixels; Mosaic GPU refuses a stride of 3 with two elements per thread)."""
+def _forward_store(image: bool, block_stops: bool, tiles_x: int, wg, pixels: int):
+    """The Local-GS forward's store of its (r, g, b, T, D, stop pair) into `forward`'s outputs:
+    `_store`'s per-tile planes, except, with `image`, the colour into a (tiles_y·16, tiles_x·16,
+    3) image (block `wg` of tile `tile` holds rows wg·pixels/16 .. of the tile, pixel k of the
+    block at row k // 16, column k % 16: lgs_jax.layout; each channel one (pixels/16, 16) box,
+    stored with a stride of 3, one element per thread: blocks of 128 pixels, as Mosaic GPU
+    refuses a stride of 3 with two elements per thread), and with `block_stops` the block's
+    latest stop pair alone, at [tile, wg] of a (n_tiles, 256 / pixels) output."""
     rows = pixels // TILE
 
     def store(refs, tile, cols, outputs):
-        color_ref, rest = refs[0], refs[1:]
-        y = (tile // tiles_x) * TILE + wg * rows
-        x = (tile % tiles_x) * TILE
-        for c in range(3):
-            color_ref[pl.ds(y, rows), pl.ds(x, TILE), c] = (
-                outputs[c].astype(color_ref.dtype).reshape(rows, TILE))
-        _store(rest, tile, cols, outputs[3:])
+        color, (trans, depth, stop) = outputs[:3], outputs[3:]
+        if image:
+            color_ref, refs = refs[0], refs[1:]
+            y, x = (tile // tiles_x) * TILE + wg * rows, (tile % tiles_x) * TILE
+            for c in range(3):
+                color_ref[pl.ds(y, rows), pl.ds(x, TILE), c] = (
+                    color[c].astype(color_ref.dtype).reshape(rows, TILE))
+        else:
+            _store(refs[:3], tile, cols, color)
+            refs = refs[3:]
+        _store(refs[:2], tile, cols, (trans, depth))
+        if block_stops:
+            refs[2][tile, wg] = jnp.max(stop)
+        else:
+            _store(refs[2:], tile, cols, (stop,))
 
     return store
 
@@ -154,9 +164,10 @@ def compacts(config: RasterConfig) -> bool:
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
-                   interpret: bool, segment: int | None = None, image: bool = False):
+                   interpret: bool, segment: int | None = None, image: bool = False,
+                   block_stops: bool = False):
     """The Local-GS forward for one warpgroup; `refs` = the six outputs (four with `image`:
-    the colour image, T, D, the stop pair; `_image_store`), then, with a
+    the colour image, T, D, the stop pairs; `_forward_store`), then, with a
     `segment`, the five checkpoint outputs (r, g, b, T, D before every pair start + m·segment,
     m >= 1, at row ranges_ref[tile, 2] + m − 1: lgs_jax.backends.backward_segments), then, when
     `staged`, the shared-memory record buffers and their barriers. With
@@ -172,7 +183,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     k, strip, cols = _lanes(wg, pixels)
     frame, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
-    store = _image_store(tiles_x, wg, pixels) if image else _store
+    store = _forward_store(image, block_stops, tiles_x, wg, pixels)
 
     def evaluate(rec, mask_word):
         alpha, hit, _ = ks.record_alpha(rec, frame, pixel, config)
@@ -273,22 +284,24 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
 
 
 def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, tiles_x: int,
-            order, bins, data, dt, segment: int | None = None, image: bool = False):
+            order, bins, data, dt, segment: int | None = None, image: bool = False,
+            block_stops: bool = False):
     """Run the vanilla (data = (Gaussian ids, rows)) or Local-GS (data = (masks, records), or
     (Gaussian ids, `pairs.gaussian_table`) with `tuning.mosaic_pair_source` "gaussians")
     forward kernel on a (n_tiles, 256 / pixels) grid of one-warpgroup blocks; outputs
     (n_tiles, 256) each: r, g, b, T, D and the stop pair, or with `image` (Local-GS, blocks of
     128 pixels) the colour as one (tiles_y·16, tiles_x·16, 3) image and T, D, the stop pair;
-    then with a `segment` (Local-GS only) the five (n_checkpoints, 256) checkpoint buffers of
-    `backward_segments.checkpoints`."""
-    if image and (vanilla or pixels != 128):
-        raise ValueError("image: the Local-GS kernel's blocks of 128 pixels only")
+    with `block_stops` (Local-GS) the stop pairs as each block's latest, (n_tiles, 256 /
+    pixels); then with a `segment` (Local-GS only) the five (n_checkpoints, 256) checkpoint
+    buffers of `backward_segments.checkpoints`."""
+    if (image and pixels != 128) or (vanilla and (image or block_stops)):
+        raise ValueError("image, block_stops: the Local-GS kernel's (image: blocks of 128)")
     n_tiles = bins.tile_start.shape[0]
     common = dict(config=config, tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
                   pixels=pixels)
     kernel = (functools.partial(vanilla_kernel, **common) if vanilla else
               functools.partial(localgs_kernel, **common, interpret=interpret,
-                                segment=segment, image=image))
+                                segment=segment, image=image, block_stops=block_stops))
     columns = [bins.tile_start, bins.tile_end]
     checks = []
     if segment is not None:
@@ -304,7 +317,8 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
         chunk = config.tuning.mosaic_chunk
         scratch = (plgpu.SMEM((2, chunk, ks.REC), dt), plgpu.Barrier(num_barriers=2))
     out = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), dt)
-    stop = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), jnp.int32)
+    stop = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS // pixels if block_stops else TILE_PIXELS),
+                                jnp.int32)
     planes = [out] * 5
     if image:
         shape = (n_tiles // tiles_x * TILE, tiles_x * TILE, 3)

@@ -254,69 +254,87 @@ def test_compaction_applies_where_its_conditions_hold():
     assert pallas.plan(compact, True, 10**5).forward_pixels == 256  # the vanilla kernel's
 
 
-def _image_layout(image: bool, segment=None):
-    return C(kernel="mosaic", tuning=K(mosaic_image_layout=image, mosaic_forward_pixels=128,
-                                       mosaic_backward_segment=segment))
+def _lean(on: bool, segment=None):
+    """The Local-GS forward with (or without) both of its lean outputs: the colour as an image
+    (`KernelConfig.mosaic_image_layout`) and each block's latest stop (`mosaic_block_stops`)."""
+    return C(kernel="mosaic", tuning=K(mosaic_image_layout=on, mosaic_block_stops=on,
+                                       mosaic_forward_pixels=128, mosaic_backward_segment=segment))
 
 
 @settings(max_examples=1)  # interpret mode
 @given(seed=st.integers(0, 2**32 - 1))
-def test_image_layout_renders_the_planes_images(seed):
-    """`KernelConfig.mosaic_image_layout`: the Local-GS forward writing its colour as an image
-    gives the images of the per-tile planes, bit for bit (interpret mode; on the GPU too: the
-    same stores of the same values), on the suite's scenes (partial edge tiles) with their
+def test_lean_forward_renders_the_planes_images(seed):
+    """`KernelConfig.mosaic_image_layout` and `mosaic_block_stops`: the Local-GS forward writing
+    its colour as an image and each block's latest stop pair gives the images of the per-tile
+    planes, bit for bit (interpret mode; on the GPU too: the same stores of the same values),
+    and the same walked pairs, on the suite's scenes (partial edge tiles) with their
     background."""
     g, cam = scenes.scene(seed), scenes.camera()
-    out = {image: lgs_jax.render(g, cam, background=np.asarray(scenes.BACKGROUND, np.float32),
-                                 backend="pallas", config=_image_layout(image),
-                                 capacity=scenes.CAPACITY) for image in (True, False)}
+    background = np.asarray(scenes.BACKGROUND, np.float32)
+    out = {on: lgs_jax.render(g, cam, background=background, backend="pallas",
+                              config=_lean(on), capacity=scenes.CAPACITY) for on in (True, False)}
     for field in ("image", "alpha", "depth"):
         _assert_same(getattr(out[True], field), getattr(out[False], field), err_msg=field)
+    assert int(out[True].stats.pairs_walked) == int(out[False].stats.pairs_walked)
+    bins = binning.bin_gaussians(project(g, cam), cam.width, cam.height, scenes.CAPACITY)
+    stops = pallas.rasterize(project(g, cam), bins, cam.width, cam.height, _lean(True)).stop
+    assert stops.shape == (bins.tile_start.shape[0], 2)  # one per block of 128 pixels
 
 
 @pytest.mark.slow  # interpret mode: about 50 s (the default is the planes)
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_image_layout_gives_the_planes_gradients(seed):
-    """With `mosaic_image_layout` the gradients of a loss of image, alpha and depth are the
-    planes', bit for bit, with split backward segments (their entries gathered from the image)
-    and the walked rows, on partial tiles (40x24) with a background."""
+def test_lean_forward_gives_the_planes_gradients(seed):
+    """With both lean outputs the gradients of a loss of image, alpha and depth are the
+    planes', bit for bit, and so are the walked pairs under differentiation (the forward a
+    backward follows keeps its pixels' stops and reduces them), with split backward segments
+    (their entries gathered from the image) and the walked rows, on partial tiles (40x24) with
+    a background."""
     dtype = np.float32
     g, cam = scenes.saturating(seed, 150, dtype), scenes.camera(40, 24, dtype=dtype)
     w = np.random.default_rng(seed % 2**16).normal(size=(24, 40, 3)).astype(dtype)
-    render = lambda g, image, rows=None: lgs_jax.render(
+    render = lambda g, on, rows=None: lgs_jax.render(
         g, cam, background=np.asarray([0.2, 0.5, 0.9], dtype), backend="pallas",
-        config=_image_layout(image, 16), capacity=2048, row_capacity=rows)
+        config=_lean(on, 16), capacity=2048, row_capacity=rows)
     rows = int(render(g, False).stats.pairs_walked)
     assert rows > 2 * 16 * 6  # segments to enter on the 3x2 tiles
 
-    def loss(g, image):
-        o = render(g, image, rows)
+    def loss(g, on):
+        o = render(g, on, rows)
         return (jax.numpy.sum(o.image * w) + jax.numpy.sum(o.alpha * w[..., 0])
-                + jax.numpy.sum(o.depth * w[..., 1])), (o.image, o.alpha, o.depth)
+                + jax.numpy.sum(o.depth * w[..., 1])), (o.image, o.alpha, o.depth,
+                                                        o.stats.pairs_walked)
 
     run = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
-    assert pallas.plan(_image_layout(True, 16), False, 6).image
+    assert pallas.plan(_lean(True, 16), False, 6).image
     got, want = run(g, True), run(g, False)
-    for name, a, b in zip(scenes.FIELDS + ("image", "alpha", "depth"), jax.tree.leaves(got),
-                          jax.tree.leaves(want)):
+    for name, a, b in zip(scenes.FIELDS + ("image", "alpha", "depth", "pairs_walked"),
+                          jax.tree.leaves(got), jax.tree.leaves(want)):
         _assert_same(a, b, err_msg=name)
 
 
-def test_image_layout_applies_where_its_conditions_hold():
+def test_lean_forward_applies_where_its_conditions_hold():
     """`mosaic_image_layout` where the render's forward and the one a gradient runs are both the
-    Local-GS Mosaic GPU kernel in blocks of 128 pixels (custom_vjp's two must return alike);
-    the planes elsewhere."""
-    on = lambda **kw: C(kernel="mosaic", tuning=K(mosaic_image_layout=True, **kw))
-    assert pallas.plan(on(), False, 10**5).image  # compacted: blocks of 128 pixels
-    assert not pallas.plan(on(), True, 10**5).image  # the vanilla kernel
-    assert not pallas.plan(on(mosaic_compact=False), False, 10**5).image  # whole tiles
-    assert not pallas.plan(dataclasses.replace(on(), kernel="triton"), False, 10**5).image
-    assert not pallas.plan(C(kernel="mosaic"), False, 10**5).image  # off by default
+    Local-GS Mosaic GPU kernel in blocks of 128 pixels (custom_vjp's two must return alike),
+    the planes elsewhere; `mosaic_block_stops` where the render's forward is the Local-GS Mosaic
+    GPU kernel (the gradient's reduces its pixels' stops)."""
+    on = lambda **kw: C(kernel="mosaic", tuning=K(mosaic_image_layout=True,
+                                                  mosaic_block_stops=True, **kw))
+    both = pallas.plan(on(), False, 10**5)  # compacted: blocks of 128 pixels
+    assert both.image and both.block_stops
+    vanilla = pallas.plan(on(), True, 10**5)
+    assert not vanilla.image and not vanilla.block_stops
+    whole = pallas.plan(on(mosaic_compact=False), False, 10**5)  # blocks of 256 pixels
+    assert not whole.image and whole.block_stops
+    triton = pallas.plan(dataclasses.replace(on(), kernel="triton"), False, 10**5)
+    assert not triton.image and not triton.block_stops
+    off = pallas.plan(C(kernel="mosaic"), False, 10**5)
+    assert not off.image and not off.block_stops  # off by default
     routed = C(tuning=K(mosaic_image_layout=True, vanilla_from_pairs=1, interpret=False))
     assert not pallas.plan(routed, False, 10**5, capacity=2).image  # vanilla, Local-GS under grad
-    with pytest.raises(ValueError, match="tuning.mosaic_image_layout"):
-        K(mosaic_image_layout=1)
+    for name in ("mosaic_image_layout", "mosaic_block_stops"):
+        with pytest.raises(ValueError, match=f"tuning.{name}"):
+            K(**{name: 1})
 
 
 def test_table_render_builds_before_binning_is_the_one_the_backend_builds():

@@ -1,19 +1,19 @@
 # Next GPU session (issues 17 and 18), from the repository root; each step one `run` call.
 # Set up carry/ as on Dec 3 (data: guitar, lego_sh3, lego_train, skull; the gsplat 1.5.3 wheel in
 # carry/wheels).
-# 0. KernelConfig.mosaic_image_layout (built this session, off by default; never run on a GPU):
-#    its tests compiled (the slow gradient case too), then its time and memory against the
-#    planes in one process per scene, forward and forward + backward:
-#      TEST_ARGS="tests/backends/test_mosaic_staging.py -k 'image_layout or lowers'" \
+# 0. KernelConfig.mosaic_image_layout and mosaic_block_stops (built this session, off by
+#    default; never run on a GPU): their tests compiled (the slow gradient case too), then time
+#    and memory against the planes in one process per scene, forward and forward + backward:
+#      TEST_ARGS="tests/backends/test_mosaic_staging.py -k 'lean or lowers'" \
 #        bash scripts/scale_gpu_check.sh tests
-#      SCENES="guitar_720p lego_800 guitar_4k guitar_x110_4k" FWD_ROWS=localgs,localgs:image \
-#        bash scripts/scale_gpu_check.sh fwd
-#      SCENES="guitar_4k guitar_x16_1080p" GRAD_ROWS=localgs@walked,localgs:image@walked \
+#      SCENES="guitar_720p lego_800 guitar_4k guitar_x110_4k" \
+#        FWD_ROWS=localgs,localgs:image,localgs:lean bash scripts/scale_gpu_check.sh fwd
+#      SCENES="guitar_4k guitar_x16_1080p" GRAD_ROWS=localgs@walked,localgs:lean@walked \
 #        bash scripts/scale_gpu_check.sh grad
-#    Expected memory (offline): forward 720p 32.9 -> 26.9 MiB, lego 23 -> 18.7, 4K 263.5 ->
-#    200.2; gradients unchanged with walked rows. If the images are the planes' (bit for bit in
-#    float32) and the time holds: turn it on by default, take the gradient test out of `slow`
-#    and ~50 s of CI elsewhere.
+#    Expected memory (offline): forward 720p 32.9 -> 26.9 (image) -> 23.4 MiB (lean), lego
+#    23 -> 18.7 -> 16.2, 4K 263.5 -> 200.2 -> 168.8; gradients unchanged with walked rows. If
+#    the images are the planes' (bit for bit in float32) and the time holds: both on by
+#    default, the gradient test out of `slow` and ~50 s of CI taken out elsewhere.
 # 1. Training unchanged since the split backward's entries (not run since Dec 2):
 #      TRAIN_SCENES=lego bash scripts/scale_gpu_check.sh train
 # 2. The synthetic scenes miss both issues (forward 0.93x / 1.05x, fwd+bwd 1.03x / 1.07x, memory
