@@ -122,8 +122,8 @@ def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, monkeypatch):
     """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
     lane-vector strip masks without floor or ceil, shared-memory stores, the barrier), float32
     and float64; the compacted forward (`mosaic_compact`: ballot, population counts, the
-    per-lane partition) and, with it, the colour written as an image (`mosaic_image_layout`:
-    strided stores of (8, 16) boxes). Not what
+    per-lane partition) and, with it, the lean outputs (`mosaic_image_layout`: strided stores
+    of (8, 16) boxes; `mosaic_block_stops`: a block's maximum, one scalar store). Not what
     the GPU compiler's LLVM translation may still reject: the tests above run the kernels on a
     GPU."""
     from jax._src.pallas.triton import gpu_info  # gaussian_grads is a Triton kernel
@@ -131,7 +131,8 @@ def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, monkeypatch):
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
     config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_pair_source="gaussians",
-                                         mosaic_compact=compact, mosaic_image_layout=compact))
+                                         mosaic_compact=compact, mosaic_image_layout=compact,
+                                         mosaic_block_stops=compact))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
                                         capacity=scenes.CAPACITY).image
