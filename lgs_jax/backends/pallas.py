@@ -156,9 +156,10 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
                     forward_pixels=block_pixels(forward_pixels, n_tiles, config),
                     backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
                     routed=routed)
-    writes = lambda q: q.forward == "mosaic" and not q.vanilla and q.forward_pixels == 128
+    local_mosaic = lambda q: q.forward == "mosaic" and not q.vanilla
+    writes = lambda q: local_mosaic(q) and q.forward_pixels == 128  # an image: pallas_mosaic.forward
     image = (t.mosaic_image_layout and writes(resolved) and writes(resolved.for_gradients()))
-    block_stops = t.mosaic_block_stops and resolved.forward == "mosaic" and not resolved.vanilla
+    block_stops = t.mosaic_block_stops and local_mosaic(resolved)
     return dataclasses.replace(resolved, image=image, block_stops=block_stops)
 
 
@@ -313,11 +314,13 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
 
 
 def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan, trans,
-               stop_at, saved, cotangents):
+               returned_stops, saved, cotangents):
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth) from the backward
-    kernel's pair rows."""
+    kernel's pair rows. The backward reads each pixel's stop pair from `saved`, not the stops
+    the forward returned (per block with `Plan.block_stops`)."""
+    del returned_stops
     plan_ = plan_.for_gradients()
-    masks, records, order, entry, stop_at = saved  # the pixels' stop pairs
+    masks, records, order, entry, stop_at = saved
     config = _vanilla_model(plan_.config) if plan_.vanilla else plan_.config
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
