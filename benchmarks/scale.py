@@ -74,13 +74,11 @@ ROWS = {
     "localgs:records": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                        mosaic_pair_source="records"))),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
-    # the colour written as an image by the kernel (KernelConfig.mosaic_image_layout)
-    "localgs:image": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                     mosaic_image_layout=True))),
-    # and each block's latest stop pair instead of the pixels' (KernelConfig.mosaic_block_stops)
-    "localgs:lean": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                    mosaic_image_layout=True,
-                                                    mosaic_block_stops=True))),
+    # the colour as per-tile planes XLA interleaves and every pixel's stops (the default before
+    # Dec 3, seventh session: KernelConfig.mosaic_image_layout and mosaic_block_stops off)
+    "localgs:planes": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                      mosaic_image_layout=False,
+                                                      mosaic_block_stops=False))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # block-size variants of the Mosaic GPU kernels (KernelConfig)

@@ -110,17 +110,17 @@ class KernelConfig:
         stride of 3 per channel) instead of three (n_tiles, 256) planes that XLA then
         interleaves into the image: the planes and the image are never live together, and XLA
         blends the background in place. Where the render's or the gradient's forward is another
-        kernel, the planes. The same bits. Forward memory for the H200, compiled offline
-        (scripts/gpu_memory_offline.py, BENCHMARKS.md §7): 0.09M Gaussians at 720p 32.9 -> 26.9
-        MiB (gsplat 29), at 4K 263.5 -> 200.2 (gsplat 180); lego_sh3 at 800x800 23 -> 18.7
-        (gsplat 20).
+        kernel, the planes. The same bits (images and gradients, float32 on the H200). Forward
+        memory on the H200 (benchmarks.scale, BENCHMARKS.md §7 "Dec 3, seventh session"): 0.09M
+        Gaussians at 720p 33 -> 27 MiB (gsplat 29), at 4K 264 -> 200 (gsplat 181); lego_sh3 at
+        800x800 23 -> 19 (gsplat 19); time unchanged.
       mosaic_block_stops: in a render no gradient follows, the Local-GS Mosaic GPU forward
         stores each block's latest stop pair (a warpgroup maximum) instead of an int32 stop
         pair per pixel, and `RasterResult.stop` holds per-block stops for every forward (the
         one a gradient runs keeps its pixels' stops for the backward and reduces them alike):
         `stats.pairs_walked` reads only each tile's latest. With mosaic_image_layout, forward
-        memory for the H200 at 0.09M Gaussians at 4K 200.2 -> 168.8 MiB (gsplat 180),
-        at 720p 26.9 -> 23.4 (29), lego_sh3 18.7 -> 16.2 (20).
+        memory on the H200 at 0.09M Gaussians at 4K 200 -> 169 MiB (gsplat 181), at 720p
+        27 -> 23 (29), lego_sh3 19 -> 16 (19).
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -143,8 +143,8 @@ class KernelConfig:
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
-    mosaic_image_layout: bool = False
-    mosaic_block_stops: bool = False
+    mosaic_image_layout: bool = True
+    mosaic_block_stops: bool = True
     tiles_group: int = 256
     tiles_chunk: int = 16
 

@@ -284,7 +284,7 @@ def test_lean_forward_renders_the_planes_images(seed):
     assert stops.shape == (bins.tile_start.shape[0], 2)  # one per block of 128 pixels
 
 
-@pytest.mark.slow  # interpret mode: about 50 s (the default is the planes)
+@pytest.mark.slow  # interpret mode: about 50 s (CI: test_gradients runs the default, lean)
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_lean_forward_gives_the_planes_gradients(seed):
@@ -331,8 +331,8 @@ def test_lean_forward_applies_where_its_conditions_hold():
     assert not whole.image and whole.block_stops
     triton = pallas.plan(dataclasses.replace(on(), kernel="triton"), False, 10**5)
     assert not triton.image and not triton.block_stops
-    off = pallas.plan(C(kernel="mosaic"), False, 10**5)
-    assert not off.image and not off.block_stops  # off by default
+    default = pallas.plan(C(kernel="mosaic"), False, 10**5)
+    assert default.image and default.block_stops  # on by default
     routed = C(tuning=K(mosaic_image_layout=True, vanilla_from_pairs=1, interpret=False))
     assert not pallas.plan(routed, False, 10**5, capacity=2).image  # vanilla, Local-GS under grad
     for name in ("mosaic_image_layout", "mosaic_block_stops"):
