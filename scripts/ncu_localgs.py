@@ -1,10 +1,14 @@
 """Runs the Pallas rasterization of one scene once per backend, for Nsight Compute:
 
     ncu -k regex:'localgs|vanilla' [--set full] python scripts/ncu_localgs.py [DATA]
-        [--scene guitar_720p] [--backends pallas,pallas_vanilla] [--kernel auto]
+        [--scene guitar_720p] [--backends pallas,pallas_vanilla] [--kernel auto] [--grad]
+        [--gsplat]
 
 DATA: default carry/data; scenes are `benchmarks.common.SCENES` names. Each backend's render is
-compiled and run once, so each kernel is launched (and profiled) once.
+compiled and run once, so each kernel is launched (and profiled) once. With --grad, the gradient
+of Σ image·w (w fixed, random; `benchmarks.scale`'s --grad program) instead of the render; with
+--gsplat, then gsplat 1.5.3's forward (+ backward with --grad) once, e.g. both backward kernels:
+`ncu -k regex:'localgs_backward|3dgs_bwd' ... --grad --gsplat --backends pallas`.
 """
 import argparse
 import os
@@ -24,12 +28,25 @@ ap.add_argument("--scene", default="guitar_720p")
 ap.add_argument("--backends", default="pallas,pallas_vanilla")
 ap.add_argument("--kernel", default="auto", help="RasterConfig.kernel (\"mosaic\": Local-GS even "
                 "where \"auto\" routes a large pair buffer to the vanilla kernel)")
+ap.add_argument("--grad", action="store_true")
+ap.add_argument("--gsplat", action="store_true")
 args = ap.parse_args()
 g, cam = load_scene(args.scene, args.data)
 g = jax.device_put(g)
 p = jax.jit(project)(g, cam)
 cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, cam.width, cam.height)))
+w = jax.random.normal(jax.random.key(0), (cam.height, cam.width, 3), jax.numpy.float32)
 for backend in args.backends.split(","):
-    f = jax.jit(lambda g, c, b=backend: lgs_jax.render(
-        g, c, backend=b, config=lgs_jax.RasterConfig(kernel=args.kernel), capacity=cap).image)
-    jax.block_until_ready(f(g, cam))
+    image = lambda g, c, b=backend: lgs_jax.render(
+        g, c, backend=b, config=lgs_jax.RasterConfig(kernel=args.kernel), capacity=cap).image
+    if args.grad:
+        f = jax.jit(jax.grad(lambda g, c, w, image=image: jax.numpy.sum(image(g, c) * w)))
+        jax.block_until_ready(f(g, cam, w))
+    else:
+        jax.block_until_ready(jax.jit(image)(g, cam))
+if args.gsplat:
+    from benchmarks.scale import gsplat_grad_step, gsplat_peer  # noqa: E402
+    if args.grad:
+        gsplat_grad_step(g, cam, w)()
+    else:
+        gsplat_peer(g, cam)
