@@ -63,8 +63,9 @@ def reduction_share(g, cam, repeat: int):
     (chunk 0)), and 1 reduction per pair (a bound); how far each variant's rows are from the
     first's."""
     # XLA's records, whose TMA staging the variants switch (the default builds them in the
-    # kernel: KernelConfig.mosaic_pair_source)
-    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(mosaic_pair_source="records"))
+    # kernel: KernelConfig.mosaic_pair_source), each pixel's stop pair (mosaic_block_stops off)
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(mosaic_pair_source="records",
+                                                              mosaic_block_stops=False))
     w, h = cam.width, cam.height
     tiles_x, tiles_y = tile_grid(w, h)
     cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
@@ -72,7 +73,7 @@ def reduction_share(g, cam, repeat: int):
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
     plan = pallas.plan(config, False, tiles_x * tiles_y)
     state, stop, _, saved = jax.jit(lambda p, b: pallas._forward(p, b, w, h, plan))(p, bins)
-    masks, records, order, _ = saved
+    masks, records, order = saved[:3]
     rng = np.random.default_rng(0)
     cot = [jnp.asarray(rng.normal(size=state.trans.shape).astype(np.float32)) for _ in range(5)]
     args = (bins, masks, records, order, (state.trans, stop, *cot))

@@ -42,7 +42,10 @@ def _time(fns: dict, repeat: int) -> dict:
 
 
 def profile(g, cam, repeat: int):
-    C = lgs_jax.RasterConfig()
+    # the colour as per-tile planes and each pixel's stops (the default writes an image and
+    # returns block stops), which `rows_of` below hands the backward kernel as its lane rows
+    C = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(mosaic_image_layout=False,
+                                                         mosaic_block_stops=False))
     w, h = cam.width, cam.height
     tiles_x, tiles_y = tile_grid(w, h)
     cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)

@@ -38,14 +38,15 @@ RESIDENT = 132 * 5
 
 def _binned(g, cam):
     """(projected, binned at `pair_capacity` of the view's pairs, the Local-GS config walking
-    every pair (compaction off: the blocks the model starts from; the stops are the same), the
-    backend whose stops are the walks: the Mosaic GPU kernel on a GPU, `tiles` elsewhere)."""
+    every pair (compaction off: the blocks the model starts from; the stops are the same) and
+    returning each pixel's stop pair (`mosaic_block_stops` off), the backend whose stops are the
+    walks: the Mosaic GPU kernel on a GPU, `tiles` elsewhere)."""
     w, h = cam.width, cam.height
     p = jax.jit(project)(g, cam)
     cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, w, h)))
     bins = jax.jit(lambda p: binning.bin_gaussians(p, w, h, cap))(p)
-    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(vanilla_from_pairs=None,
-                                                              mosaic_compact=False))
+    config = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(
+        vanilla_from_pairs=None, mosaic_compact=False, mosaic_block_stops=False))  # pixels
     backend = pallas.LOCALGS if jax.default_backend() == "gpu" else REGISTRY["tiles"]
     return p, bins, config, backend
 
