@@ -170,7 +170,8 @@ def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: i
 def backward_lanes(tile, k, tiles_x: int, config: RasterConfig, dt, trans, stop_at, cotangents):
     """The per-lane data of `backward_step` for lanes k of `tile`, from the rows of the final
     T, stop pairs and cotangents (r, g, b, T, D) the kernel loaded: (frame, pixel, strip bit,
-    stop pair, ḡ_r, ḡ_g, ḡ_b, ḡ_D, ḡ_T·T_N)."""
+    stop pair, ḡ_r, ḡ_g, ḡ_b, ḡ_D, ḡ_T·T_N); D None where the loss does not reach the depth
+    (`backward.walk_step` leaves its terms out)."""
     frame_xy, pixel = lane_coordinates(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), k // STRIP_PIXELS)  # each lane's strip
     g_r, g_g, g_b, g_t, g_d = cotangents
@@ -200,4 +201,4 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
     else:
         model = alpha_model.difference_vjp(d_alpha, alpha, aux, rec[0:2], rec[2:5], rec[5],
                                            *pixel, cap) + [None]
-    return model + [w * g_r, w * g_g, w * g_b, w * g_d], (t,) + sums
+    return model + [w * g_r, w * g_g, w * g_b, None if g_d is None else w * g_d], (t,) + sums

@@ -339,8 +339,8 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     tile) at the pair's row r = row_ref[j] (`gaussian_grads.RowLayout.at`), for the pairs in
     [lo, hi) before the block's last stop pair, and zero rows for the segment's pairs after it:
     every row is written once per block (the tile in every one), as `reduction` says
-    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D; without D,
-    which is then zero, where not `depth_cotangent`); with
+    (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D; without D where
+    not `depth_cotangent`, whose terms are then left out: `backward.walk_step`); with
     `from_checkpoints` (split segments), the five buffers of the carries a segment that is not
     its tile's last enters with (`backward_segments.entries`);
     then rows_ref; then the scratch:
@@ -360,7 +360,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     tile, lo, hi, check = (seg_ref[sid, c] for c in range(backward_segments.COLUMNS))
     k, _, half = _lanes(wg, pixels)
     trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
-    cots = [ref[tile, half] for ref in cot_refs] + [jnp.zeros_like(trans)] * (5 - n_cot)
+    cots = [ref[tile, half] for ref in cot_refs] + [None] * (5 - n_cot)
     lane = ks.backward_lanes(tile, k, tiles_x, config, dt, trans, stop_at, cots)
     block_last = jnp.max(stop_at)
     last = jnp.clip(block_last, lo, hi)
