@@ -81,6 +81,11 @@ ROWS = {
                                                       mosaic_block_stops=False))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
+    # the Local-GS forward's pair loop unrolled 4 times instead of 8: 95 registers for the H200
+    # (5 blocks per SM) instead of 116 (4), 49.5 SASS instructions per pair instead of 46.5
+    # (scripts/kernel_sass.py, Dec 3, seventh session)
+    "localgs:unroll4": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                       mosaic_unroll_localgs=4))),
     # block-size variants of the Mosaic GPU kernels (KernelConfig)
     "localgs:px128": ("pallas", C("gsplat", tuning=K(
         mosaic_forward_pixels=128, mosaic_backward_pixels=128, vanilla_from_pairs=None))),

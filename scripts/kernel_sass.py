@@ -1,8 +1,8 @@
 """The Mosaic GPU kernels' machine code for the H200, compiled on a machine without a GPU: each
 kernel's registers and, in its main loop, the SASS instructions per iteration by opcode.
 
-    build/gpu-offline/bin/python scripts/kernel_sass.py SCENE [--grad] [--kernel backward]
-        [--tuning NAME=VALUE ...] [--data DIR] [--keep DIR]
+    build/gpu-offline/bin/python scripts/kernel_sass.py SCENE [--grad] [--row localgs]
+        [--kernel backward] [--tuning NAME=VALUE ...] [--data DIR] [--keep DIR]
 
 `scripts/gpu_memory_offline.py` compiles the scene's program for the H200 (deviceless); Mosaic
 GPU compiles its kernels to PTX on the way and, with MOSAIC_GPU_DUMP_PTX / _PTXAS /
@@ -87,6 +87,7 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("scene")
     ap.add_argument("--grad", action="store_true")
+    ap.add_argument("--row", default="localgs", help="a benchmarks.scale.ROWS key")
     ap.add_argument("--kernel", default="", help="only kernels whose name contains this")
     ap.add_argument("--tuning", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
@@ -97,7 +98,7 @@ def main(argv=None) -> int:
     env = dict(os.environ, MOSAIC_GPU_DUMP_PTX="1", MOSAIC_GPU_DUMP_PTXAS="1",
                MOSAIC_GPU_DUMP_TO=out)
     cmd = [sys.executable, os.path.join(ROOT, "scripts", "gpu_memory_offline.py"), args.scene,
-           "--data", args.data] + (["--grad"] if args.grad else [])
+           "--data", args.data, "--row", args.row] + (["--grad"] if args.grad else [])
     for t in args.tuning:
         cmd += ["--tuning", t]
     compiled = subprocess.run(cmd, env=env, capture_output=True, text=True)

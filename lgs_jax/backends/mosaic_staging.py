@@ -11,13 +11,19 @@ Per chunk of LANES = 128 pairs of a tile's list, lane t of the block's warpgroup
   2. computes the pair record on the lane vectors, the strip mask included, with the functions
      the XLA path uses (`pairs.record_columns`, `pairs.strip_mask_columns`; the tile is the
      block's, a scalar), and
-  3. stores it to shared memory, column by column, in one of two buffers (chunk c in c % 2),
-     followed by one warpgroup barrier,
+  3. stores it to shared memory as row t of one of two (LANES, REC) buffers (chunk c in
+     c % 2; `_store_rows`), followed by one warpgroup barrier,
 and the pair loop reads the records there as scalars, as it reads TMA-staged records (the
 forward's chunks start at the tile's first pair, `forward_source`; the backward walks down
 through chunks aligned to multiples of LANES, `backward_source`). Two
 buffers and one barrier per chunk suffice: a buffer is written again two chunks later, after
 every thread passed the barrier of the chunk in between, which follows its reads.
+
+A record per row keeps its columns adjacent, so the compiler loads a record with three 128-bit
+loads (float32) where column-major buffers took twelve scalar loads, and stores it with three:
+for the H200 (`scripts/kernel_sass.py`, BENCHMARKS.md §7, Dec 3, seventh session) the
+forward's pair loop 54 -> 46.5 SASS instructions per pair, the backward's 230 -> 223, and the
+backward's staging 26 -> 2 barriers per chunk (Pallas fenced each column's store with two).
 
 No per-pair buffer in global memory and no per-pair XLA pass (the records, and the Gaussian rows
 gathered per pair to build them, are 48 + 56 bytes per pair: 1.2 + 1.4 GB at 10M Gaussians at
@@ -48,8 +54,8 @@ _STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
 
 
 def scratch(dt) -> tuple:
-    """Shared memory: the two record buffers (2, REC, LANES)."""
-    return (plgpu.SMEM((2, ks.REC, LANES), dt),)
+    """Shared memory: the two record buffers (2, LANES, REC)."""
+    return (plgpu.SMEM((2, LANES, ks.REC), dt),)
 
 
 def gather(gauss_ref, table_ref, base, last_pair: int, interpret: bool):
@@ -96,20 +102,40 @@ def _barrier(_):
 def stage(buffer, gauss_ref, table_ref, base, tile, tiles_x: int, config: RasterConfig,
           last_pair: int, interpret: bool):
     """Build the records of pairs [base, base + LANES) (`tile`'s, where the caller reads them)
-    into `buffer` (REC, LANES) of shared memory, then a warpgroup barrier (module docstring)."""
+    into `buffer` (LANES, REC) of shared memory, then a warpgroup barrier (module docstring)."""
     tx, ty = tile % tiles_x, tile // tiles_x
     cols = gather(gauss_ref, table_ref, base, last_pair, interpret)
     mask = pairs.strip_mask_columns(cols, tx, ty, config) if config.warp_cull else None
-    for c, v in enumerate(pairs.record_columns(cols, tx, ty, config, mask)):
-        buffer[c, :] = v
-    if not interpret:
-        _barrier()
+    records = pairs.record_columns(cols, tx, ty, config, mask)
+    if interpret:
+        for c, v in enumerate(records):
+            buffer[:, c] = v
+    else:
+        _store_rows(buffer, *records)
+
+
+def _store_rows(buffer, *columns):
+    """buffer[t, c] = columns[c] at lane t (a record per row: the pair loop's scalar reads of
+    one record are then adjacent), one store per column from each thread (a strided store
+    Pallas' shared-memory lowering rejects), then a warpgroup barrier."""
+    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) + (_STRIDED,) * len(columns))
+    def store(_, buf, *arrays):
+        i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
+        tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
+        for col, a in enumerate(arrays):
+            value = vector.extract(a.registers.flat[0], dynamic_position=[],
+                                   static_position=ir.DenseI64ArrayAttr.get([0]))
+            memref.store(value, buf, [arith.index_cast(index, tid),
+                                      arith.index_cast(index, mgpu_utils.c(col, i32))])
+        mgpu_utils.warpgroup_barrier()
+
+    store(buffer, *columns)
 
 
 def _read(smem, k, columns=range(ks.REC)):
     """Columns `columns` of the record at position k of a walk's chunks (chunk k // LANES, in
     buffer (k // LANES) % 2, lane k % LANES), as scalars."""
-    return [smem[(k // LANES) % 2, c, k % LANES] for c in columns]
+    return [smem[(k // LANES) % 2, k % LANES, c] for c in columns]
 
 
 def forward_source(gauss_ref, table_ref, smem, start, end, tile, tiles_x: int, evaluate,
@@ -159,9 +185,9 @@ COUNT = 4  # `compact_scratch`'s sync buffer: the warps' kept counts at 0..3, th
 
 
 def compact_scratch(dt) -> tuple:
-    """Shared memory of the compacted forward (`compact_loop`): one chunk's records (REC,
-    LANES), their pair indices (LANES,) and the warps' and the chunk's kept counts (8,)."""
-    return (plgpu.SMEM((ks.REC, LANES), dt), plgpu.SMEM((LANES,), jnp.int32),
+    """Shared memory of the compacted forward (`compact_loop`): one chunk's records (LANES,
+    REC), their pair indices (LANES,) and the warps' and the chunk's kept counts (8,)."""
+    return (plgpu.SMEM((LANES, ks.REC), dt), plgpu.SMEM((LANES,), jnp.int32),
             plgpu.SMEM((8,), jnp.int32))
 
 
@@ -177,7 +203,7 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
     if interpret:
         order = jnp.argsort(keep == 0, stable=True)
         for c, v in enumerate(records):
-            buf[c, :] = v[order]
+            buf[:, c] = v[order]
         index_ref[...] = (base + jnp.arange(LANES, dtype=jnp.int32))[order]
         sync_ref[COUNT] = jnp.sum(keep, dtype=jnp.int32)
         return
@@ -212,7 +238,7 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
             total = arith.addi(total, n)
         pos = arith.select(kept, before, arith.subi(arith.addi(total, tid), before))
         for col, a in enumerate(arrays[:-1]):
-            memref.store(value(a), buf, [at(c(col)), at(pos)])
+            memref.store(value(a), buf, [at(pos), at(c(col))])
         memref.store(arith.addi(first.registers.item(), tid), index_ref, [at(pos)])
         with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.eq, tid, c(0)))
                                .then_block):
@@ -264,7 +290,7 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         at = [jnp.minimum(v + u, LANES - 1) for u in range(unroll)]
         evaluated = []
         for p in at:
-            rec = [buf[col, p] for col in range(ks.REC)]
+            rec = [buf[p, col] for col in range(ks.REC)]
             evaluated.append(evaluate(rec, rec[ks.REC - 1].astype(jnp.int32)))
         for u, ((alpha, hit, rgb, z), p) in enumerate(zip(evaluated, at)):
             st = ks.blend(st, alpha, hit & (v + u < n), rgb, z, index_ref[p], config)
