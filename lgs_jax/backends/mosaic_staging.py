@@ -93,12 +93,6 @@ def gather(gauss_ref, table_ref, base, last_pair: int, interpret: bool):
     return list(load(gauss_ref, table_ref, base))
 
 
-@plgpu.inline_mgpu()
-def _barrier(_):
-    """A warpgroup barrier (bar.sync over the block's 128 threads)."""
-    mgpu_utils.warpgroup_barrier()
-
-
 def stage(buffer, gauss_ref, table_ref, base, tile, tiles_x: int, config: RasterConfig,
           last_pair: int, interpret: bool):
     """Build the records of pairs [base, base + LANES) (`tile`'s, where the caller reads them)
