@@ -54,7 +54,9 @@ def hoisted(raw, log_opacity, cap):
 
 
 def hoisted_vjp(d_alpha, alpha, ln_a, raw, log_opacity, cap):
-    """(∂L/∂raw, ∂L/∂ln o) per pixel from ∂L/∂α; ∂L/∂V = ∂L/∂raw · B (Eq. 9's basis)."""
-    d_ln = jnp.where(jnp.exp(ln_a) < cap, d_alpha * alpha, 0)
+    """(∂L/∂raw, ∂L/∂ln o) per pixel from ∂L/∂α and `hoisted`'s α, ln α; ∂L/∂V = ∂L/∂raw · B
+    (Eq. 9's basis). The cap does not bind where α < cap, which is e^{ln α} < cap exactly
+    (α = min(cap, e^{ln α}); both false for NaN), without a second exponential."""
+    d_ln = jnp.where(alpha < cap, d_alpha * alpha, 0)
     on_v = raw <= log_opacity
     return jnp.where(on_v, d_ln, 0), jnp.where(on_v, 0, d_ln)
