@@ -50,6 +50,13 @@ def image_to_tiles(x, width: int, height: int):
     return jnp.moveaxis(x, 2, 1).reshape((tiles_x * tiles_y, TILE_PIXELS) + rest)
 
 
+def tiled_image_to_tiles(image):
+    """A (tiles_y·16, tiles_x·16, C) image (the whole tiles' pixels, as the Local-GS forward
+    writes its colour: `KernelConfig.mosaic_image_layout`) -> (n_tiles, 256, C) per tile."""
+    rows, cols = image.shape[:2]
+    return image_to_tiles(image.reshape((rows * cols,) + image.shape[2:]), cols, rows)
+
+
 def image_tiles(image, tile, tiles_x: int):
     """The channels of a (tiles_y·16, tiles_x·16, C) image at the pixels of tiles `tile` (any
     shape): C arrays tile.shape + (256,), pixel k of a tile at row k // 16, column k % 16 (a

@@ -201,7 +201,7 @@ def _kernel_forward(g, cam, config):
 def _kernel_and_walk_rows(p, bins, cam, state, stop_at, saved, cot, config):
     """The backward kernel's pair rows and the plain-jnp walk's, from the same residuals."""
     from lgs_jax.backends import pallas, tiles
-    from lgs_jax.layout import image_to_tiles, tile_grid
+    from lgs_jax.layout import tile_grid, tiled_image_to_tiles
 
     plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
     got = pallas._gradients(p, bins, cam.width, cam.height, plan, state.trans, stop_at, saved, cot)
@@ -210,10 +210,7 @@ def _kernel_and_walk_rows(p, bins, cam, state, stop_at, saved, cot, config):
     # forward may return each block's: Plan.block_stops) and the colour's cotangent per tile
     # (the forward may write an image: Plan.image).
     masks, records, _ = pallas._records(p, bins, tile_grid(cam.width, cam.height)[0], config)
-    g_color = cot[0]
-    if plan.image:
-        rows, cols = g_color.shape[:2]
-        g_color = image_to_tiles(g_color.reshape(rows * cols, 3), cols, rows)
+    g_color = tiled_image_to_tiles(cot[0]) if plan.image else cot[0]
     want = tiles._gradients(p, bins, cam.width, cam.height, config, state.trans, saved[-1],
                             (masks, records[:, :7] if config.hoist else None),
                             (g_color,) + tuple(cot[1:]))

@@ -57,7 +57,7 @@ from .. import pairs
 from ..binning import TileBins
 from ..composite import PixelState
 from ..config import RasterConfig
-from ..layout import STRIPS, TILE_PIXELS, image_tiles, image_to_tiles, tile_grid
+from ..layout import STRIPS, TILE_PIXELS, image_tiles, tile_grid, tiled_image_to_tiles
 from ..projection import Projected
 from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
                pallas_triton, table_kernel)
@@ -326,8 +326,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     tiles_x, _ = tile_grid(width, height)
     g_color, g_trans, g_depth = cotangents
     if plan_.image:  # the colour image's cotangent, per tile: (n_tiles, 256, 3)
-        rows, cols = g_color.shape[:2]
-        g_color = image_to_tiles(g_color.reshape(rows * cols, 3), cols, rows)
+        g_color = tiled_image_to_tiles(g_color)
     masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
     lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans)
     if g_depth is not None or plan_.backward != "mosaic":  # the Mosaic GPU kernel takes None
