@@ -136,10 +136,11 @@ def record_columns(cols, tx, ty, config: RasterConfig, mask=None):
     """The 12 columns of the Local-GS kernels' pair record of Gaussians `cols` in tiles (tx, ty)
     (lgs_jax.backends.kernel_steps): hoisted, V (Eq. 8) relative to the tile's origin and ln o;
     the difference form, μ, the conic, o and 0; then rgb, z and the strip mask as a float
-    (`mask`: int32, None for 0). On columns, as `strip_mask_columns`. The difference form's 0
-    is o · 0, a column of the lanes' own data: a constant (`zeros_like`) reaches the compacted
-    forward's Mosaic GPU store as a splat its lane-strided store cannot take, and the kernel
-    failed to build on the H200 (LLVM translation: an unrealized_conversion_cast)."""
+    (`mask`: int32, None for 0). On columns, as `strip_mask_columns`. The zeros (the difference
+    form's o · 0, no mask's z · 0) are products of the lanes' own data: a constant
+    (`zeros_like`) reaches the Mosaic GPU kernels' lane-strided shared-memory stores as a
+    splat they cannot take, and the kernel fails to build for the H200 (LLVM translation: an
+    unrealized_conversion_cast; on the GPU the test hung instead of raising)."""
     mx, my, a, b, c, o, red, green, blue, z = cols[:10]
     if config.hoist:
         dt = mx.dtype
@@ -148,7 +149,7 @@ def record_columns(cols, tx, ty, config: RasterConfig, mask=None):
         head = list(hoist.hoist_terms(a, b, c, mx - ox, my - oy, log_o)) + [log_o]
     else:
         head = [mx, my, a, b, c, o, o * 0]
-    bits = jnp.zeros_like(z) if mask is None else mask.astype(z.dtype)
+    bits = z * 0 if mask is None else mask.astype(z.dtype)
     return head + [red, green, blue, z, bits]
 
 

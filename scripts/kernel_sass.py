@@ -102,8 +102,9 @@ def main(argv=None) -> int:
     for t in args.tuning:
         cmd += ["--tuning", t]
     compiled = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    if compiled.returncode:
-        sys.exit(compiled.stdout[-2000:] + compiled.stderr[-2000:])
+    failed = [line for line in compiled.stderr.splitlines() if "error:" in line]
+    if compiled.returncode or failed:  # a kernel the GPU compiler rejects writes no PTX
+        sys.exit("\n".join(failed[:8]) or compiled.stdout[-2000:] + compiled.stderr[-2000:])
     ptxas, cuobjdump = tool("ptxas"), tool("cuobjdump")
     tools = dict(os.environ, PATH=os.path.dirname(tool("nvdisasm")) + os.pathsep
                  + os.environ.get("PATH", ""))  # cuobjdump -sass runs nvdisasm
