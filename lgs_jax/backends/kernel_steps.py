@@ -16,6 +16,7 @@ kernels themselves from per-Gaussian rows (lgs_jax.backends.mosaic_staging; the 
 from __future__ import annotations
 
 import functools
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 from jax import lax
@@ -178,11 +179,26 @@ def backward_lanes(tile, k, tiles_x: int, config: RasterConfig, dt, trans, stop_
     return frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_t * trans
 
 
+class Scaled(NamedTuple):
+    """A gradient term source · factor whose factor is the lane's own and the same at every pair
+    of the walk (a pixel's basis value x², xy, y², x, y). The GPU reduction
+    (`mosaic_rows.transposed_row`) then chooses between two terms of one source by their
+    factors, once per walk, instead of between their products at every pair."""
+    source: Any
+    factor: Any
+
+
+def term(value):
+    """A gradient term's per-lane values (`backward_step`'s terms: an array, `Scaled` or None)."""
+    return value.source * value.factor if isinstance(value, Scaled) else value
+
+
 def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
     """Pair j's step of the backward walk (`backward.walk_step`, equations in
     lgs_jax.backends.backward) at a lane vector of pixels: its per-lane gradient terms (7
-    α-model columns, ∂L/∂rgb, ∂L/∂z; the kernels reduce them over their pixels) and the new
-    carry (T_{k+1}, S_r, S_g, S_b, S_Z)."""
+    α-model columns, ∂L/∂rgb, ∂L/∂z; arrays, `Scaled` products or None for a zero term, each
+    `term`'s value; the kernels reduce them over their pixels) and the new carry (T_{k+1},
+    S_r, S_g, S_b, S_Z)."""
     frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
     cap = jnp.asarray(config.alpha_cap, rec[0].dtype)
     alpha, hit, aux = record_alpha(rec, frame_xy, pixel, config)
@@ -196,9 +212,14 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
         ln_a, raw = aux
         d_raw, d_ln_o = alpha_model.hoisted_vjp(d_alpha, alpha, ln_a, raw, rec[6], cap)
         x, y = frame_xy
-        model = [d_raw * (x * x), d_raw * (x * y), d_raw * (y * y), d_raw * x, d_raw * y, d_raw,
-                 d_ln_o]
+        # as `Scaled` the basis terms pair up in the GPU reduction's first step without
+        # selects (4 of the pair step's 216 SASS instructions for the H200, at 96 registers,
+        # which keep 5 blocks per SM; d_raw · 1 and the colour terms as Scaled too: 210 at
+        # 103-105, 4 blocks: BENCHMARKS.md §7, Dec 3, eighth session)
+        model = [Scaled(d_raw, x * x), Scaled(d_raw, x * y), Scaled(d_raw, y * y),
+                 Scaled(d_raw, x), Scaled(d_raw, y), d_raw, d_ln_o]
     else:
         model = alpha_model.difference_vjp(d_alpha, alpha, aux, rec[0:2], rec[2:5], rec[5],
                                            *pixel, cap) + [None]
-    return model + [w * g_r, w * g_g, w * g_b, None if g_d is None else w * g_d], (t,) + sums
+    colour = [w * g_r, w * g_g, w * g_b, None if g_d is None else w * g_d]
+    return model + colour, (t,) + sums

@@ -65,7 +65,7 @@ def writers(reduction: str, rows_ref, wg, tile, pixels: int, exchange=None):
 
     def store(values, s, parity):
         for c, v in enumerate(values):
-            rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(v)
+            rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(ks.term(v))
         rows_ref[wg, s, ks.TILE_COLUMN] = tile_value
         return parity
 
@@ -105,45 +105,97 @@ def butterfly_plan(rows: int):
     return tuple(halves), tuple(int(r) for r in final[0::2])
 
 
+def term_order(sources) -> tuple[int, ...]:
+    """The order in which `transposed_row` lays out its m present terms for `butterfly_plan(m)`
+    (positions k and k + h, h = ceil(m / 2), meet at its first step), given each term's source
+    (`sources[i]`: equal for `kernel_steps.Scaled` terms of one source, None for a term of its
+    own): terms of one source paired at positions (k, k + h) as far as they go, then the rest.
+    A pair of one source needs no per-pair select at that step (`_butterfly`)."""
+    m = len(sources)
+    h = (m + 1) // 2
+    groups: dict = {}
+    for i, key in enumerate(sources):
+        groups.setdefault(("own", i) if key is None else key, []).append(i)
+    pairs, rest = [], []
+    for members in groups.values():
+        pairs += [members[k:k + 2] for k in range(0, len(members) - 1, 2)]
+        rest += members[len(members) // 2 * 2:]
+    # len(pairs) <= m // 2 = m − h: every pair finds a position k < m − h
+    low = [a for a, _ in pairs] + rest[:h - len(pairs)]
+    high = [b for _, b in pairs] + rest[h - len(pairs):]
+    return tuple(low + high)
+
+
+def row_slots(terms) -> tuple[tuple[int, ...], tuple, tuple[int, ...]]:
+    """(order, halves, slot of each row) of `transposed_row` for `terms`: the present terms'
+    indices in butterfly order (`term_order`), `butterfly_plan`'s halving sizes for them, and
+    per row c < len(terms) the exchange slot (lane pair) holding the warp's sum of terms[c];
+    a None row is given a slot no term reaches, whose sums are exact zeros (the butterfly adds
+    only its padding zeros there; one exists, as fewer than 16 terms are present)."""
+    present = [c for c, v in enumerate(terms) if v is not None]
+    if not present:
+        raise ValueError("transposed_row: every term is None (zero_row writes a zero row)")
+    sources = [id(terms[c].source) if isinstance(terms[c], ks.Scaled) else None
+               for c in present]
+    order = tuple(present[i] for i in term_order(sources))
+    halves, slot_rows = butterfly_plan(len(order))
+    slots = {order[p]: s for s, p in enumerate(slot_rows) if p >= 0}
+    if len(order) < len(terms):
+        spare = slot_rows.index(-1)
+        slots.update({c: spare for c in range(len(terms)) if c not in slots})
+    return order, halves, tuple(slots[c] for c in range(len(terms)))
+
+
 def transposed_row(terms, pixels: int, exchange, row, tile):
     """Store one pair's row: row[c] = Σ over the block's pixels of terms[c] (c < len(terms)),
-    then row[len(terms)] = tile, from the block-wide (pixels,) lane vectors `terms` (Mosaic GPU
-    strided layout: each thread holds pixels/128 of them; None: a term that is zero, which
-    stays a constant inside: a zero array passed in fails the GPU compiler's LLVM translation
-    with an unrealized layout cast).
+    then row[len(terms)] = tile, from `kernel_steps.backward_step`'s terms: block-wide
+    (pixels,) lane vectors (Mosaic GPU strided layout: each thread holds pixels/128 of them),
+    `kernel_steps.Scaled` products of two, or None for a zero term, which is left out of the
+    butterfly (a zero array passed in fails the GPU compiler's LLVM translation with an
+    unrealized layout cast).
 
     A transposing reduction (`plgpu.inline_mgpu`; GPU only): each thread adds its own pixels,
     then five butterfly steps over the warp's lanes (distance 16, 8, 4, 2, 1) halve the values
-    each lane still holds, exchanging only the half its partner keeps (for 11 terms 6 + 3 + 2 +
-    1 + 1 = 13 shuffles per thread, where reducing each term over the lanes takes 11 x 5 = 55),
-    leaving every lane pair the warp's sum of one term (`butterfly_plan`). Each warp writes its
-    16 sums to `exchange` (a (EXCHANGE,) view of shared memory: slot s of warp w at 4s + w),
-    one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
+    each lane still holds, exchanging only the half its partner keeps (for 10 terms 5 + 3 + 2 +
+    1 + 1 = 12 shuffles per thread, where reducing each term over the lanes takes 10 x 5 = 50),
+    leaving every lane pair the warp's sum of one term (`butterfly_plan`, in `row_slots`'
+    order). At the first step a lane sends one of two terms and keeps the other, two selects
+    per pair of terms; for two `Scaled` terms of one source it multiplies the source by the
+    factors it selected once per walk instead (the same products: the same bits). Each warp
+    writes its 16 sums to `exchange` (a (EXCHANGE,) view of shared memory: slot s of warp w at
+    4s + w), one barrier, and lanes 0..len(terms) of the first warp add the four warps' sums
     ((w0 + w1) + (w2 + w3)) and store the row with one coalesced store (the tile from lane
     len(terms)). The caller alternates two `exchange` buffers between consecutive reductions,
     so one barrier per pair suffices: a warp writes a buffer again only after the barrier of
     the reduction in between, which the first warp passes after reading it. Fixed order,
-    no atomics: deterministic."""
-    rows, vec = len(terms), pixels // 128
-    halves, slot_rows = butterfly_plan(rows)
-    present = [c for c, v in enumerate(terms) if v is not None]
+    no atomics: deterministic; each sum's order over the lanes is the butterfly's whatever the
+    terms' order (a + b is b + a), so the bits do not depend on `row_slots`."""
+    vec = pixels // 128
+    order, halves, slots = row_slots(terms)
+    inputs, index = [], {}  # the distinct arrays passed in, by id
+
+    def arg(a):
+        if id(a) not in index:
+            index[id(a)] = len(inputs)
+            inputs.append(a)
+        return index[id(a)]
+
+    specs = [(arg(terms[c].source), arg(terms[c].factor)) if isinstance(terms[c], ks.Scaled)
+             else (arg(terms[c]),) for c in order]
 
     @plgpu.inline_mgpu(
         arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(()))
-        + (plgpu.Layout.WG_STRIDED((pixels,), vec_size=vec),) * len(present))
+        + (plgpu.Layout.WG_STRIDED((pixels,), vec_size=vec),) * len(inputs))
     def reduce(_, exchange_ref, row_ref, tile_value, *arrays):
         el = ir.VectorType(arrays[0].registers.flat[0].type).element_type
         tid = arith.remui(mgpu_utils.thread_idx(), _i32(128))
-        zero = arith.constant(el, 0.0)
-        vals = [zero] * rows
-        for col, a in zip(present, arrays):
-            [reg] = a.registers.reshape(-1)  # this thread's pixels of the term
-            vals[col] = functools.reduce(arith.addf, [_element(reg, e) for e in range(vec)])
-        value = _butterfly(vals, halves, arith.remui(tid, _i32(32)), zero)
-        _exchange_and_store(value, exchange_ref, row_ref, tid, slot_rows, rows,
+        lanes = [[_element(a.registers.reshape(-1)[0], e) for e in range(vec)] for a in arrays]
+        elements = [tuple(lanes[i] for i in sp) for sp in specs]
+        value = _butterfly(elements, halves, arith.remui(tid, _i32(32)), arith.constant(el, 0.0))
+        _exchange_and_store(value, exchange_ref, row_ref, tid, slots,
                             tile_value.registers.item())
 
-    reduce(exchange, row, tile, *[terms[c] for c in present])
+    reduce(exchange, row, tile, *inputs)
 
 
 def _i32(v: int):
@@ -161,14 +213,47 @@ def _shuffle(v, d: int):
                                          d), 0)
 
 
-def _butterfly(vals, halves, lane, zero):
-    """`butterfly_plan`'s steps on this lane's values `vals` (one per term): the lane's one
-    value at the end, the warp's sum of the term the plan assigns to its lane pair."""
+def _own_sum(element):
+    """The thread's sum over its pixels of a term: (values,) or (source, factor) per pixel."""
+    if len(element) == 1:
+        return functools.reduce(arith.addf, element[0])
+    return functools.reduce(arith.addf, [arith.mulf(s, f) for s, f in zip(*element)])
+
+
+def _first_step(elements, h: int, upper, zero):
+    """The butterfly's first step's (send, keep) per k < h, from the terms' per-pixel values
+    (`_own_sum`'s elements): for two products of one source, the source times the selected
+    factors (selects of per-walk values, which the compiler takes out of the pair loop)."""
+    out = []
+    for k in range(h):
+        lo = elements[k]
+        hi = elements[k + h] if k + h < len(elements) else None
+        if hi is not None and len(lo) == len(hi) == 2 and lo[0] is hi[0]:
+            pick = lambda a, b: [arith.select(upper, x, y) for x, y in zip(a, b)]
+            out.append((_own_sum((lo[0], pick(lo[1], hi[1]))),
+                        _own_sum((lo[0], pick(hi[1], lo[1])))))
+            continue
+        lo_sum, hi_sum = _own_sum(lo), zero if hi is None else _own_sum(hi)
+        out.append((arith.select(upper, lo_sum, hi_sum), arith.select(upper, hi_sum, lo_sum)))
+    return out
+
+
+def _butterfly(elements, halves, lane, zero):
+    """`butterfly_plan`'s steps on this lane's terms `elements` (per term its per-pixel values,
+    or a source and factor per pixel, in `row_slots`' order): the lane's one value at the end,
+    the warp's sum of the term the plan assigns to its lane pair."""
+    vals = None
     for d, h in zip((16, 8, 4, 2, 1), halves):
+        upper = arith.cmpi(arith.CmpIPredicate.ne, arith.andi(lane, _i32(d)), _i32(0))
+        if vals is None:  # the first step (at least two terms; with one, h is 0 here)
+            if h:
+                vals = [arith.addf(keep, _shuffle(send, d))
+                        for send, keep in _first_step(elements, h, upper, zero)]
+                continue
+            vals = [_own_sum(elements[0])]
         if h == 0:
             vals = [arith.addf(vals[0], _shuffle(vals[0], d))]
             continue
-        upper = arith.cmpi(arith.CmpIPredicate.ne, arith.andi(lane, _i32(d)), _i32(0))
         merged = []
         for k in range(h):
             lo = vals[k]
@@ -180,11 +265,12 @@ def _butterfly(vals, halves, lane, zero):
     return vals[0]
 
 
-def _exchange_and_store(value, exchange_ref, row_ref, tid, slot_rows, rows: int, tile):
+def _exchange_and_store(value, exchange_ref, row_ref, tid, slots, tile):
     """Each lane's warp sum `value` to exchange_ref[4·slot + warp] (slot = lane // 2), one
-    barrier, then thread t <= rows of the first warp stores row_ref[t]: the four warps' sums of
-    term t, (w0 + w1) + (w2 + w3), or, for t = rows, the tile."""
+    barrier, then thread t <= rows (rows = len(slots)) of the first warp stores row_ref[t]: the
+    four warps' sums in slot slots[t], (w0 + w1) + (w2 + w3), or, for t = rows, the tile."""
     index = ir.IndexType.get()
+    rows = len(slots)
     lane, warp = arith.remui(tid, _i32(32)), arith.divui(tid, _i32(32))
     at = arith.addi(arith.muli(arith.shrui(lane, _i32(1)), _i32(4)), warp)
     memref.store(value, exchange_ref, [arith.index_cast(index, at)])
@@ -192,10 +278,8 @@ def _exchange_and_store(value, exchange_ref, row_ref, tid, slot_rows, rows: int,
     with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.ule, tid, _i32(rows)))
                            .then_block):
         slot = _i32(0)
-        for s, r in enumerate(slot_rows):
-            if r >= 0:
-                slot = arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, _i32(r)), _i32(s),
-                                    slot)
+        for t, s in enumerate(slots):
+            slot = arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, _i32(t)), _i32(s), slot)
         four = vector.load(ir.VectorType.get((4,), value.type), exchange_ref,
                            [arith.index_cast(index, arith.muli(slot, _i32(4)))])
         p = [_element(four, w) for w in range(4)]

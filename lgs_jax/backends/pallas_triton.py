@@ -107,11 +107,11 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, tiles_x: int, 
 
 
 def _columns(values, lanes: int, dt):
-    """Σ over lanes of each of `values` (lane vectors), as one (lanes, GRAD_COLUMNS) column
+    """Σ over lanes of each of `values` (`kernel_steps.term`s), as one (lanes, GRAD_COLUMNS) column
     reduction (one cross-warp reduction per pair instead of one per value)."""
     col = lax.broadcasted_iota(jnp.int32, (lanes, GRAD_COLUMNS), 1)
     m = jnp.zeros((lanes, GRAD_COLUMNS), dt)
-    for c, v in enumerate(values):
+    for c, v in enumerate(map(ks.term, values)):
         if v is not None:
             m = jnp.where(col == c, v[:, None], m)
     return jnp.sum(m, axis=0)
