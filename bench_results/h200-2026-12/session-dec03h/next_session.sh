@@ -1,0 +1,30 @@
+# Next GPU session (issues 17 and 18), from the repository root; each step one `run` call.
+# carry/: data (guitar, lego_sh3, lego_train, skull), carry/wheels (gsplat 1.5.3 and
+# pytest-timeout: a test that hangs in C is then named, `--timeout 150 --timeout-method thread`),
+# carry/ab_pkg.py (session-dec03e/ab_pkg.py) with carry/old/lgs_old from
+# `git archive b2c9b27 lgs_jax`, renamed lgs_jax -> lgs_old (the package before ff6056a).
+# Before any call: `build/gpu-offline/bin/python scripts/gpu_build_offline.py` (14 built).
+# 0. ff6056a (the backward's reduction: None term out, Scaled basis terms; pair step 220 -> 212
+#    SASS instructions, 96 registers) has not run on a GPU. Its tests and the whole GPU set
+#    (73 + 3 new CPU-side cases; about 3 min):
+#      TEST_WORKERS=8 TEST_TIMEOUT=300 TEST_ARGS="-vv --timeout 150 --timeout-method thread \
+#        tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
+#        tests/backends/test_gradients.py tests/backends/test_mosaic_staging.py \
+#        tests/backends/test_pallas.py" bash scripts/scale_gpu_check.sh tests
+#    then the A/B against b2c9b27 (bits must be equal: same products, same lane order):
+#      python3 carry/ab_pkg.py synthetic4M_1080p 5; python3 carry/ab_pkg.py guitar_x64_1080p 7
+#    and the backward kernel's device time (4.06 ms at synthetic 4M this session):
+#      python3 scripts/kernel_times.py --data carry/data --scenes synthetic4M_1080p --grad \
+#        --rows localgs --iters 5 --top 8 (with gsplat: its 3.40 ms in the same process)
+# 1. The issue tables again with gsplat in one process (Dec 3 sixth session's were before the
+#    three cuts and the reduction): SCENES="synthetic4M_1080p synthetic10M_4k guitar_x110_4k"
+#    bash scripts/scale_gpu_check.sh fwd, and ... grad (GRAD_ROWS=localgs,localgs@walked).
+#    Expected from this session's A/B: synthetic 4M fwd+bwd about 0.99x gsplat (was 1.03x);
+#    x110 4K forward about 0.83x (target 0.8x).
+# 2. Skull training (TRAIN_SCENES=skull, 7k steps) against Dec 3's 15.16 / 11.35 ms, 26.81 dB.
+# 3. gsplat's backward kernel under ncu: the wheel outside /tmp/site (pip --target /tmp/gs),
+#      PYTHONPATH=$PWD:/tmp/gs ncu --clock-control none -k regex:3dgs_bwd -c 1 --set full \
+#        python3 scripts/ncu_localgs.py carry/data --scene synthetic4M_1080p --backends pallas \
+#        --kernel mosaic --grad --gsplat
+# 4. α through exp2 (forward 43.5 -> 40.25 SASS per pair): first whether the Mosaic GPU and
+#    Triton kernels compute it to the same bits on the GPU (BENCHMARKS §7, Dec 3 seventh).
