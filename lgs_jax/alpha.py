@@ -16,7 +16,14 @@ Difference form (the contract, lgs_jax.composite), with d = μ − pixel centre:
 Hoisted form (Local-GS Eq. 8–10), with raw = V·B the six-term dot product in the hoisting frame:
     ln α = min(raw, ln o)  (the clamp at the exact maximum ln o replaces the `power > 0` skip,
     which in the expanded form would fire on rounding at Gaussian centres),
-    α = min(cap, e^{ln α}),  hit = ln α >= ln(1/255).
+    α = min(cap, 2^{ln α · log2 e}),  hit = ln α >= ln(1/255).
+  e^{ln α} as 2^{ln α · log2 e} (`exp2`): for the GPU, Mosaic GPU and Triton compile `exp2` to
+  one `ex2.approx` (within 2 ulp, as libdevice's `expf`, whose range reduction costs 8
+  instructions where this costs 2; gsplat's `__expf` is the same product and instruction):
+  SASS per pair for the H200 3.25 fewer in the Local-GS forward (43.5 -> 40.25) and 8 in the
+  backward (212 -> 204; BENCHMARKS.md §7, Dec 3, eighth session). A forward and the backward
+  that reads its residuals are always one compiler's kernels (`pallas.Plan.for_gradients`), so
+  they agree to the bit. `hit` is tested on ln α, so it does not depend on the exponential.
   Derivative, where the cap does not bind (e^{ln α} < cap), ∂α/∂ln α = α:
     ∂α/∂raw = α where raw <= ln o (then ∂raw/∂V = B), ∂α/∂ln o = α where the clamp binds.
 """
@@ -27,6 +34,8 @@ import jax.numpy as jnp
 
 from .composite import gaussian_alpha, passes
 from .config import ALPHA_MIN
+
+LOG2_E = 1.4426950408889634  # log2(e): e^x = 2^{x · log2 e}
 
 
 def difference(mean, conic, opacity, px, py, cap):
@@ -49,14 +58,15 @@ def difference_vjp(d_alpha, alpha, power, mean, conic, opacity, px, py, cap):
 def hoisted(raw, log_opacity, cap):
     """(α, hit, ln α) of the hoisted form from raw = V·B (`lgs_jax.hoist`) and ln o."""
     ln_a = jnp.minimum(raw, log_opacity)
-    alpha = jnp.minimum(cap, jnp.exp(ln_a))
+    alpha = jnp.minimum(cap, jnp.exp2(ln_a * jnp.asarray(LOG2_E, ln_a.dtype)))
     return alpha, ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, raw.dtype)), ln_a
 
 
 def hoisted_vjp(d_alpha, alpha, ln_a, raw, log_opacity, cap):
     """(∂L/∂raw, ∂L/∂ln o) per pixel from ∂L/∂α and `hoisted`'s α, ln α; ∂L/∂V = ∂L/∂raw · B
     (Eq. 9's basis). The cap does not bind where α < cap, which is e^{ln α} < cap exactly
-    (α = min(cap, e^{ln α}); both false for NaN), without a second exponential."""
+    (α = min(cap, e^{ln α}), computed as `hoisted` does; both false for NaN), without a second
+    exponential."""
     d_ln = jnp.where(alpha < cap, d_alpha * alpha, 0)
     on_v = raw <= log_opacity
     return jnp.where(on_v, d_ln, 0), jnp.where(on_v, 0, d_ln)

@@ -2,7 +2,9 @@
 # carry/: data (guitar, lego_sh3, lego_train, skull), carry/wheels (gsplat 1.5.3 and
 # pytest-timeout: a test that hangs in C is then named, `--timeout 150 --timeout-method thread`),
 # carry/ab_pkg.py (session-dec03e/ab_pkg.py) with carry/old/lgs_old from
-# `git archive b2c9b27 lgs_jax`, renamed lgs_jax -> lgs_old (the package before ff6056a).
+# `git archive REV lgs_jax`, renamed lgs_jax -> lgs_old: REV = ff6056a (before exp2 for α) for
+# the time of exp2; for the reduction's bits, a second old package at b2c9b27 against a tree at
+# ff6056a (as session-dec03f's c1.sh ran an old tree from /tmp/oldtree).
 # Before any call: `build/gpu-offline/bin/python scripts/gpu_build_offline.py` (14 built).
 # 0. ff6056a (the backward's reduction: None term out, Scaled basis terms; pair step 220 -> 212
 #    SASS instructions, 96 registers) has not run on a GPU. Its tests and the whole GPU set
@@ -26,5 +28,8 @@
 #      PYTHONPATH=$PWD:/tmp/gs ncu --clock-control none -k regex:3dgs_bwd -c 1 --set full \
 #        python3 scripts/ncu_localgs.py carry/data --scene synthetic4M_1080p --backends pallas \
 #        --kernel mosaic --grad --gsplat
-# 4. α through exp2 (forward 43.5 -> 40.25 SASS per pair): first whether the Mosaic GPU and
-#    Triton kernels compute it to the same bits on the GPU (BENCHMARKS §7, Dec 3 seventh).
+# The commit after ff6056a computes α through exp2 (alpha.hoisted; SASS per pair: render
+# forward 43.5 -> 40.25, backward 212 -> 204), also not yet run on a GPU: its check is step 0's
+# test set (float32 tolerances against the float64 oracle and between the Mosaic GPU and Triton
+# forwards; a forward and its backward are always one compiler's, Plan.for_gradients). Its
+# time: ab_pkg.py against ff6056a (guitar_4k 9 fwd; synthetic4M_1080p 5).
