@@ -49,20 +49,23 @@ def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents):
     ḡ_D, ḡ_T·T_N), ḡ_D None where the loss does not reach the depth: its terms are left out
     rather than multiplied by zeros (which a compiler must keep) and S_Z is carried unchanged.
     Returns (T_k where hit else T_{k+1}: the next carry, w = α·T_k, ∂L/∂α (zero where not hit),
-    the sums including this pair).
+    the sums including this pair). A miss is a pair with α = 0 (T_{k+1}/1 and 0·T_k are exact),
+    one select where three took the cases apart (`hit`, the GPU kernels' pair step 204 -> 198
+    SASS instructions for the H200; the same bits).
     """
     g_r, g_g, g_b, g_d, g_bg = cotangents
     s_r, s_g, s_b, s_z = sums
-    one_minus = jnp.where(hit, 1 - alpha, 1)
+    alpha = jnp.where(hit, alpha, 0)  # a miss: 1 − α = 1, so T_k = T_{k+1} and w = 0, exactly
+    one_minus = 1 - alpha
     t_k = t_next / one_minus
-    w = jnp.where(hit, alpha * t_k, 0)
+    w = alpha * t_k
     dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
     dot_s = g_r * s_r + g_g * s_g + g_b * s_b
     if g_d is not None:
         dot_c, dot_s, s_z = dot_c + g_d * z, dot_s + g_d * s_z, s_z + w * z
     d_alpha = jnp.where(hit, t_k * dot_c - (dot_s + g_bg) / one_minus, 0)
     sums = (s_r + w * rgb[0], s_g + w * rgb[1], s_b + w * rgb[2], s_z)
-    return jnp.where(hit, t_k, t_next), w, d_alpha, sums
+    return t_k, w, d_alpha, sums
 
 
 def walk(bins: TileBins, rgb, depth, trans, stop_at, g_color, g_trans, g_depth, pair_alpha,
