@@ -4,9 +4,9 @@ gradient terms summed over the block's pixels, then the pair's tile, at the pair
 
 Two reductions (`REDUCTIONS`, `writers`):
   "transposed" (the GPU default): `transposed_row`, a transposing butterfly in inline Mosaic GPU
-    code (13 shuffles per thread for 11 terms, one exchange across the warps through shared
-    memory, one barrier, one coalesced store of the row by the first warp), and `zero_row`,
-    one coalesced store; `plgpu.inline_mgpu` code does not run in interpret mode;
+    code (12 shuffles per thread for an image loss's 10 terms, one exchange across the warps
+    through shared memory, one barrier, one coalesced store of the row by the first warp), and
+    `zero_row`, one coalesced store; `plgpu.inline_mgpu` code does not run in interpret mode;
   "terms" (interpret mode): one warpgroup `jnp.sum` per term, each stored from every thread.
 The two agree to float rounding (a different summation order); each is deterministic (a fixed
 order, no atomics). BENCHMARKS.md §7 has the measurements.
