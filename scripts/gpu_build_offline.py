@@ -102,7 +102,7 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_platforms", "cpu")  # the GPU is only a compilation target
-    jax.config.update("jax_enable_x64", True)
+    jax.config.update("jax_enable_x64", True)  # as tests/conftest.py: the float64 cases
     sharding = target_device(CUB_DEVICE)
     table = cases()
     bad = 0
