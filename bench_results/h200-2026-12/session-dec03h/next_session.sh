@@ -32,4 +32,6 @@
 # forward 43.5 -> 40.25, backward 212 -> 204), also not yet run on a GPU: its check is step 0's
 # test set (float32 tolerances against the float64 oracle and between the Mosaic GPU and Triton
 # forwards; a forward and its backward are always one compiler's, Plan.for_gradients). Its
-# time: ab_pkg.py against ff6056a (guitar_4k 9 fwd; synthetic4M_1080p 5).
+# time: ab_pkg.py against ff6056a (guitar_4k 9 fwd; synthetic4M_1080p 5). 2f92278 (a miss as
+# α = 0 in backward.walk_step: 204 -> 198) should leave the bits: ab_pkg.py with the package at
+# dad7a98 as lgs_old, "same bits" expected on every row.
