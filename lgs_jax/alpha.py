@@ -21,9 +21,11 @@ Hoisted form (Local-GS Eq. 8–10), with raw = V·B the six-term dot product in 
   one `ex2.approx` (within 2 ulp, as libdevice's `expf`, whose range reduction costs 8
   instructions where this costs 2; gsplat's `__expf` is the same product and instruction):
   SASS per pair for the H200 3.25 fewer in the Local-GS forward (43.5 -> 40.25) and 8 in the
-  backward (212 -> 204; BENCHMARKS.md §7, Dec 3, eighth session). A forward and the backward
-  that reads its residuals are always one compiler's kernels (`pallas.Plan.for_gradients`), so
-  they agree to the bit. `hit` is tested on ln α, so it does not depend on the exponential.
+  backward (212 -> 204; BENCHMARKS.md §7, Dec 3, eighth session). XLA lowers exp2(y) as
+  e^{y · ln 2} and folds the two constants, so the XLA paths (and interpret mode) compute e^{ln α}
+  as before: only the GPU kernels take `ex2`. A forward and the backward that reads its
+  residuals are always one compiler's (`pallas.Plan.for_gradients`), so they agree to the bit.
+  `hit` is tested on ln α, so it does not depend on the exponential.
   Derivative, where the cap does not bind (e^{ln α} < cap), ∂α/∂ln α = α:
     ∂α/∂raw = α where raw <= ln o (then ∂raw/∂V = B), ∂α/∂ln o = α where the clamp binds.
 """

@@ -1,10 +1,10 @@
 # Next GPU session (issues 17 and 18), from the repository root; each step one `run` call.
 # carry/: data (guitar, lego_sh3, lego_train, skull), carry/wheels (gsplat 1.5.3 and
 # pytest-timeout: a test that hangs in C is then named, `--timeout 150 --timeout-method thread`),
-# carry/ab_pkg.py (session-dec03e/ab_pkg.py) with carry/old/lgs_old from
-# `git archive REV lgs_jax`, renamed lgs_jax -> lgs_old: REV = ff6056a (before exp2 for α) for
-# the time of exp2; for the reduction's bits, a second old package at b2c9b27 against a tree at
-# ff6056a (as session-dec03f's c1.sh ran an old tree from /tmp/oldtree).
+# and the earlier packages for in-process A/B (benchmarks/ab.py, new):
+#   python -m benchmarks.ab prepare b2c9b27 ff6056a dad7a98 --to carry/old
+# (b2c9b27: before this session's kernel changes; ff6056a: the reduction; dad7a98: exp2;
+# HEAD adds walk_step's miss as α = 0).
 # Before any call: `build/gpu-offline/bin/python scripts/gpu_build_offline.py` (14 built).
 # 0. ff6056a (the backward's reduction: None term out, Scaled basis terms; pair step 220 -> 212
 #    SASS instructions, 96 registers) has not run on a GPU. Its tests and the whole GPU set
@@ -13,8 +13,13 @@
 #        tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
 #        tests/backends/test_gradients.py tests/backends/test_mosaic_staging.py \
 #        tests/backends/test_pallas.py" bash scripts/scale_gpu_check.sh tests
-#    then the A/B against b2c9b27 (bits must be equal: same products, same lane order):
-#      python3 carry/ab_pkg.py synthetic4M_1080p 5; python3 carry/ab_pkg.py guitar_x64_1080p 7
+#    then the A/B, all four packages in one process (about 3 min per scene):
+#      python3 -m benchmarks.ab run synthetic4M_1080p --repeat 5 --against ff6056a
+#        (bits: b2c9b27's rows equal ff6056a's expected: the reduction changes no bit)
+#      python3 -m benchmarks.ab run guitar_x64_1080p --repeat 7
+#        (bits: dad7a98's rows equal this tree's expected: walk_step; times: each change's
+#        share, alternating rounds)
+#      python3 -m benchmarks.ab run guitar_4k --fwd --repeat 9 (exp2 in the forward)
 #    and the backward kernel's device time (4.06 ms at synthetic 4M this session):
 #      python3 scripts/kernel_times.py --data carry/data --scenes synthetic4M_1080p --grad \
 #        --rows localgs --iters 5 --top 8 (with gsplat: its 3.40 ms in the same process)
@@ -32,6 +37,5 @@
 # forward 43.5 -> 40.25, backward 212 -> 204), also not yet run on a GPU: its check is step 0's
 # test set (float32 tolerances against the float64 oracle and between the Mosaic GPU and Triton
 # forwards; a forward and its backward are always one compiler's, Plan.for_gradients). Its
-# time: ab_pkg.py against ff6056a (guitar_4k 9 fwd; synthetic4M_1080p 5). 2f92278 (a miss as
-# α = 0 in backward.walk_step: 204 -> 198) should leave the bits: ab_pkg.py with the package at
-# dad7a98 as lgs_old, "same bits" expected on every row.
+# time: the benchmarks.ab rows of dad7a98 and ff6056a above. 2f92278 (a miss as α = 0 in
+# backward.walk_step: 204 -> 198) should leave the bits: dad7a98's rows "same bits" as HEAD.
