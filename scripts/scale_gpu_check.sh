@@ -56,12 +56,18 @@ variant_check() {
 scenes="${SCENES:-guitar_720p guitar_x16_1080p guitar_x64_1080p guitar_x110_4k}"
 case "${1:-grad}" in
   tests)
-    timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -q -p no:cacheprovider \
+    # Each test named (-v); with pytest-timeout carried (carry/wheels), a test still running
+    # after 150 s has every thread's stack dumped and its worker replaced: a kernel that hangs
+    # waits in C, where the signal method never fires (Dec 3, eighth session).
+    per_test=""
+    python3 -c "import pytest_timeout" 2>/dev/null \
+      && per_test="--timeout ${PER_TEST_TIMEOUT:-150} --timeout-method thread"
+    timeout "${TEST_TIMEOUT:-300}" python3 -m pytest -v -p no:cacheprovider $per_test \
       -n "${TEST_WORKERS:-4}" ${TEST_ARGS:-tests/backends/test_backward_segments.py \
       tests/backends/test_gaussian_grads.py tests/backends/test_gradients.py \
       tests/backends/test_mosaic_staging.py} \
       -m 'slow or not slow' -rf --tb=short > "$out/tests.log" 2>&1
-    grep "^FAILED\|passed\|failed" "$out/tests.log" ;;
+    grep "^FAILED\|passed\|failed\|Timeout\|crashed" "$out/tests.log" ;;
   grad)
     build_gsplat
     for s in $scenes; do

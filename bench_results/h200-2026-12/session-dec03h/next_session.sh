@@ -1,6 +1,6 @@
 # Next GPU session (issues 17 and 18), from the repository root; each step one `run` call.
 # carry/: data (guitar, lego_sh3, lego_train, skull), carry/wheels (gsplat 1.5.3 and
-# pytest-timeout: a test that hangs in C is then named, `--timeout 150 --timeout-method thread`),
+# pytest-timeout: scale_gpu_check.sh's tests then name a test that hangs in C and go on),
 # and the earlier packages for in-process A/B (benchmarks/ab.py, new):
 #   python -m benchmarks.ab prepare b2c9b27 ff6056a dad7a98 --to carry/old
 # (b2c9b27: before this session's kernel changes; ff6056a: the reduction; dad7a98: exp2;
@@ -9,7 +9,7 @@
 # 0. ff6056a (the backward's reduction: None term out, Scaled basis terms; pair step 220 -> 212
 #    SASS instructions, 96 registers) has not run on a GPU. Its tests and the whole GPU set
 #    (73 + 3 new CPU-side cases; about 3 min):
-#      TEST_WORKERS=8 TEST_TIMEOUT=300 TEST_ARGS="-vv --timeout 150 --timeout-method thread \
+#      TEST_WORKERS=8 TEST_TIMEOUT=300 TEST_ARGS="\
 #        tests/backends/test_backward_segments.py tests/backends/test_gaussian_grads.py \
 #        tests/backends/test_gradients.py tests/backends/test_mosaic_staging.py \
 #        tests/backends/test_pallas.py" bash scripts/scale_gpu_check.sh tests
