@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import given, strategies as st
+from jax.extend.core import Literal
 
 import lgs_jax
 from lgs_jax import binning, layout, pairs
@@ -137,3 +138,24 @@ def test_padded_ellipse_det_lo_is_positive_on_adversarial_scenes(seed):
     assert not np.any(det_lo <= 0)
     assert np.all(det_lo[unbounded] == 1)
     assert np.all(np.isfinite(det_lo[np.asarray(p.valid)]))
+
+
+@pytest.mark.parametrize("hoist", [True, False])
+def test_record_columns_are_computed_from_the_lanes_data(hoist):
+    """Every column of `pairs.record_columns` without a mask is computed from the Gaussians'
+    own columns, none a constant: the Mosaic GPU kernels store the columns with lane-strided
+    inline stores, which a constant's splat fails to build for (LLVM translation), and on the
+    H200 the kernels without warp culling hung their tests (Dec 3, eighth session)."""
+    cols = [jnp.arange(8, dtype=jnp.float32) + i for i in range(13)]
+    config = lgs_jax.RasterConfig(hoist=hoist, warp_cull=False)
+    tx, ty = jnp.int32(3), jnp.int32(2)
+    jaxpr = jax.make_jaxpr(lambda c: pairs.record_columns(c, tx, ty, config))(cols).jaxpr
+    made_by = {v: e for e in jaxpr.eqns for v in e.outvars}
+
+    def from_lanes(v) -> bool:
+        if isinstance(v, Literal) or v not in made_by:  # a constant, an input or a captured one
+            return not isinstance(v, Literal) and v in jaxpr.invars
+        return any(from_lanes(u) for u in made_by[v].invars)
+
+    for c, v in enumerate(jaxpr.outvars):
+        assert from_lanes(v), f"record column {c} is a constant"
