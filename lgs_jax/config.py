@@ -63,8 +63,8 @@ class KernelConfig:
       mosaic_forward_pixels, mosaic_backward_pixels: pixels per block, 128 (half a tile, one per
         lane) or 256 (the whole tile, two per lane); None: by the image's tile count, whole
         tiles from `mosaic_whole_tile_from` tiles on. The backward's default is 256: its
-        per-pair gradient rows are one per pair and block, so half tiles double them (48 bytes
-        per pair), and with the split backward whole tiles no longer cost time. H200,
+        per-pair gradient rows are one per pair and block, so half tiles double them (44–48
+        bytes per pair), and with the split backward whole tiles no longer cost time. H200,
         forward + backward against half-tile blocks (BENCHMARKS.md §7, Dec 3, fourth
         session): 1.59 against 1.60 ms and 64 against 79 MiB at 0.09M Gaussians (720p), 1.58
         against 1.64 ms at 0.06M (800x800), 3.36 against 3.46 ms and 283 against 331 MiB at

@@ -5,9 +5,10 @@ The backward kernels (lgs_jax.backends.pallas_mosaic, pallas_triton) store each 
 row at its row in emission-slot order (`RowLayout`; a Gaussian's pairs are the consecutive slots
 [first, first + count) in ascending tile order, `TileBins.first`, `TileBins.count`). A row
 holds the pair's gradient summed over one block's pixels (`kernel_steps.GRAD_VALUES` values:
-the α model's 7 columns, ∂L/∂rgb, ∂L/∂z) and, in column `kernel_steps.TILE_COLUMN`, its tile
-index as a float (exact: images have fewer than 2^24 tiles, lgs_jax.scene checks); a block's
-row of a pair none of its pixels reached is zero. For Gaussian g this computes, walking its
+the α model's 7 columns, ∂L/∂rgb, ∂L/∂z; the Mosaic GPU kernel leaves ∂L/∂z out where the loss
+does not reach the depth, `kernel_steps.row_width`) and then its tile index as a float (exact:
+images have fewer than 2^24 tiles, lgs_jax.scene checks); a block's row of a pair none of its
+pixels reached is zero. For Gaussian g this computes, walking its
 rows in order,
 
     hoisted (Eq. 8):  Σ_pairs [∂L/∂μ, ∂L/∂(a, b, c), ∂L/∂ln o + clamp, ∂L/∂rgb, ∂L/∂z]
@@ -162,17 +163,22 @@ def _take(arrays, spec, g):
 
 
 def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
-          config: RasterConfig):
+          config: RasterConfig, depth: bool):
     """COLUMNS sums (arrays shaped as `first`) of the Gaussians whose slots are [first,
     first + count): each slot's blocks added in block order, chained (`_pair_terms`), summed in
-    slot order; `rows` is the (blocks, capacity, >= TILE_COLUMN + 1) ref (kernel) or array
-    (`reference`), indexed alike. fields = (μx, μy, a, b, c), opacity: of those Gaussians."""
+    slot order; `rows` is the (blocks, capacity, >= n + 1) ref (kernel) or array
+    (`reference`), indexed alike: n = GRAD_VALUES values, then the tile in column n; without
+    `depth`, n = GRAD_VALUES − 1 (no ∂L/∂z: its sums are zero). fields = (μx, μy, a, b, c),
+    opacity: of those Gaussians."""
+    n = ks.GRAD_VALUES if depth else ks.GRAD_VALUES - 1
+
     def body(i, acc):
         live = i < count
         s = jnp.where(live, first + i, 0)  # lanes done read slot 0 (cached) and keep acc
         vals = [functools.reduce(lambda x, y: x + y, [rows[w, s, col] for w in range(blocks)])
-                for col in range(ks.GRAD_VALUES)]
-        tile = rows[0, s, ks.TILE_COLUMN].astype(jnp.int32)
+                for col in range(n)]
+        vals += [jnp.zeros_like(vals[0])] * (ks.GRAD_VALUES - n)
+        tile = rows[0, s, n].astype(jnp.int32)
         terms = _pair_terms(vals, tile, fields, tiles_x, config)
         return tuple(jnp.where(live, x + t, x) for x, t in zip(acc, terms))
 
@@ -182,7 +188,7 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
 
 
 def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: int, n: int,
-            blocks: int, lanes: int):
+            blocks: int, lanes: int, depth: bool):
     field_refs, rows_ref, out_refs = refs[:-COLUMNS - 1], refs[-COLUMNS - 1], refs[-COLUMNS:]
     # Lanes past the last Gaussian walk the last one again and store the same bits at its
     # index: the outputs need no padding (a padded output's slice is a copy XLA cannot fuse
@@ -191,15 +197,16 @@ def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: in
     *fields, opacity = _take(field_refs, spec, g)
     # Read before any store: the first two outputs may be these inputs' buffers (`sums`).
     first, count = (lax.bitcast_convert_type(ref[g], jnp.int32) for ref in (first_ref, count_ref))
-    sums_ = _walk(rows_ref, blocks, first, count, fields, opacity, tiles_x, config)
+    sums_ = _walk(rows_ref, blocks, first, count, fields, opacity, tiles_x, config, depth)
     for out_ref, v in zip(out_refs, sums_):
         out_ref[g] = v
 
 
 def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
-         interpret: bool, lanes: int = LANES):
+         interpret: bool, lanes: int = LANES, depth: bool = True):
     """(N, COLUMNS) per-Gaussian gradients from the backward kernels' rows (blocks,
-    layout.size, >= TILE_COLUMN + 1) (module docstring), by the Triton kernel with
+    layout.size, >= TILE_COLUMN + 1; without `depth`, rows without ∂L/∂z, the tile in column
+    TILE_COLUMN − 1, `kernel_steps.row_width`) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
     its lanes' longest count, so fewer lanes idle less where counts vary). `fields`: the
     Gaussians' μ, conic and opacity, a `Projected` or a table (`_sources`).
@@ -215,7 +222,7 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     n, blocks = arrays[0].shape[0], rows.shape[0]
     programs = pl.cdiv(n, lanes)
     kernel = functools.partial(_kernel, spec=spec, config=config, tiles_x=tiles_x, n=n,
-                               blocks=blocks, lanes=lanes)
+                               blocks=blocks, lanes=lanes, depth=depth)
     dt = rows.dtype
     aliased = jnp.dtype(dt).itemsize == jnp.dtype(layout.first.dtype).itemsize
     first, count = ((lax.bitcast_convert_type(x, dt) for x in (layout.first, layout.count))
@@ -230,9 +237,10 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     return jnp.stack(columns, -1)  # its consumers' column slices take the columns themselves
 
 
-def reference(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig):
+def reference(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
+              depth: bool = True):
     """`sums` in jnp: every Gaussian at once, the same walk over its slots and the same
     arithmetic (`_walk`; tests compare the kernel with it in interpret mode)."""
     *values, opacity = _take(*_sources(fields), slice(None))
     return jnp.stack(_walk(rows, rows.shape[0], layout.first, layout.count, values, opacity,
-                           tiles_x, config), -1)
+                           tiles_x, config, depth), -1)

@@ -33,8 +33,15 @@ from . import backward
 ROW = 12  # Gaussian row (vanilla)
 REC = 12  # pair record (Local-GS); the strip mask in the last column (exact as a float: < 2^8)
 GRAD_VALUES = 11  # backward pair row: 7 α-model columns, ∂L/∂rgb, ∂L/∂z
-TILE_COLUMN = GRAD_VALUES  # then the pair's tile index, as a float (backends.gaussian_grads)
-ROW_WIDTH = 12  # backward row: GRAD_VALUES, the tile (48 bytes)
+TILE_COLUMN = GRAD_VALUES  # then the pair's tile index, as a float, in rows with ∂L/∂z (row_width)
+
+
+def row_width(depth: bool) -> int:
+    """Columns of the Mosaic GPU backward's pair rows: the GRAD_VALUES values and the tile (48
+    bytes), or, where the loss does not reach the depth (its cotangent a symbolic zero,
+    `backward.depth_cotangent`), the values without ∂L/∂z, which would be zero, and the tile in
+    column GRAD_VALUES − 1 (44 bytes: 4 bytes less per walked pair, 40 MiB at 10M Gaussians)."""
+    return GRAD_VALUES + 1 if depth else GRAD_VALUES
 
 
 def gaussian_rows(p: Projected):

@@ -45,16 +45,25 @@ def scratch(reduction: str, dt) -> tuple:
 
 
 def writers(reduction: str, rows_ref, wg, tile, pixels: int, exchange=None):
-    """(store, zero) for block `wg`'s rows rows_ref[wg] (capacity, ROW_WIDTH) of tile `tile`
+    """(store, zero) for block `wg`'s rows rows_ref[wg] (capacity, width) of tile `tile`
     (a row's ref is taken as rows_ref.at[wg, s], one subview, as the GPU runs tested it):
-    store(values, s, parity) reduces a pair's GRAD_VALUES per-pixel terms (None: zero) and
+    store(values, s, parity) reduces a pair's width − 1 per-pixel terms (None: zero) and
     writes them and the tile at slot s, returning the next exchange buffer's index; zero(s)
-    writes a zero row with the tile (a tile's other block may have a row there)."""
+    writes a zero row with the tile (a tile's other block may have a row there). The tile is
+    the row's last column (`kernel_steps.row_width`); values past width − 1 (∂L/∂z where the
+    loss does not reach the depth) must be None and are not stored."""
     dt = rows_ref.dtype
     tile_value = tile.astype(dt)
+    width = rows_ref.shape[-1]
+
+    def kept(values):
+        assert all(v is None for v in values[width - 1:]), "a row too narrow for its values"
+        return values[:width - 1]
+
     if reduction == "transposed":
         def store(values, s, parity):
-            transposed_row(values, pixels, exchange.at[parity], rows_ref.at[wg, s], tile_value)
+            transposed_row(kept(values), pixels, exchange.at[parity], rows_ref.at[wg, s],
+                           tile_value)
             return 1 - parity
 
         def zero(s):
@@ -64,15 +73,15 @@ def writers(reduction: str, rows_ref, wg, tile, pixels: int, exchange=None):
     zero_scalar = jnp.zeros((), dt)
 
     def store(values, s, parity):
-        for c, v in enumerate(values):
+        for c, v in enumerate(kept(values)):
             rows_ref[wg, s, c] = zero_scalar if v is None else jnp.sum(ks.term(v))
-        rows_ref[wg, s, ks.TILE_COLUMN] = tile_value
+        rows_ref[wg, s, width - 1] = tile_value
         return parity
 
     def zero(s):
-        for c in range(ks.GRAD_VALUES):
+        for c in range(width - 1):
             rows_ref[wg, s, c] = zero_scalar
-        rows_ref[wg, s, ks.TILE_COLUMN] = tile_value
+        rows_ref[wg, s, width - 1] = tile_value
 
     return store, zero
 

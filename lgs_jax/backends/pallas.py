@@ -157,7 +157,8 @@ def plan(config: RasterConfig, vanilla: bool, n_tiles: int, capacity: int = 0) -
                     backward_pixels=block_pixels(t.mosaic_backward_pixels, n_tiles, config),
                     routed=routed)
     local_mosaic = lambda q: q.forward == "mosaic" and not q.vanilla
-    writes = lambda q: local_mosaic(q) and q.forward_pixels == 128  # an image: pallas_mosaic.forward
+    # the forwards that write an image (pallas_mosaic.forward)
+    writes = lambda q: local_mosaic(q) and q.forward_pixels == 128
     image = (t.mosaic_image_layout and writes(resolved) and writes(resolved.for_gradients()))
     block_stops = t.mosaic_block_stops and local_mosaic(resolved)
     return dataclasses.replace(resolved, image=image, block_stops=block_stops)
@@ -345,7 +346,8 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     # A staged backward's records are the Gaussian table, whose first columns are the fields
     # `sums` reads.
     return gaussian_grads.sums(rows, layout, records if _backward_staged(plan_) else p,
-                               tiles_x, config, plan_.interpret)
+                               tiles_x, config, plan_.interpret,
+                               depth=len(lane_rows) == 7)  # rows without ∂L/∂z else
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):

@@ -464,14 +464,15 @@ def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
 def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, segments,
                   bins, layout, masks, records, lane_rows, dt, entry=(),
                   reduction: str | None = None):
-    """(blocks per tile, layout.size, ROW_WIDTH) pair rows (`gaussian_grads.RowLayout`) from
+    """(blocks per tile, layout.size, width) pair rows (`gaussian_grads.RowLayout`) from
     `backward_kernel` on a (segments, blocks per tile) grid: block w's row of each pair with a
     row (gradient over its pixels, then the tile), zero where the block's pixels had stopped;
     rows no pair has are left unwritten (no Gaussian's rows reach them). `segments`: the
     (n, backward_segments.COLUMNS) table (`backward_segments.whole_tiles` or `split`);
     `entry`: with split segments, `backward_segments.entries` (C − C_hi for r, g, b; T_hi;
     D − D_hi per checkpoint). `lane_rows` = the per-tile final T, stop pairs and cotangents
-    (r, g, b, T, D; D left out where it is zero, a symbolic zero not materialised). (masks,
+    (r, g, b, T, D; D left out where it is zero, a symbolic zero not materialised, and with
+    it the rows' ∂L/∂z column: width = `kernel_steps.row_width`, the tile last). (masks,
     records): the pairs' (Gaussian ids, `pairs.gaussian_table`) with
     `tuning.mosaic_pair_source` "gaussians". `reduction`: `mosaic_rows.resolve`'s (by default
     "transposed" on the GPU, "terms" in interpret mode)."""
@@ -481,7 +482,7 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                reduction=reduction, last_pair=capacity - 1, interpret=interpret,
                                from_checkpoints=bool(entry), depth_cotangent=len(lane_rows) == 7)
-    out = jax.ShapeDtypeStruct((n, layout.size, ks.ROW_WIDTH), dt)
+    out = jax.ShapeDtypeStruct((n, layout.size, ks.row_width(len(lane_rows) == 7)), dt)
     scratch = ()
     if config.tuning.mosaic_pair_source == "gaussians":
         scratch = mosaic_staging.scratch(dt)

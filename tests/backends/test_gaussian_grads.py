@@ -55,9 +55,9 @@ def _four_ways(rows, bins, p, config):
 
 
 def _random_rows(bins, blocks: int, seed: int, fill, dtype):
-    """(blocks, capacity, ROW_WIDTH) rows: random gradient values and the pair's tile at every
-    real pair's emission slot, `fill` elsewhere."""
-    rows = np.full((blocks, bins.gauss.shape[0], ks.ROW_WIDTH), fill, dtype)
+    """(blocks, capacity, row_width(True)) rows: random gradient values and the pair's tile at
+    every real pair's emission slot, `fill` elsewhere."""
+    rows = np.full((blocks, bins.gauss.shape[0], ks.row_width(True)), fill, dtype)
     real = np.asarray(bins.tile) < bins.tile_start.shape[0]
     slot = np.asarray(bins.slot)[real]
     rng = np.random.default_rng(seed)
@@ -120,6 +120,30 @@ def test_float32_kernel_writing_into_the_layouts_buffers_equals_its_twin(seed):
     assert np.any(np.asarray(kernel) != 0)
     np.testing.assert_array_equal(np.asarray(layout.first), first)
     np.testing.assert_array_equal(np.asarray(layout.count), count)
+
+
+@settings(max_examples=2)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_rows_without_the_depth_column_give_the_sums_of_a_zero_depth_column(seed):
+    """Rows without ∂L/∂z (the Mosaic GPU backward's for a loss that does not reach the depth:
+    `kernel_steps.row_width(False)`, the tile one column earlier) give the sums of the same rows
+    with a zero ∂L/∂z column, bit for bit, kernel and twin; the test fails if the tile is read
+    from the wrong column or the depth's sums are not zero."""
+    g = scenes.cast(scenes.scene(seed), np.float64)
+    p, bins = _projected_bins(g, scenes.camera(W, H), 1024)
+    stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
+    layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
+    rows = _random_rows(bins, 2, seed, 0, np.float64)
+    rows[..., ks.GRAD_VALUES - 1] = 0  # ∂L/∂z
+    short = jnp.asarray(np.delete(rows, ks.GRAD_VALUES - 1, axis=-1))
+    assert short.shape[-1] == ks.row_width(False)
+    rows = jnp.asarray(rows)
+    table = pairs.gaussian_table(p)
+    full = gaussian_grads.sums(rows, layout, table, TILES_X, C(), True)
+    for out in (gaussian_grads.sums(short, layout, table, TILES_X, C(), True, depth=False),
+                gaussian_grads.reference(short, layout, table, TILES_X, C(), depth=False)):
+        np.testing.assert_array_equal(np.asarray(out), np.asarray(full))
+    assert np.any(np.asarray(full)[:, :9] != 0) and np.all(np.asarray(full)[:, 9] == 0)
 
 
 @settings(max_examples=10)
