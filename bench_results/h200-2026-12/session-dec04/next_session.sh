@@ -2,8 +2,8 @@
 # carry/: data (guitar, lego_sh3, lego_train, skull), wheels (gsplat 1.5.3, pytest-timeout),
 # old/ (benchmarks.ab packages). Before any call that changes a kernel:
 #   build/gpu-offline/bin/python scripts/gpu_build_offline.py   (14 built)
-# 0. Skull's held-out PSNR moved 26.81 -> 25.51 dB with exp2 (dad7a98) and lego's step took
-#    9.33 ms against 7.26 on a machine whose compiles were 13-30% slower. Both trees in one call:
+# 0. (ready: session-dec04/next_c1.sh; carry/old/tree_ff6056a is prepared.) Skull's held-out
+#    PSNR moved 26.81 -> 25.51 dB with exp2 (dad7a98) and lego's step took 9.33 ms against 7.26 on a machine whose compiles were 13-30% slower. Both trees in one call:
 #      git archive ff6056a lgs_jax | tar -x -C carry/old/tree_ff6056a   (package not renamed)
 #    then, per tree in ". carry/old/tree_ff6056a" and seed in 0 1 (3k steps, about 100 s each):
 #      PYTHONPATH=$tree:/tmp/site:$PWD python3 benchmarks/train_vs_gsplat.py --data-root \
