@@ -14,9 +14,8 @@ same with each segment's first pass run (`split_model_local`); with `--compact` 
 half-tile blocks that skip the pairs none of their strips takes (`compact_walks`,
 `KernelConfig.mosaic_compact`, the default since Dec 2) against the full walk's blocks'. The
 `tiles` backend on a CPU (same stops). Also printed: the pairs some block of their tile walked
-(`render`'s `stats.pairs_walked`) and the backward's row buffers (48 bytes per row and block; 44
-for an image loss)
-for them and for every pair.
+(`render`'s `stats.pairs_walked`) and the backward's row buffers (48 bytes per row and block, 44
+for an image loss) for them and for every pair.
 """
 import argparse
 import dataclasses

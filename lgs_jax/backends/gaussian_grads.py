@@ -163,14 +163,14 @@ def _take(arrays, spec, g):
 
 
 def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
-          config: RasterConfig, depth: bool):
+          config: RasterConfig):
     """COLUMNS sums (arrays shaped as `first`) of the Gaussians whose slots are [first,
     first + count): each slot's blocks added in block order, chained (`_pair_terms`), summed in
     slot order; `rows` is the (blocks, capacity, >= n + 1) ref (kernel) or array
-    (`reference`), indexed alike: n = GRAD_VALUES values, then the tile in column n; without
-    `depth`, n = GRAD_VALUES − 1 (no ∂L/∂z: its sums are zero). fields = (μx, μy, a, b, c),
-    opacity: of those Gaussians."""
-    n = ks.GRAD_VALUES if depth else ks.GRAD_VALUES - 1
+    (`reference`), indexed alike: n = GRAD_VALUES values, then the tile in column n; rows of
+    `kernel_steps.row_width(False)` columns have no ∂L/∂z (n = GRAD_VALUES − 1, the depth's
+    sums zero). fields = (μx, μy, a, b, c), opacity: of those Gaussians."""
+    n = ks.GRAD_VALUES if rows.shape[-1] > ks.row_width(False) else ks.GRAD_VALUES - 1
 
     def body(i, acc):
         live = i < count
@@ -188,7 +188,7 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
 
 
 def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: int, n: int,
-            blocks: int, lanes: int, depth: bool):
+            blocks: int, lanes: int):
     field_refs, rows_ref, out_refs = refs[:-COLUMNS - 1], refs[-COLUMNS - 1], refs[-COLUMNS:]
     # Lanes past the last Gaussian walk the last one again and store the same bits at its
     # index: the outputs need no padding (a padded output's slice is a copy XLA cannot fuse
@@ -197,16 +197,16 @@ def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: in
     *fields, opacity = _take(field_refs, spec, g)
     # Read before any store: the first two outputs may be these inputs' buffers (`sums`).
     first, count = (lax.bitcast_convert_type(ref[g], jnp.int32) for ref in (first_ref, count_ref))
-    sums_ = _walk(rows_ref, blocks, first, count, fields, opacity, tiles_x, config, depth)
+    sums_ = _walk(rows_ref, blocks, first, count, fields, opacity, tiles_x, config)
     for out_ref, v in zip(out_refs, sums_):
         out_ref[g] = v
 
 
 def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
-         interpret: bool, lanes: int = LANES, depth: bool = True):
+         interpret: bool, lanes: int = LANES):
     """(N, COLUMNS) per-Gaussian gradients from the backward kernels' rows (blocks,
-    layout.size, >= TILE_COLUMN + 1; without `depth`, rows without ∂L/∂z, the tile in column
-    TILE_COLUMN − 1, `kernel_steps.row_width`) (module docstring), by the Triton kernel with
+    layout.size, >= TILE_COLUMN + 1; or `kernel_steps.row_width(False)`: without ∂L/∂z, the
+    tile in column TILE_COLUMN − 1) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
     its lanes' longest count, so fewer lanes idle less where counts vary). `fields`: the
     Gaussians' μ, conic and opacity, a `Projected` or a table (`_sources`).
@@ -222,7 +222,7 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     n, blocks = arrays[0].shape[0], rows.shape[0]
     programs = pl.cdiv(n, lanes)
     kernel = functools.partial(_kernel, spec=spec, config=config, tiles_x=tiles_x, n=n,
-                               blocks=blocks, lanes=lanes, depth=depth)
+                               blocks=blocks, lanes=lanes)
     dt = rows.dtype
     aliased = jnp.dtype(dt).itemsize == jnp.dtype(layout.first.dtype).itemsize
     first, count = ((lax.bitcast_convert_type(x, dt) for x in (layout.first, layout.count))
@@ -237,10 +237,9 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     return jnp.stack(columns, -1)  # its consumers' column slices take the columns themselves
 
 
-def reference(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
-              depth: bool = True):
+def reference(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig):
     """`sums` in jnp: every Gaussian at once, the same walk over its slots and the same
     arithmetic (`_walk`; tests compare the kernel with it in interpret mode)."""
     *values, opacity = _take(*_sources(fields), slice(None))
     return jnp.stack(_walk(rows, rows.shape[0], layout.first, layout.count, values, opacity,
-                           tiles_x, config, depth), -1)
+                           tiles_x, config), -1)

@@ -346,8 +346,7 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     # A staged backward's records are the Gaussian table, whose first columns are the fields
     # `sums` reads.
     return gaussian_grads.sums(rows, layout, records if _backward_staged(plan_) else p,
-                               tiles_x, config, plan_.interpret,
-                               depth=len(lane_rows) == 7)  # rows without ∂L/∂z else
+                               tiles_x, config, plan_.interpret)
 
 
 def _forward_for_gradients(p, bins, width, height, plan_: Plan):

@@ -127,8 +127,8 @@ def test_float32_kernel_writing_into_the_layouts_buffers_equals_its_twin(seed):
 def test_rows_without_the_depth_column_give_the_sums_of_a_zero_depth_column(seed):
     """Rows without ∂L/∂z (the Mosaic GPU backward's for a loss that does not reach the depth:
     `kernel_steps.row_width(False)`, the tile one column earlier) give the sums of the same rows
-    with a zero ∂L/∂z column, bit for bit, kernel and twin; the test fails if the tile is read
-    from the wrong column or the depth's sums are not zero."""
+    with a zero ∂L/∂z column, bit for bit, kernel and twin (it fails where the sums read ∂L/∂z
+    from the short rows, which would then sum the tiles as the depth's gradient)."""
     g = scenes.cast(scenes.scene(seed), np.float64)
     p, bins = _projected_bins(g, scenes.camera(W, H), 1024)
     stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
@@ -140,8 +140,8 @@ def test_rows_without_the_depth_column_give_the_sums_of_a_zero_depth_column(seed
     rows = jnp.asarray(rows)
     table = pairs.gaussian_table(p)
     full = gaussian_grads.sums(rows, layout, table, TILES_X, C(), True)
-    for out in (gaussian_grads.sums(short, layout, table, TILES_X, C(), True, depth=False),
-                gaussian_grads.reference(short, layout, table, TILES_X, C(), depth=False)):
+    for out in (gaussian_grads.sums(short, layout, table, TILES_X, C(), True),
+                gaussian_grads.reference(short, layout, table, TILES_X, C())):
         np.testing.assert_array_equal(np.asarray(out), np.asarray(full))
     assert np.any(np.asarray(full)[:, :9] != 0) and np.all(np.asarray(full)[:, 9] == 0)
 
