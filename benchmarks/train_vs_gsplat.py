@@ -30,7 +30,8 @@ as compilation, so steps slowed beside a compile ahead count as steps: use
 loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians),
-summary.csv (final and best PSNR/SSIM, ms/step, peak MB, Gaussians), <scene>_<trainer>.json,
+summary.csv (final and best PSNR/SSIM, ms/step, peak MB, Gaussians, the folder of the lgs_jax
+package that ran: `PYTHONPATH=TREE` runs an earlier tree's for an A/B), <scene>_<trainer>.json,
 curves_<scene>.png; both CSVs are rewritten after each run. Our run directories (checkpoints of
 the whole pool: large) go to --run-dir, a temporary folder by default.
 --no-gsplat runs ours alone (CPU checks); --inline runs the trainers in this process.
@@ -41,6 +42,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import importlib.util
 import json
 import os
 import subprocess
@@ -162,7 +164,7 @@ def run_ours(args, scene: str) -> dict:
                 ms_per_step_excl_compile=ms - 1e3 * compile_s / args.steps if ms else None,
                 peak_mb=stats.get("peak_bytes_in_use", 0) / 2**20 or None,
                 gaussians=result["gaussians"], skipped_steps=result["skipped_steps"],
-                device=result["device"], backend=result["backend"])
+                device=result["device"], backend=result["backend"], package=package_root())
 
 
 def torch_ssim(img, ref, padding: str = "same"):
@@ -361,6 +363,16 @@ def run_gsplat(args, scene: str) -> dict:
                 device=torch.cuda.get_device_name() if cuda else DEVICE)
 
 
+def package_root() -> str:
+    """The folder holding the `lgs_jax` package that this process imports: the first on its
+    path (an earlier tree's, `PYTHONPATH=tree python benchmarks/train_vs_gsplat.py`, for an
+    A/B of two versions), or this repository's where none is."""
+    spec = importlib.util.find_spec("lgs_jax")
+    if spec is None or spec.origin is None:
+        return ROOT
+    return os.path.dirname(os.path.dirname(os.path.abspath(spec.origin)))
+
+
 def _run(args, argv, scene: str, trainer: str) -> dict:
     """One trainer on one scene: inline, or in a subprocess (JAX off the GPU for gsplat's)."""
     path = os.path.join(args.out, f"{scene}_{trainer}.json")
@@ -368,7 +380,10 @@ def _run(args, argv, scene: str, trainer: str) -> dict:
         result = (run_ours if trainer == "ours" else run_gsplat)(args, scene)
     else:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (ROOT, env.get("PYTHONPATH")) if p)
+        # The worker imports the lgs_jax this process would (an earlier tree on PYTHONPATH
+        # for an A/B, else this repository's), never silently another one.
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root(), env.get("PYTHONPATH"))
+                                            if p)
         if trainer == "gsplat":
             env["JAX_PLATFORMS"] = "cpu"
         cmd = [sys.executable, os.path.abspath(__file__), *argv, "--worker", trainer,
@@ -384,7 +399,7 @@ def _run(args, argv, scene: str, trainer: str) -> dict:
 
 SUMMARY = ("scene", "trainer", "steps", "final_psnr", "final_ssim", "best_psnr", "best_step",
            "ms_per_step", "ms_per_step_excl_compile", "compile_s", "peak_mb", "gaussians",
-           "device", "error")
+           "device", "package", "error")
 
 
 def summary_row(r: dict) -> dict:
@@ -487,6 +502,7 @@ def main(argv=None) -> int:
         plot_curves(args.out, scene, [r for r in results if r["scene"] == scene])
     print_curves(results)
     print_table(results)
+    print(f"lgs_jax from {package_root()}")
     return 1 if any(r.get("error") for r in results) else 0
 
 

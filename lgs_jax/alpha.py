@@ -16,16 +16,15 @@ Difference form (the contract, lgs_jax.composite), with d = μ − pixel centre:
 Hoisted form (Local-GS Eq. 8–10), with raw = V·B the six-term dot product in the hoisting frame:
     ln α = min(raw, ln o)  (the clamp at the exact maximum ln o replaces the `power > 0` skip,
     which in the expanded form would fire on rounding at Gaussian centres),
-    α = min(cap, 2^{ln α · log2 e}),  hit = ln α >= ln(1/255).
-  e^{ln α} as 2^{ln α · log2 e} (`exp2`): for the GPU, Mosaic GPU and Triton compile `exp2` to
-  one `ex2.approx` (within 2 ulp, as libdevice's `expf`, whose range reduction costs 8
-  instructions where this costs 2; gsplat's `__expf` is the same product and instruction):
-  SASS per pair for the H200 3.25 fewer in the Local-GS forward (43.5 -> 40.25) and 8 in the
-  backward (212 -> 204; BENCHMARKS.md §7, Dec 3, eighth session). XLA lowers exp2(y) as
-  e^{y · ln 2} and folds the two constants, so the XLA paths (and interpret mode) compute e^{ln α}
-  as before: only the GPU kernels take `ex2`. A forward and the backward that reads its
-  residuals are always one compiler's (`pallas.Plan.for_gradients`), so they agree to the bit.
-  `hit` is tested on ln α, so it does not depend on the exponential.
+    α = min(cap, e^{ln α}),  hit = ln α >= ln(1/255).
+  e^{ln α} with `exp` (libdevice's `expf` on the GPU, 8 SASS instructions), not as
+  2^{ln α · log2 e}, which the GPU kernels compile to one `ex2.approx` (3 fewer instructions per
+  pair in the forward, 8 in the backward, about 5% of a skull training step): with it skull
+  trained to lower held-out PSNR in all three trajectories tried (−0.95, −1.04 dB at 3k steps,
+  seeds 0 and 1; −1.30 dB at 7k), a spread skull also shows between unrelated bit changes, so
+  not proof of a systematic loss, but the accurate exponential stays until a wider A/B shows
+  none (BENCHMARKS.md §7, Dec 4, second session). With `exp` the XLA paths, interpret mode and
+  the GPU kernels compute the same e^{ln α} function.
   Derivative, where the cap does not bind (e^{ln α} < cap), ∂α/∂ln α = α:
     ∂α/∂raw = α where raw <= ln o (then ∂raw/∂V = B), ∂α/∂ln o = α where the clamp binds.
 """
@@ -36,8 +35,6 @@ import jax.numpy as jnp
 
 from .composite import gaussian_alpha, passes
 from .config import ALPHA_MIN
-
-LOG2_E = 1.4426950408889634  # log2(e): e^x = 2^{x · log2 e}
 
 
 def difference(mean, conic, opacity, px, py, cap):
@@ -60,15 +57,14 @@ def difference_vjp(d_alpha, alpha, power, mean, conic, opacity, px, py, cap):
 def hoisted(raw, log_opacity, cap):
     """(α, hit, ln α) of the hoisted form from raw = V·B (`lgs_jax.hoist`) and ln o."""
     ln_a = jnp.minimum(raw, log_opacity)
-    alpha = jnp.minimum(cap, jnp.exp2(ln_a * jnp.asarray(LOG2_E, ln_a.dtype)))
+    alpha = jnp.minimum(cap, jnp.exp(ln_a))
     return alpha, ln_a >= jnp.log(jnp.asarray(ALPHA_MIN, raw.dtype)), ln_a
 
 
 def hoisted_vjp(d_alpha, alpha, ln_a, raw, log_opacity, cap):
     """(∂L/∂raw, ∂L/∂ln o) per pixel from ∂L/∂α and `hoisted`'s α, ln α; ∂L/∂V = ∂L/∂raw · B
     (Eq. 9's basis). The cap does not bind where α < cap, which is e^{ln α} < cap exactly
-    (α = min(cap, e^{ln α}), computed as `hoisted` does; both false for NaN), without a second
-    exponential."""
+    (α = min(cap, e^{ln α}); both false for NaN), without a second exponential."""
     d_ln = jnp.where(alpha < cap, d_alpha * alpha, 0)
     on_v = raw <= log_opacity
     return jnp.where(on_v, d_ln, 0), jnp.where(on_v, 0, d_ln)

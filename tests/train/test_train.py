@@ -8,6 +8,8 @@ import dataclasses
 import io
 import json
 import os
+import subprocess
+import sys
 import time
 
 import jax
@@ -443,6 +445,7 @@ def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
                        "--out", out]) == 0
     row = next(csv.DictReader(open(os.path.join(out, "summary.csv"))))
     assert row["scene"] == "skull" and row["trainer"] == "lgs_jax" and row["gaussians"] == "300"
+    assert row["package"] == os.path.dirname(os.path.dirname(os.path.abspath(lgs_jax.__file__)))
     assert float(row["final_psnr"]) > 10
     ours = json.load(open(os.path.join(out, "skull_ours.json")))
     theirs = dict(ours, trainer="gsplat", ms_per_step=2.0, peak_mb=100.0,
@@ -453,6 +456,22 @@ def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
         capsys.readouterr().out
     args = bench.parse(["--data-root", data_dir, "--downscale", "32", "--refine-from", "7"])
     assert bench.scene_setup(args, "skull")[2].refine_start_iter == 7  # gsplat's takes it too
+
+
+def test_gsplat_comparison_workers_import_the_package_their_parent_would(tmp_path):
+    """An A/B of two versions (`PYTHONPATH=TREE python benchmarks/train_vs_gsplat.py`) must run
+    TREE's lgs_jax in the worker processes too: `package_root` is the folder of the lgs_jax
+    first on the path, which the workers' PYTHONPATH puts first (it used to put this
+    repository first, so both arms of an A/B ran this tree)."""
+    tree = tmp_path / "tree"
+    (tree / "lgs_jax").mkdir(parents=True)
+    (tree / "lgs_jax" / "__init__.py").write_text("")
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    code = "from benchmarks.train_vs_gsplat import package_root; print(package_root())"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tree), root]))
+    out = subprocess.run([sys.executable, "-P", "-c", code], env=env, cwd=str(tmp_path),
+                         capture_output=True, text=True, check=True).stdout
+    assert out.strip() == str(tree)
 
 
 def test_seed_summary_pairs_the_trainers_by_step(tmp_path, capsys):
