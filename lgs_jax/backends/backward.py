@@ -41,7 +41,7 @@ from ..projection import Projected
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
 
-def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents):
+def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents, quotients=None):
     """One pair of the walk at a set of pixels (any shape; `rgb`, `z` broadcast): the module
     docstring's recurrence, the one both the XLA walk and the Pallas backward kernels take.
 
@@ -51,21 +51,28 @@ def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents):
     Returns (T_k where hit else T_{k+1}: the next carry, w = α·T_k, ∂L/∂α (zero where not hit),
     the sums including this pair). A miss is a pair with α = 0 (T_{k+1}/1 and 0·T_k are exact),
     one select where three took the cases apart (`hit`, the GPU kernels' pair step 204 -> 198
-    SASS instructions for the H200; the same bits).
+    SASS instructions for the H200; the same bits). `quotients(1 − α, (x, y))` gives the two
+    divisions by 1 − α (the Mosaic GPU kernel's own, `mosaic_quotients.quotients`), `/` if None.
     """
     g_r, g_g, g_b, g_d, g_bg = cotangents
     s_r, s_g, s_b, s_z = sums
     alpha = jnp.where(hit, alpha, 0)  # a miss: 1 − α = 1, so T_k = T_{k+1} and w = 0, exactly
     one_minus = 1 - alpha
-    t_k = t_next / one_minus
-    w = alpha * t_k
-    dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
     dot_s = g_r * s_r + g_g * s_g + g_b * s_b
     if g_d is not None:
-        dot_c, dot_s, s_z = dot_c + g_d * z, dot_s + g_d * s_z, s_z + w * z
-    d_alpha = jnp.where(hit, t_k * dot_c - (dot_s + g_bg) / one_minus, 0)
+        dot_s = dot_s + g_d * s_z
+    t_k, behind = (quotients or _divide)(one_minus, (t_next, dot_s + g_bg))
+    w = alpha * t_k
+    dot_c = g_r * rgb[0] + g_g * rgb[1] + g_b * rgb[2]
+    if g_d is not None:
+        dot_c, s_z = dot_c + g_d * z, s_z + w * z
+    d_alpha = jnp.where(hit, t_k * dot_c - behind, 0)
     sums = (s_r + w * rgb[0], s_g + w * rgb[1], s_b + w * rgb[2], s_z)
     return t_k, w, d_alpha, sums
+
+
+def _divide(denominator, numerators):
+    return tuple(x / denominator for x in numerators)
 
 
 def walk(bins: TileBins, rgb, depth, trans, stop_at, g_color, g_trans, g_depth, pair_alpha,

@@ -195,17 +195,29 @@ class Scaled(NamedTuple):
     factor: Any
 
 
+class Product(NamedTuple):
+    """A gradient term a · b whose factors both change from pair to pair (w · ḡ_r). The GPU
+    reduction forms the products in its per-thread sums, as multiply-adds after the first
+    pixel's (`mosaic_rows._own_sum`), where a term passed in formed costs a multiply per pixel
+    and an add; unlike `Scaled` terms, products are never paired by a shared factor."""
+    a: Any
+    b: Any
+
+
 def term(value):
-    """A gradient term's per-lane values (`backward_step`'s terms: an array, `Scaled` or None)."""
-    return value.source * value.factor if isinstance(value, Scaled) else value
+    """A gradient term's per-lane values (`backward_step`'s terms: an array, `Scaled`,
+    `Product` or None)."""
+    if isinstance(value, Scaled):
+        return value.source * value.factor
+    return value.a * value.b if isinstance(value, Product) else value
 
 
-def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
+def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig, quotients=None):
     """Pair j's step of the backward walk (`backward.walk_step`, equations in
     lgs_jax.backends.backward) at a lane vector of pixels: its per-lane gradient terms (7
-    α-model columns, ∂L/∂rgb, ∂L/∂z; arrays, `Scaled` products or None for a zero term, each
+    α-model columns, ∂L/∂rgb, ∂L/∂z; arrays, `Scaled` or `Product` products or None for a zero term, each
     `term`'s value; the kernels reduce them over their pixels) and the new carry (T_{k+1},
-    S_r, S_g, S_b, S_Z)."""
+    S_r, S_g, S_b, S_Z). `quotients`: `backward.walk_step`'s."""
     frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
     cap = jnp.asarray(config.alpha_cap, rec[0].dtype)
     alpha, hit, aux = record_alpha(rec, frame_xy, pixel, config)
@@ -214,7 +226,7 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
         hit = hit & ((mask_word & bit) != 0)
     rgb, z = rec[7:10], rec[10]
     t, w, d_alpha, sums = backward.walk_step(carry[0], alpha, hit, rgb, z, carry[1:],
-                                             (g_r, g_g, g_b, g_d, g_bg))
+                                             (g_r, g_g, g_b, g_d, g_bg), quotients)
     if config.hoist:  # ∂(V·B)/∂V = B; the clamp at ln o passes ∂ to ln o instead
         ln_a, raw = aux
         d_raw, d_ln_o = alpha_model.hoisted_vjp(d_alpha, alpha, ln_a, raw, rec[6], cap)
@@ -228,5 +240,6 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig):
     else:
         model = alpha_model.difference_vjp(d_alpha, alpha, aux, rec[0:2], rec[2:5], rec[5],
                                            *pixel, cap) + [None]
-    colour = [w * g_r, w * g_g, w * g_b, None if g_d is None else w * g_d]
+    colour = [Product(w, g_r), Product(w, g_g), Product(w, g_b),
+              None if g_d is None else Product(w, g_d)]
     return model + colour, (t,) + sums

@@ -22,6 +22,7 @@ from jax.experimental.mosaic.gpu import utils as mgpu_utils
 from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, memref, scf, vector
+from jaxlib.mlir.dialects import math as math_dialect
 
 from . import kernel_steps as ks
 
@@ -159,7 +160,8 @@ def transposed_row(terms, pixels: int, exchange, row, tile):
     """Store one pair's row: row[c] = Σ over the block's pixels of terms[c] (c < len(terms)),
     then row[len(terms)] = tile, from `kernel_steps.backward_step`'s terms: block-wide
     (pixels,) lane vectors (Mosaic GPU strided layout: each thread holds pixels/128 of them),
-    `kernel_steps.Scaled` products of two, or None for a zero term, which is left out of the
+    `kernel_steps.Scaled` or `kernel_steps.Product` products of two (formed here, the pixels
+    after a thread's first added by multiply-adds), or None for a zero term, left out of the
     butterfly (a zero array passed in fails the GPU compiler's LLVM translation with an
     unrealized layout cast).
 
@@ -189,8 +191,9 @@ def transposed_row(terms, pixels: int, exchange, row, tile):
             inputs.append(a)
         return index[id(a)]
 
-    specs = [(arg(terms[c].source), arg(terms[c].factor)) if isinstance(terms[c], ks.Scaled)
+    specs = [tuple(map(arg, terms[c])) if isinstance(terms[c], (ks.Scaled, ks.Product))
              else (arg(terms[c]),) for c in order]
+    scaled = [isinstance(terms[c], ks.Scaled) for c in order]
 
     @plgpu.inline_mgpu(
         arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(()))
@@ -200,7 +203,8 @@ def transposed_row(terms, pixels: int, exchange, row, tile):
         tid = arith.remui(mgpu_utils.thread_idx(), _i32(128))
         lanes = [[_element(a.registers.reshape(-1)[0], e) for e in range(vec)] for a in arrays]
         elements = [tuple(lanes[i] for i in sp) for sp in specs]
-        value = _butterfly(elements, halves, arith.remui(tid, _i32(32)), arith.constant(el, 0.0))
+        value = _butterfly(elements, scaled, halves, arith.remui(tid, _i32(32)),
+                           arith.constant(el, 0.0))
         _exchange_and_store(value, exchange_ref, row_ref, tid, slots,
                             tile_value.registers.item())
 
@@ -223,21 +227,26 @@ def _shuffle(v, d: int):
 
 
 def _own_sum(element):
-    """The thread's sum over its pixels of a term: (values,) or (source, factor) per pixel."""
+    """The thread's sum over its pixels of a term: (values,) or (source, factor) per pixel, the
+    products after the first added by multiply-adds (s₀f₀ + s₁f₁ as fma(s₁, f₁, s₀f₀): one
+    instruction fewer per product, and one rounding)."""
     if len(element) == 1:
         return functools.reduce(arith.addf, element[0])
-    return functools.reduce(arith.addf, [arith.mulf(s, f) for s, f in zip(*element)])
+    (s0, *sources), (f0, *factors) = element
+    return functools.reduce(lambda acc, sf: math_dialect.fma(sf[0], sf[1], acc),
+                            zip(sources, factors), arith.mulf(s0, f0))
 
 
-def _first_step(elements, h: int, upper, zero):
+def _first_step(elements, scaled, h: int, upper, zero):
     """The butterfly's first step's (send, keep) per k < h, from the terms' per-pixel values
-    (`_own_sum`'s elements): for two products of one source, the source times the selected
-    factors (selects of per-walk values, which the compiler takes out of the pair loop)."""
+    (`_own_sum`'s elements; `scaled[i]`: whether term i is a `kernel_steps.Scaled`): for two
+    `Scaled` terms of one source, the source times the selected factors (selects of per-walk
+    values, which the compiler takes out of the pair loop)."""
     out = []
     for k in range(h):
         lo = elements[k]
         hi = elements[k + h] if k + h < len(elements) else None
-        if hi is not None and len(lo) == len(hi) == 2 and lo[0] is hi[0]:
+        if hi is not None and scaled[k] and scaled[k + h] and lo[0] is hi[0]:
             pick = lambda a, b: [arith.select(upper, x, y) for x, y in zip(a, b)]
             out.append((_own_sum((lo[0], pick(lo[1], hi[1]))),
                         _own_sum((lo[0], pick(hi[1], lo[1])))))
@@ -247,17 +256,17 @@ def _first_step(elements, h: int, upper, zero):
     return out
 
 
-def _butterfly(elements, halves, lane, zero):
+def _butterfly(elements, scaled, halves, lane, zero):
     """`butterfly_plan`'s steps on this lane's terms `elements` (per term its per-pixel values,
-    or a source and factor per pixel, in `row_slots`' order): the lane's one value at the end,
-    the warp's sum of the term the plan assigns to its lane pair."""
+    or two factors per pixel, in `row_slots`' order; `scaled`: `_first_step`'s): the lane's one
+    value at the end, the warp's sum of the term the plan assigns to its lane pair."""
     vals = None
     for d, h in zip((16, 8, 4, 2, 1), halves):
         upper = arith.cmpi(arith.CmpIPredicate.ne, arith.andi(lane, _i32(d)), _i32(0))
         if vals is None:  # the first step (at least two terms; with one, h is 0 here)
             if h:
                 vals = [arith.addf(keep, _shuffle(send, d))
-                        for send, keep in _first_step(elements, h, upper, zero)]
+                        for send, keep in _first_step(elements, scaled, h, upper, zero)]
                 continue
             vals = [_own_sum(elements[0])]
         if h == 0:

@@ -75,7 +75,7 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from ..config import RasterConfig
 from ..layout import STRIP_PIXELS, TILE, TILE_PIXELS
 from . import kernel_steps as ks
-from . import backward_segments, mosaic_rows, mosaic_staging
+from . import backward_segments, mosaic_quotients, mosaic_rows, mosaic_staging
 
 
 def _ranges(*columns):
@@ -381,9 +381,11 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
         zero_row(s)
         return carry, parity
 
+    quotients = None if interpret or dt != jnp.float32 else mosaic_quotients.quotients
+
     def step(j, mask_word, s, carry, parity):
         values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
-                                         lane, carry, config)
+                                         lane, carry, config, quotients)
         return carry, store_row(values, s, parity)
 
     def body(i, state):
