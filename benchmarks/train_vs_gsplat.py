@@ -22,18 +22,16 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
            --eval-every steps and at the end, on renders clipped to [0, 1].
 Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by default, with the
 3DGS compositing rule, alpha cap 0.99, or gsplat's with --convention gsplat; gsplat's: 0.999).
-Time per step: the training loop's wall time (one host sync per step in both, as
-simple_trainer's progress bar does) without evaluations; ours also without compilation (both
-numbers are written; compiling ahead in a thread, the default on a GPU, counts only the waits
-as compilation, so steps slowed beside a compile ahead count as steps: use
---no-compile-ahead for the steps alone), gsplat's after one warm-up render (its CUDA extension
-loaded).
+Time per step: the training loop's wall time (one host sync per step in both, as simple_trainer's
+progress bar does) without evaluations; ours also without compilation (both numbers are written;
+compiling ahead in a thread, the default on a GPU, counts only the waits as compilation, so steps
+slowed beside a compile ahead count as steps: use --no-compile-ahead for the steps alone), gsplat's
+after one warm-up render (its CUDA extension loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
-Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians),
-summary.csv (final and best PSNR/SSIM, ms/step, peak MB, Gaussians, the folder of the lgs_jax
-package that ran: `PYTHONPATH=TREE` runs an earlier tree's for an A/B), <scene>_<trainer>.json,
-curves_<scene>.png; both CSVs are rewritten after each run. Our run directories (checkpoints of
-the whole pool: large) go to --run-dir, a temporary folder by default.
+Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians), summary.csv
+(final and best PSNR/SSIM, ms/step, peak MB, Gaussians, the folder of the lgs_jax that ran:
+PYTHONPATH=TREE runs an earlier tree's), <scene>_<trainer>.json, curves_<scene>.png, rewritten after
+each run; our run directories (checkpoints: large) in --run-dir, a temporary folder by default.
 --no-gsplat runs ours alone (CPU checks); --inline runs the trainers in this process.
 """
 
@@ -87,11 +85,11 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--ssim-padding", choices=["same", "valid"], default="same",
                     help="the loss's SSIM (both trainers): same (the issue's recipe, 3DGS) or "
                          "valid (gsplat's simple_trainer)")
-    ap.add_argument("--out", default="train_vs_gsplat_out",
-                    help="CSV, JSON and figures (small files)")
+    ap.add_argument("--out", default="train_vs_gsplat_out", help="CSVs, JSON and figures")
     ap.add_argument("--run-dir", help="our runs' directories, checkpoints included (large; "
                                       "default: a temporary folder)")
     ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--no-ours", action="store_true")
     ahead = ap.add_mutually_exclusive_group()
     ahead.add_argument("--no-compile-ahead", action="store_true",
                        help="our trainer without compiling ahead of pair-capacity growths")
@@ -104,7 +102,6 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--row-headroom", type=float, default=None,
                     help="our trainer's backward rows over the walked pairs (Settings."
                          "row_headroom; default: a row per pair slot)")
-    ap.add_argument("--no-ours", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)
@@ -328,8 +325,7 @@ def _gsplat_loop(args, rd, model, settings, strategy, log):
         if step + 1 in evals:
             busy += time.perf_counter() - t0
             psnr, ssim = _gsplat_eval(params, rd, test_vm, test_k)
-            curve.append(dict(step=step + 1, psnr=psnr, ssim=ssim,
-                              gaussians=len(params["means"])))
+            curve.append(dict(step=step + 1, psnr=psnr, ssim=ssim, gaussians=len(params["means"])))
             log(f"gsplat step {step + 1}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}, "
                 f"{len(params['means'])} Gaussians")
             _sync()
@@ -364,13 +360,11 @@ def run_gsplat(args, scene: str) -> dict:
 
 
 def package_root() -> str:
-    """The folder holding the `lgs_jax` package that this process imports: the first on its
-    path (an earlier tree's, `PYTHONPATH=tree python benchmarks/train_vs_gsplat.py`, for an
-    A/B of two versions), or this repository's where none is."""
+    """The folder of the lgs_jax this process imports, which the workers import too: the first
+    on its path (PYTHONPATH=TREE for an A/B of two versions), else this repository."""
     spec = importlib.util.find_spec("lgs_jax")
-    if spec is None or spec.origin is None:
-        return ROOT
-    return os.path.dirname(os.path.dirname(os.path.abspath(spec.origin)))
+    origin = spec.origin if spec else None
+    return os.path.dirname(os.path.dirname(os.path.abspath(origin))) if origin else ROOT
 
 
 def _run(args, argv, scene: str, trainer: str) -> dict:
@@ -380,10 +374,7 @@ def _run(args, argv, scene: str, trainer: str) -> dict:
         result = (run_ours if trainer == "ours" else run_gsplat)(args, scene)
     else:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        # The worker imports the lgs_jax this process would (an earlier tree on PYTHONPATH
-        # for an A/B, else this repository's), never silently another one.
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root(), env.get("PYTHONPATH"))
-                                            if p)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, (package_root(), env.get("PYTHONPATH"))))
         if trainer == "gsplat":
             env["JAX_PLATFORMS"] = "cpu"
         cmd = [sys.executable, os.path.abspath(__file__), *argv, "--worker", trainer,
@@ -502,7 +493,6 @@ def main(argv=None) -> int:
         plot_curves(args.out, scene, [r for r in results if r["scene"] == scene])
     print_curves(results)
     print_table(results)
-    print(f"lgs_jax from {package_root()}")
     return 1 if any(r.get("error") for r in results) else 0
 
 

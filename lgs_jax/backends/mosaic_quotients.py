@@ -16,11 +16,18 @@ backends divide.
 
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
 from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, nvvm, vector
+
+
+def of(interpret: bool, dtype):
+    """`backward.walk_step`'s quotients for a Mosaic GPU kernel: `quotients` on the GPU in
+    float32, None (`/`) in interpret mode or float64."""
+    return None if interpret or dtype != jnp.float32 else quotients
 
 
 def quotients(denominator, numerators):

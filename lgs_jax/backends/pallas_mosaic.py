@@ -381,11 +381,9 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
         zero_row(s)
         return carry, parity
 
-    quotients = None if interpret or dt != jnp.float32 else mosaic_quotients.quotients
-
     def step(j, mask_word, s, carry, parity):
         values, carry = ks.backward_step(j, record(j), mask_word if config.warp_cull else None,
-                                         lane, carry, config, quotients)
+                                         lane, carry, config, mosaic_quotients.of(interpret, dt))
         return carry, store_row(values, s, parity)
 
     def body(i, state):
