@@ -308,13 +308,16 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
             checkpoint(jnp.where(first, start + c * LANES, start), st)
         pl.when(first)(lambda: stage_chunk(c))
         n = sync_ref[COUNT]
-        at = [jnp.minimum(v + u, LANES - 1) for u in range(unroll)]
+        # v is a multiple of unroll below n <= LANES, which unroll divides (`KernelConfig`
+        # checks it): the group's records are rows [v, v + unroll), no clamp, at offsets from
+        # one address
+        group, indices = buf.at[pl.ds(v, unroll)], index_ref.at[pl.ds(v, unroll)]
         evaluated = []
-        for p in at:
-            rec = [buf[p, col] for col in range(ks.REC)]
+        for u in range(unroll):
+            rec = [group[u, col] for col in range(ks.REC)]
             evaluated.append(evaluate(rec, _mask(rec[ks.REC - 1], interpret)))
-        for u, ((alpha, hit, rgb, z), p) in enumerate(zip(evaluated, at)):
-            st = ks.blend(st, alpha, hit & (v + u < n), rgb, z, index_ref[p], config)
+        for u, (alpha, hit, rgb, z) in enumerate(evaluated):
+            st = ks.blend(st, alpha, hit & (v + u < n), rgb, z, indices[u], config)
         wrap = v + unroll >= n
         return jnp.where(wrap, c + 1, c), jnp.where(wrap, 0, v + unroll), st
 
