@@ -1,7 +1,8 @@
 # Next GPU session (issues 17 and 18), from the repository root; each step one `run` call with
 # carry ["carry"] (data, wheels, old/: lgs_5831554 for benchmarks.ab, tree_ff6056a for training).
-# This session's kernel change (0b888c8, 31b1b3b: the backward's pair step 206 -> 181 SASS
-# instructions for the H200, built offline, never run on a GPU) is what to check first.
+# This session's kernel changes (built offline, never run on a GPU) are what to check first:
+# 0b888c8/31b1b3b, the backward's pair step 206 -> 181 SASS instructions for the H200; and the
+# compacted forward's record reads (43.5 -> 40.4 per pair, the same bits by construction).
 #
 # 1. The GPU tests of the backward, the quotient test first (its bits claim), then the in-process
 #    A/B against the tree before the change (time ratio; the bits differ: the reduction's
@@ -28,3 +29,11 @@
 #      PYTHONPATH=TREE:/tmp/site python3 benchmarks/train_vs_gsplat.py --data-root carry/data \
 #        --scenes skull --steps 3000 --eval-every 3000 --seed S --no-gsplat --out $OUT/x
 #    (workers now import the tree on PYTHONPATH; summary.csv's `package` column says which).
+# 4. The forward (issue 17) after the record reads: the A/B (bits must be equal to 5831554's:
+#    the same rows are read) and the whole forward table against gsplat, with unroll 4 (now 84
+#    registers: 6 blocks per SM, 44.25 instructions per pair) beside the default unroll 8:
+#      timeout 200 python3 -m benchmarks.ab run synthetic4M_1080p --fwd --old carry/old \
+#        --revs 5831554 --repeat 10 --data carry/data
+#      timeout 440 python3 -m benchmarks.scale --data carry/data --csv $OUT/full.csv
+#      python3 -m benchmarks.scale --no-gsplat --data carry/data --scenes synthetic4M_1080p \
+#        guitar_x64_1080p --rows localgs,localgs:unroll4 --repeat 10
