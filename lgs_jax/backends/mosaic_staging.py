@@ -316,8 +316,9 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         for u in range(unroll):
             rec = [group[u, col] for col in range(ks.REC)]
             evaluated.append(evaluate(rec, _mask(rec[ks.REC - 1], interpret)))
+        left = n - v  # kept pairs from v on: pair v + u is one iff u < left (one compare)
         for u, (alpha, hit, rgb, z) in enumerate(evaluated):
-            st = ks.blend(st, alpha, hit & (v + u < n), rgb, z, indices[u], config)
+            st = ks.blend(st, alpha, hit & (left > u), rgb, z, indices[u], config)
         wrap = v + unroll >= n
         return jnp.where(wrap, c + 1, c), jnp.where(wrap, 0, v + unroll), st
 
