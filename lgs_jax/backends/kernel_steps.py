@@ -215,9 +215,9 @@ def term(value):
 def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig, quotients=None):
     """Pair j's step of the backward walk (`backward.walk_step`, equations in
     lgs_jax.backends.backward) at a lane vector of pixels: its per-lane gradient terms (7
-    α-model columns, ∂L/∂rgb, ∂L/∂z; arrays, `Scaled` or `Product` products or None for a zero term, each
-    `term`'s value; the kernels reduce them over their pixels) and the new carry (T_{k+1},
-    S_r, S_g, S_b, S_Z). `quotients`: `backward.walk_step`'s."""
+    α-model columns, ∂L/∂rgb, ∂L/∂z; arrays, `Scaled` or `Product` products or None for a
+    zero term, each `term`'s value; the kernels reduce them over their pixels) and the new
+    carry (T_{k+1}, S_r, S_g, S_b, S_Z). `quotients`: `backward.walk_step`'s."""
     frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
     cap = jnp.asarray(config.alpha_cap, rec[0].dtype)
     alpha, hit, aux = record_alpha(rec, frame_xy, pixel, config)
