@@ -138,7 +138,8 @@ def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     (lgs_jax.backends.pallas_mosaic) enters its segment [lo, hi), for its pixels (`half`, their
     columns of a tile's row; final `trans`, `stop_at`): at the tile's end (T, 0, 0, 0, 0);
     inside the block's walk, from checkpoint `check` (`entries`' rows `entry_refs`: the
-    forward's T there and C − C_hi, D − D_hi). Only for a pixel that blends pair hi (its stop
+    forward's T there and C − C_hi, D − D_hi; without D − D_hi where the loss does not reach
+    the depth, S_Z enters as 0, which the walk then carries unread). Only for a pixel that blends pair hi (its stop
     pair is past hi), whose forward block walked past hi and so stored the checkpoint. A pixel
     that stopped at or before hi is in its final state there, so it enters with (T, 0, 0, 0,
     0), exactly what the checkpoint would hold; its forward block may have stopped before hi
@@ -149,14 +150,14 @@ def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     zero = jnp.zeros_like(trans)
     if not entry_refs:
         return trans, zero, zero, zero, zero
-    s_r, s_g, s_b, t_hi, s_d = entry_refs
+    s_r, s_g, s_b, t_hi, *s_d = entry_refs  # no D − D_hi where the loss does not reach D
 
     def from_checkpoint():
         c = jnp.maximum(check, 0)
         reached = stop_at > hi
-        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b)]
-        return (jnp.where(reached, t_hi[c, half], trans), *sums,
-                jnp.where(reached, s_d[c, half], zero))
+        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b, *s_d)]
+        return (jnp.where(reached, t_hi[c, half], trans), *sums[:3],
+                sums[3] if s_d else zero)
 
     return lax.cond(inside & (check >= 0), from_checkpoint,
                     lambda: (trans, zero, zero, zero, zero))

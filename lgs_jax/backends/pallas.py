@@ -337,9 +337,12 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
         segments = (backward_segments.split(bins, layout.end, _segment(plan_),
                                             compacted=bins.row_capacity is not None) if entry
                     else backward_segments.whole_tiles(order, bins, layout.end))
+        # without a depth cotangent the kernel takes no D − D_hi entry either (XLA then drops
+        # its subtraction: 10 MiB at 10M Gaussians at 4K)
         rows = pallas_mosaic.backward_rows(config, plan_.interpret, plan_.backward_pixels,
                                            tiles_x, segments, bins, layout, masks, records,
-                                           lane_rows, dt, entry)
+                                           lane_rows, dt, entry if g_depth is not None
+                                           else entry[:4])
     else:
         rows = pallas_triton.backward_rows(config, plan_.interpret, tiles_x, order, bins, layout,
                                            masks, records, lane_rows, dt)

@@ -341,8 +341,8 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     every row is written once per block (the tile in every one), as `reduction` says
     (lgs_jax.backends.mosaic_rows). `refs`: the cotangent rows (r, g, b, T, D; without D where
     not `depth_cotangent`, whose terms are then left out: `backward.walk_step`); with
-    `from_checkpoints` (split segments), the five buffers of the carries a segment that is not
-    its tile's last enters with (`backward_segments.entries`);
+    `from_checkpoints` (split segments), the buffers of the carries a segment that is not its
+    tile's last enters with (`backward_segments.entries`; without D − D_hi alike);
     then rows_ref; then the scratch:
     when `staged`, the shared-memory record buffers and their barriers
     (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`; the loop carries
@@ -353,7 +353,7 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     pair's mask is read there once its chunk is built."""
     dt = rec_ref.dtype
     n_cot = 5 if depth_cotangent else 4
-    n_in = n_cot + (5 if from_checkpoints else 0)  # cotangents, entering carries
+    n_in = n_cot * (2 if from_checkpoints else 1)  # cotangents, entering carries alike
     cot_refs, entry_refs, rows_ref, scratch = (refs[:n_cot], refs[n_cot:n_in], refs[n_in],
                                                refs[n_in + 1:])
     sid, wg = lax.axis_index("tile"), lax.axis_index("wg")

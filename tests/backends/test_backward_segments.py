@@ -104,27 +104,28 @@ def test_entries_hold_each_segments_carry_where_split_reads_it(seed, share, segm
         np.testing.assert_array_equal(np.asarray(b)[dst], want)
 
 
-def _grads(g, cam, w, config, row_capacity=None):
+def _grads(g, cam, w, config, row_capacity=None, depth=True):
     @jax.jit
     def grads(g):
         def loss(g):
             out = lgs_jax.render(g, cam, backend="pallas", config=config, capacity=2048,
                                  row_capacity=row_capacity)
-            total = (jnp.sum(out.image * w) + jnp.sum(out.alpha * w[..., 0])
-                     + 0.1 * jnp.sum(out.depth * w[..., 1]))
+            total = jnp.sum(out.image * w) + jnp.sum(out.alpha * w[..., 0])
+            if depth:  # else no depth cotangent: the kernel takes no D entries
+                total = total + 0.1 * jnp.sum(out.depth * w[..., 1])
             return total, out.stats
         return jax.grad(loss, has_aux=True)(g)
     return grads(g)
 
 
-@pytest.mark.parametrize("dtype,pixels,rows,size", [
-    (np.float64, 128, True, 16), (np.float64, (128, 256), False, 16),
-    pytest.param(np.float64, 256, False, 32, marks=pytest.mark.slow),
-    pytest.param(np.float32, 128, True, 32, marks=[pytest.mark.slow, gpu_only(
+@pytest.mark.parametrize("dtype,pixels,rows,size,depth", [
+    (np.float64, 128, True, 16, True), (np.float64, (128, 256), False, 16, False),
+    pytest.param(np.float64, 256, False, 32, True, marks=pytest.mark.slow),
+    pytest.param(np.float32, 128, True, 32, False, marks=[pytest.mark.slow, gpu_only(
         "CI time: the float64 cases check the same kernels in interpret mode")])])
 @settings(max_examples=1)  # interpret mode
 @given(seed=st.integers(0, 2**32 - 1))
-def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, size, seed):
+def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, size, depth, seed):
     """Segments of 16 pairs (tiles walk tens of pairs, asserted): the gradients equal those of
     the whole walk to 1e-12 of their scale in float64 (5e-5 in float32), half and whole
     tiles (and half-tile forward blocks under whole-tile backward blocks, as at 4K, where a
@@ -132,19 +133,19 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
     segment's checkpoint: interpret mode fills unwritten memory with NaN), rows in a buffer of
     the pair capacity or of the walked pairs (the checkpoints compacted), on one tile (default
     set) or four; with one row fewer than the walked pairs (an overflow, reported), finite
-    gradients."""
+    gradients; with a loss on the depth or without one (the kernel then takes no D entries)."""
     g, cam = scenes.saturating(seed, 200, dtype), scenes.camera(size, size, dtype=dtype)
     w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
     forward, backward = pixels if isinstance(pixels, tuple) else (pixels, pixels)
     config = lambda segment: C(kernel="mosaic", tuning=K(
         mosaic_forward_pixels=forward, mosaic_backward_pixels=backward,
         mosaic_backward_segment=segment))
-    whole, stats = _grads(g, cam, w, config(None))
+    whole, stats = _grads(g, cam, w, config(None), depth=depth)
     walked = int(stats.pairs_walked)
     assert walked > 2 * 16 * (size // 16) ** 2  # more than two segments per tile on average
-    split, _ = _grads(g, cam, w, config(16), walked if rows else None)
+    split, _ = _grads(g, cam, w, config(16), walked if rows else None, depth)
     if rows:
-        short, short_stats = _grads(g, cam, w, config(16), walked - 1)
+        short, short_stats = _grads(g, cam, w, config(16), walked - 1, depth)
         assert bool(short_stats.row_overflow)
         assert all(np.all(np.isfinite(x)) for x in jax.tree.leaves(short))
     tol = 1e-12 if dtype == np.float64 else 5e-5
