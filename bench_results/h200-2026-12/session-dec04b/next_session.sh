@@ -22,7 +22,8 @@
 #        GRAD_ROWS=localgs@walked bash scripts/scale_gpu_check.sh grad
 #    (Dec 4, second session, before the change: synthetic 4M 8.21-8.26 ms against gsplat's 7.47
 #    (1.10x), 10M 20.55-20.61 against 20.43 (1.01x); the offline count predicts about -0.45 ms
-#    at 4M and -1.3 ms at 10M if the backward kernel's time follows its instructions.)
+#    at 4M and -1.3 ms at 10M if the backward kernel's time follows its instructions. Memory
+#    compiled offline with the four split entries: 10M 1675.6 MiB, 4M 642.3.)
 # 3. Training after the change (the multiply-adds change the gradient's bits, so the
 #    trajectories): skull 3k steps, seeds 0 and 1, and lego 3k at this tree and at
 #    tree_ff6056a (its training bits are 5831554's: skull 25.07 / 26.14 dB at 3k, measured):
