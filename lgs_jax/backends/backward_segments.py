@@ -139,8 +139,9 @@ def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     columns of a tile's row; final `trans`, `stop_at`): at the tile's end (T, 0, 0, 0, 0);
     inside the block's walk, from checkpoint `check` (`entries`' rows `entry_refs`: the
     forward's T there and C − C_hi, D − D_hi; without D − D_hi where the loss does not reach
-    the depth, S_Z enters as 0, which the walk then carries unread). Only for a pixel that blends pair hi (its stop
-    pair is past hi), whose forward block walked past hi and so stored the checkpoint. A pixel
+    the depth, S_Z enters as 0, which the walk then carries unread). Only for a pixel that
+    blends pair hi (its stop pair is past hi), whose forward block walked past hi and so stored
+    the checkpoint. A pixel
     that stopped at or before hi is in its final state there, so it enters with (T, 0, 0, 0,
     0), exactly what the checkpoint would hold; its forward block may have stopped before hi
     without storing it (half-tile forward blocks under a whole-tile backward block:
@@ -155,9 +156,9 @@ def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     def from_checkpoint():
         c = jnp.maximum(check, 0)
         reached = stop_at > hi
-        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b, *s_d)]
-        return (jnp.where(reached, t_hi[c, half], trans), *sums[:3],
-                sums[3] if s_d else zero)
+        sums = [jnp.where(reached, ref[c, half], zero) for ref in (s_r, s_g, s_b)]
+        s_z = jnp.where(reached, s_d[0][c, half], zero) if s_d else zero
+        return jnp.where(reached, t_hi[c, half], trans), *sums, s_z
 
     return lax.cond(inside & (check >= 0), from_checkpoint,
                     lambda: (trans, zero, zero, zero, zero))

@@ -23,6 +23,8 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, nvvm, vector
 
+from .mosaic_rows import element
+
 
 def of(interpret: bool, dtype):
     """`backward.walk_step`'s quotients for a Mosaic GPU kernel: `quotients` on the GPU in
@@ -44,11 +46,11 @@ def quotients(denominator, numerators):
     def divide(_, den, *nums):
         vec_type = ir.VectorType(den.registers.flat[0].type)
         width = vec_type.shape[0]
-        recips = [nvvm.rcp_approx_ftz_f(_element(den.registers.flat[0], e))
+        recips = [nvvm.rcp_approx_ftz_f(element(den.registers.flat[0], e))
                   for e in range(width)]
         out = []
         for num in nums:
-            products = [arith.mulf(_element(num.registers.flat[0], e), r)
+            products = [arith.mulf(element(num.registers.flat[0], e), r)
                         for e, r in enumerate(recips)]
             out.append(mgpu_fa.FragmentedArray(
                 _registers=np.array([vector.from_elements(vec_type, products)], dtype=object),
@@ -56,7 +58,3 @@ def quotients(denominator, numerators):
         return tuple(out)
 
     return divide(denominator, *numerators)
-
-
-def _element(vec, i: int):
-    return vector.extract(vec, dynamic_position=[], static_position=ir.DenseI64ArrayAttr.get([i]))

@@ -201,7 +201,7 @@ def transposed_row(terms, pixels: int, exchange, row, tile):
     def reduce(_, exchange_ref, row_ref, tile_value, *arrays):
         el = ir.VectorType(arrays[0].registers.flat[0].type).element_type
         tid = arith.remui(mgpu_utils.thread_idx(), _i32(128))
-        lanes = [[_element(a.registers.reshape(-1)[0], e) for e in range(vec)] for a in arrays]
+        lanes = [[element(a.registers.reshape(-1)[0], e) for e in range(vec)] for a in arrays]
         elements = [tuple(lanes[i] for i in sp) for sp in specs]
         value = _butterfly(elements, scaled, halves, arith.remui(tid, _i32(32)),
                            arith.constant(el, 0.0))
@@ -215,14 +215,15 @@ def _i32(v: int):
     return mgpu_utils.c(v, ir.IntegerType.get_signless(32))
 
 
-def _element(vec, i: int):
+def element(vec, i: int):
+    """Element i of a vector register (inline Mosaic GPU code's lane values)."""
     return vector.extract(vec, dynamic_position=[], static_position=ir.DenseI64ArrayAttr.get([i]))
 
 
 def _shuffle(v, d: int):
     """v of lane l ^ d (a butterfly shuffle), through a 1-vector: utils.shfl_bfly cannot
     bitcast a 64-bit scalar."""
-    return _element(mgpu_utils.shfl_bfly(vector.broadcast(ir.VectorType.get((1,), v.type), v),
+    return element(mgpu_utils.shfl_bfly(vector.broadcast(ir.VectorType.get((1,), v.type), v),
                                          d), 0)
 
 
@@ -300,7 +301,7 @@ def _exchange_and_store(value, exchange_ref, row_ref, tid, slots, tile):
             slot = arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, _i32(t)), _i32(s), slot)
         four = vector.load(ir.VectorType.get((4,), value.type), exchange_ref,
                            [arith.index_cast(index, arith.muli(slot, _i32(4)))])
-        p = [_element(four, w) for w in range(4)]
+        p = [element(four, w) for w in range(4)]
         total = arith.addf(arith.addf(p[0], p[1]), arith.addf(p[2], p[3]))
         memref.store(arith.select(arith.cmpi(arith.CmpIPredicate.eq, tid, _i32(rows)), tile,
                                   total),
