@@ -126,8 +126,8 @@ def test_mosaic_kernels_equal_triton_kernels(name, dtype, seed):
     """The Mosaic GPU forward kernels (a warpgroup per tile or half tile) run the Triton kernels'
     arithmetic in the same order with exact blending: the same image, alpha, depth and stop
     pairs, bit for bit in interpret mode; on the GPU, float64 to 1e-9 and float32 within the
-    float32 tolerance of the other kernels (the compilers' exp and multiply-add contraction
-    differ: measured 4e-5 at most)."""
+    float32 tolerance of the other kernels, relative to the field's scale (the compilers' exp
+    and multiply-add contraction differ: measured 4e-5 at most in image and alpha)."""
     backend, config = MOSAIC[name]
     g = scenes.cast(scenes.scene(seed), dtype)
     cam = scenes.camera(dtype=dtype)
@@ -142,9 +142,12 @@ def test_mosaic_kernels_equal_triton_kernels(name, dtype, seed):
         else:  # the GPU's float32 exp and multiply-add contraction differ between the compilers
             # Global coordinates: the hoisted sum's cancellation (numerics/) amplifies those ulps
             # into flipped alpha tests (H100: 2.6% of depth pixels, by up to 4.6e-4).
+            # Depth is in scene units: the weights' roundings scale with it (H200, no_cull,
+            # seed 126: 15 of 960 depth pixels off by up to 3.2e-4 where depth reaches 4.3).
             share = 0.05 if name == "global" else F32_FLIP_SHARE
-            assert_render_close(got, want, atol=F32_ATOL, max_flip_share=share, flip_atol=2.0,
-                                what=field)
+            scale = max(1.0, float(np.abs(np.asarray(want)).max()))
+            assert_render_close(got, want, atol=F32_ATOL * scale, max_flip_share=share,
+                                flip_atol=2.0 * scale, what=field)
 
 
 @pytest.mark.parametrize("backend,chunk,pixels", [
