@@ -52,16 +52,26 @@ class PaddedEllipse:
 
 def padded_ellipse(p: Projected, gamma_ulps: float = 16.0) -> PaddedEllipse:
     """τ_pad = (τ + 2δ) / (1 − 2γK) of the module docstring, with its unbounded cases."""
-    dt = p.mean2d.dtype
-    u = jnp.finfo(dt).eps / 2
-    a, b, c = p.conic[:, 0], p.conic[:, 1], p.conic[:, 2]
-    tau = 2.0 * jnp.log(jnp.maximum(255.0 * p.opacity, 1.0))
+    return ellipse_bound(p.conic[:, 0], p.conic[:, 1], p.conic[:, 2], p.opacity, p.valid,
+                         gamma_ulps)
+
+
+def ellipse_bound(a, b, c, opacity, valid=None, gamma_ulps: float = 16.0) -> PaddedEllipse:
+    """`padded_ellipse` on columns: conic (a, b, c) and opacity of Gaussians (`valid`: None
+    where every one is, as for the Gaussians of tile pairs). The pair kernels' staging computes
+    it on its lane vectors where a stored column per field would live through the whole
+    gradient (lgs_jax.pairs.strip_mask_columns)."""
+    u = jnp.finfo(a.dtype).eps / 2
+    tau = 2.0 * jnp.log(jnp.maximum(255.0 * opacity, 1.0))
     tau_slack = tau * (1 + 4 * u) + 128 * u  # rounding of tau itself and the 2δ slack
     det = a * c - b * b
     det_lo = det - 4 * u * (a * c + b * b)
-    k = (a + c) ** 2 / jnp.where(det_lo > 0, det_lo, 1.0)
+    trace = a + c
+    k = trace * trace / jnp.where(det_lo > 0, det_lo, 1.0)
     shrink = 1.0 - 2.0 * gamma_ulps * u * k
-    unbounded = p.valid & ((det_lo <= 0) | (shrink < 0.5))
+    unbounded = (det_lo <= 0) | (shrink < 0.5)
+    if valid is not None:
+        unbounded = valid & unbounded
     return PaddedEllipse(tau=tau, tau_pad=tau_slack / jnp.where(unbounded, 1.0, shrink),
                          det_lo=jnp.where(unbounded | (det_lo <= 0), 1.0, det_lo),
                          unbounded=unbounded)

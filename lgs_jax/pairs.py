@@ -23,7 +23,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from . import hoist
-from .binning import TileBins, padded_ellipse
+from .binning import TileBins, ellipse_bound
 from .config import RasterConfig
 from .layout import TILE, tile_origin, tile_origin_axis
 from .projection import Projected
@@ -33,46 +33,28 @@ from .warp_masks import FULL_MASK, strip_mask
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass
 class PairGaussians:
-    """The fields of each pair's Gaussian, (capacity, ...): projection outputs and the padded
-    ellipse of lgs_jax.binning (tau, tau_pad, det_lo, unbounded)."""
+    """The projection's fields of each pair's Gaussian, (capacity, ...)."""
 
     mean2d: Any
     conic: Any
     opacity: Any
     rgb: Any
     depth: Any
-    tau: Any
-    tau_pad: Any
-    det_lo: Any
-    unbounded: Any
 
 
-# `gaussian_table`: μx, μy, a, b, c, o, r, g, b, z, τ, τ_pad, ±det_lo (`signed_det_lo`)
-TABLE_COLUMNS = 13
-
-
-def signed_det_lo(det_lo, unbounded):
-    """det_lo and unbounded in one column: −det_lo where unbounded. det_lo > 0 everywhere
-    (`binning.padded_ellipse` makes it 1 where it cannot bound), so the sign carries the flag
-    and |·| gives det_lo back exactly (`split_det_lo`); a column of 4 bytes per Gaussian less
-    in the table, which lives through the whole gradient (38 MiB at 10M Gaussians)."""
-    return jnp.where(unbounded, -det_lo, det_lo)
-
-
-def split_det_lo(column):
-    """(det_lo, unbounded) of a `signed_det_lo` column."""
-    return jnp.abs(column), column < 0
+# `gaussian_table`: μx, μy, a, b, c, o, r, g, b, z. The strip masks' padded ellipse (τ, τ_pad,
+# det_lo and whether it is bounded) is computed from a, b, c and o where a mask is made
+# (`strip_mask_columns`), not stored: the table lives through the whole gradient, and its three
+# columns more took 12 bytes per Gaussian (115 MiB at 10M Gaussians).
+TABLE_COLUMNS = 10
 
 
 def table_columns(p: Projected) -> list:
     """The TABLE_COLUMNS (N,) columns `gaussian_table` packs, in its column order: mean2d's
-    x, y, conic's a, b, c, opacity, rgb, depth, and the padded ellipse of lgs_jax.binning (tau,
-    tau_pad, det_lo signed by unbounded: `signed_det_lo`). The vector fields' columns are slices of
+    x, y, conic's a, b, c, opacity, rgb and depth. The vector fields' columns are slices of
     `project`'s stacks, which XLA reads from its stored columns."""
-    e = padded_ellipse(p)
     return ([p.mean2d[:, i] for i in range(2)] + [p.conic[:, i] for i in range(3)]
-            + [p.opacity] + [p.rgb[:, i] for i in range(3)]
-            + [p.depth, e.tau, e.tau_pad, signed_det_lo(e.det_lo, e.unbounded)])
+            + [p.opacity] + [p.rgb[:, i] for i in range(3)] + [p.depth])
 
 
 def gaussian_table(p: Projected):
@@ -86,17 +68,14 @@ def gaussian_table(p: Projected):
 def gather(p: Projected, gauss) -> PairGaussians:
     """Every pair's Gaussian fields, through one packed `gaussian_table` row per pair."""
     rows = gaussian_table(p)[gauss]
-    det_lo, unbounded = split_det_lo(rows[:, 12])
     return PairGaussians(mean2d=rows[:, 0:2], conic=rows[:, 2:5], opacity=rows[:, 5],
-                         rgb=rows[:, 6:9], depth=rows[:, 9], tau=rows[:, 10],
-                         tau_pad=rows[:, 11], det_lo=det_lo, unbounded=unbounded)
+                         rgb=rows[:, 6:9], depth=rows[:, 9])
 
 
 def columns(pg: PairGaussians) -> list:
     """The `gaussian_table` columns of `pg` (what `record_columns` takes)."""
     return [pg.mean2d[:, 0], pg.mean2d[:, 1], pg.conic[:, 0], pg.conic[:, 1], pg.conic[:, 2],
-            pg.opacity, pg.rgb[:, 0], pg.rgb[:, 1], pg.rgb[:, 2], pg.depth, pg.tau, pg.tau_pad,
-            signed_det_lo(pg.det_lo, pg.unbounded)]
+            pg.opacity, pg.rgb[:, 0], pg.rgb[:, 1], pg.rgb[:, 2], pg.depth]
 
 
 def _pair_origins(bins: TileBins, tiles_x: int, config: RasterConfig, dtype):
@@ -109,10 +88,14 @@ def strip_mask_columns(cols, tx, ty, config: RasterConfig):
     FULL_MASK for those the binning could not bound. Written on columns, so that the XLA path
     (`strip_masks`) and the Mosaic GPU kernels' in-kernel staging (lane vectors, a scalar tile;
     lgs_jax.backends.mosaic_staging) compute the same bits."""
-    mx, my, a, b, c, o, _, _, _, _, tau_min, tau, signed = cols
-    det_lo, unbounded = split_det_lo(signed)
+    mx, my, a, b, c, o = cols[:6]
     dt = mx.dtype
     u = jnp.finfo(dt).eps / 2
+    # The ellipse of `binning` (every pair's Gaussian is valid), widened by 8u: in the Mosaic
+    # GPU kernels its division is PTX div.full (<= 2 ulp), not the correctly rounded one the
+    # bound was derived for.
+    e = ellipse_bound(a, b, c, o)
+    tau_min, tau, det_lo = e.tau, e.tau_pad * (1 + 8 * u), e.det_lo
     if config.hoist:
         ox, oy = tile_origin_axis(tx, config, dt), tile_origin_axis(ty, config, dt)
         cx, cy = (tx * TILE).astype(dt), (ty * TILE).astype(dt)
@@ -122,7 +105,7 @@ def strip_mask_columns(cols, tx, ty, config: RasterConfig):
                                       16 * u)
         tau = jnp.maximum(tau, tau_min * (1 + 4 * u) + 128 * u + 2 * err)
     mask = strip_mask(mx, my, a, b, c, tau, det_lo, tx, ty)
-    return jnp.where(unbounded, FULL_MASK, mask)
+    return jnp.where(e.unbounded, FULL_MASK, mask)
 
 
 def strip_masks(pg: PairGaussians, bins: TileBins, tiles_x: int, config: RasterConfig):

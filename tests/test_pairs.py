@@ -106,25 +106,11 @@ def test_strip_masks_are_tight_on_a_real_scene(data_dir, capsys):
     assert needed / kept > 0.8
 
 
-@pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@given(exponents=st.lists(st.floats(-120, 120), min_size=16, max_size=16),
-       flags=st.lists(st.booleans(), min_size=16, max_size=16))
-def test_signed_det_lo_gives_det_lo_and_unbounded_back_exactly(dtype, exponents, flags):
-    """The table's one column for (det_lo, unbounded): the same bits back, for every positive
-    det_lo the padded ellipse can hold (1 where unbounded)."""
-    det_lo = np.exp2(np.asarray(exponents)).astype(dtype)
-    unbounded = np.asarray(flags)
-    det_lo = np.where(unbounded, dtype(1), det_lo)  # binning.padded_ellipse's placeholder
-    got, got_flags = pairs.split_det_lo(pairs.signed_det_lo(det_lo, unbounded))
-    assert np.array_equal(np.asarray(got), det_lo) and np.asarray(got).dtype == dtype
-    assert np.array_equal(np.asarray(got_flags), unbounded)
-
-
 @pytest.mark.parametrize("seed", [0, 1])
 def test_padded_ellipse_det_lo_is_positive_on_adversarial_scenes(seed):
-    """What `pairs.signed_det_lo` relies on: det_lo > 0 for every Gaussian the table holds
-    (NaN only where the projection is NaN: invalid rows, which no pair reaches), and exactly
-    1 where the ellipse cannot be bounded."""
+    """What the strip masks' division by det_lo relies on (`pairs.strip_mask_columns`): det_lo
+    > 0 for every Gaussian (NaN only where the projection is NaN: invalid rows, which no pair
+    reaches), and exactly 1 where the ellipse cannot be bounded."""
     g = scenes.scene(seed, kinds=scenes.KINDS, n=400)
     p = project(g, scenes.camera(width=W, height=H))
     # and singular or nearly singular conics (a·c = b², or 1 ulp off), which it cannot bound
@@ -146,7 +132,7 @@ def test_record_columns_are_computed_from_the_lanes_data(hoist):
     own columns, none a constant: the Mosaic GPU kernels store the columns with lane-strided
     inline stores, which a constant's splat fails to build for (LLVM translation), and on the
     H200 the kernels without warp culling hung their tests (Dec 3, eighth session)."""
-    cols = [jnp.arange(8, dtype=jnp.float32) + i for i in range(13)]
+    cols = [jnp.arange(8, dtype=jnp.float32) + i for i in range(pairs.TABLE_COLUMNS)]
     config = lgs_jax.RasterConfig(hoist=hoist, warp_cull=False)
     tx, ty = jnp.int32(3), jnp.int32(2)
     jaxpr = jax.make_jaxpr(lambda c: pairs.record_columns(c, tx, ty, config))(cols).jaxpr

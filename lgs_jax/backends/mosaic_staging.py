@@ -26,7 +26,7 @@ forward's pair loop 54 -> 46.5 SASS instructions per pair, the backward's 230 ->
 backward's staging 26 -> 2 barriers per chunk (Pallas fenced each column's store with two).
 
 No per-pair buffer in global memory and no per-pair XLA pass (the records, and the Gaussian rows
-gathered per pair to build them, are 48 + 56 bytes per pair: 1.2 + 1.4 GB at 10M Gaussians at
+gathered per pair to build them, are 48 + 40 bytes per pair: 1.2 + 1.0 GB at 10M Gaussians at
 4K). Records past the list's end (the last chunk's tail) are computed from clamped ids and never
 read. Same arithmetic as the XLA records (the same functions); bit for bit in interpret mode.
 Float32 and float64 (no TMA involved).
