@@ -124,6 +124,13 @@ def test_padded_ellipse_det_lo_is_positive_on_adversarial_scenes(seed):
     assert not np.any(det_lo <= 0)
     assert np.all(det_lo[unbounded] == 1)
     assert np.all(np.isfinite(det_lo[np.asarray(p.valid)]))
+    # The strip masks' ellipse, computed from the table's columns (`strip_mask_columns`), is
+    # binning's for every valid Gaussian, bit for bit.
+    valid, rows = np.asarray(p.valid), pairs.gaussian_table(p)
+    m = binning.ellipse_bound(rows[:, 2], rows[:, 3], rows[:, 4], rows[:, 5])
+    for field in ("tau", "tau_pad", "det_lo", "unbounded"):
+        np.testing.assert_array_equal(np.asarray(getattr(m, field))[valid],
+                                      np.asarray(getattr(e, field))[valid], err_msg=field)
 
 
 @pytest.mark.parametrize("hoist", [True, False])
