@@ -48,6 +48,7 @@ from jaxlib.mlir.dialects import math as math_dialect
 from .. import pairs
 from ..config import RasterConfig
 from . import kernel_steps as ks
+from .mosaic_rows import element
 
 LANES = 128  # pairs per staged chunk: one per thread of the warpgroup
 _STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
@@ -144,10 +145,9 @@ def _store_rows(buffer, *columns):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
         tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
         for col, a in enumerate(arrays):
-            value = vector.extract(a.registers.flat[0], dynamic_position=[],
-                                   static_position=ir.DenseI64ArrayAttr.get([0]))
-            memref.store(value, buf, [arith.index_cast(index, tid),
-                                      arith.index_cast(index, mgpu_utils.c(col, i32))])
+            memref.store(element(a.registers.flat[0], 0), buf,
+                         [arith.index_cast(index, tid),
+                          arith.index_cast(index, mgpu_utils.c(col, i32))])
         mgpu_utils.warpgroup_barrier()
 
     store(buffer, *columns)
@@ -236,8 +236,7 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
         c = lambda v: mgpu_utils.c(v, i32)
         at = lambda v: arith.index_cast(index, v)
-        value = lambda a: vector.extract(a.registers.flat[0], dynamic_position=[],
-                                         static_position=ir.DenseI64ArrayAttr.get([0]))
+        value = lambda a: element(a.registers.flat[0], 0)
         tid = arith.remui(mgpu_utils.thread_idx(), c(LANES))
         lane, warp = arith.remui(tid, c(32)), arith.divui(tid, c(32))
         kept = arith.cmpi(arith.CmpIPredicate.ne, value(arrays[-1]), c(0))
@@ -250,8 +249,7 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
             scf.yield_([])
         mgpu_utils.warpgroup_barrier()
         counts = vector.load(ir.VectorType.get((4,), i32), sync_ref, [at(c(0))])
-        counts = [vector.extract(counts, dynamic_position=[],
-                                 static_position=ir.DenseI64ArrayAttr.get([w])) for w in range(4)]
+        counts = [element(counts, w) for w in range(4)]
         before, total = rank, c(0)
         for w, n in enumerate(counts):
             before = arith.addi(before, arith.select(
