@@ -141,11 +141,10 @@ def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     forward's T there and C − C_hi, D − D_hi; without D − D_hi where the loss does not reach
     the depth, S_Z enters as 0, which the walk then carries unread). Only for a pixel that
     blends pair hi (its stop pair is past hi), whose forward block walked past hi and so stored
-    the checkpoint. A pixel
-    that stopped at or before hi is in its final state there, so it enters with (T, 0, 0, 0,
-    0), exactly what the checkpoint would hold; its forward block may have stopped before hi
-    without storing it (half-tile forward blocks under a whole-tile backward block:
-    `KernelConfig.mosaic_compact`'s default blocks at 4K). Until Dec 3 the test was stop > lo,
+    the checkpoint. A pixel that stopped at or before hi is in its final state there, so it
+    enters with (T, 0, 0, 0, 0), exactly what the checkpoint would hold; its forward block may
+    have stopped before hi without storing it (half-tile forward blocks under a whole-tile
+    backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K). Until Dec 3 the test was stop > lo,
     so those pixels with lo < stop <= hi took unwritten memory (deterministic stale values,
     bitwise repeatable but wrong, as at 10M Gaussians at 4K)."""
     zero = jnp.zeros_like(trans)
