@@ -7,7 +7,8 @@ Reads the dump's -buffer-assignment.txt (values, their allocations and byte rang
 (per allocation, the union of live values' byte ranges; parameters left out, as XLA's
 temp + output sizes do) and prints the peak's step, instruction and live values by size.
 `--temp` leaves the outputs' allocations out too (what XLA can pack into its temporary
-allocation), `--timeline` prints the live MiB at every step.
+allocation), `--timeline` prints the live MiB at every step, `--step N` the values live at
+step N instead of the peak's.
 """
 
 import argparse
@@ -20,6 +21,7 @@ def main():
     ap.add_argument("prefix")
     ap.add_argument("--top", type=int, default=40)
     ap.add_argument("--timeline", action="store_true", help="the live MiB at every step")
+    ap.add_argument("--step", type=int, help="the live values at this step, not at the peak")
     ap.add_argument("--temp", action="store_true",
                     help="the temporary allocation only (outputs' allocations left out: XLA's "
                          "memory analysis adds their whole size)")
@@ -71,10 +73,13 @@ def main():
                 total += cur[1] - cur[0]
         if a.timeline:
             print(f"{t:4d} {total / 2**20:8.1f} MiB  {seq.get(str(t))}")
-        if total > best[0]:
+        if total > best[0] or t == a.step:
             best = (total, t, live)
+        if t == a.step:
+            break
     total, t, live = best
-    print(f"peak {total / 2**20:.1f} MiB at step {t}: {seq.get(str(t))}")
+    print(f"{'live' if a.step is not None else 'peak'} {total / 2**20:.1f} MiB at step {t}: "
+          f"{seq.get(str(t))}")
     for size, name, shape, al in sorted(live, reverse=True)[:a.top]:
         lo, hi = ranges[name]
         print(f"{size / 2**20:9.2f} MiB  alloc {al:3d}  {lo:4d}-{hi:<4d} {name:55s} {shape}")
