@@ -130,14 +130,22 @@ def gaussian_columns(g: Gaussians):
     (quaternion w, x, y, z), (log scales), the opacity logits, and the SH coefficients as
     [basis][channel].
 
-    Its vjp stores the columns' cotangents (an optimization barrier), then stacks them into
-    the fields. Differentiated as plain slices instead, each field's cotangent is a sum of
-    per-column pads, which XLA fused into the projection's backward: it split that into two
-    fusions with 32 (N,) arrays between them. Behind the barrier the backward writes (N,)
-    columns only: at 10M Gaussians on an H200 it took 2.67 against 3.76 ms, at 0.96M with SH
-    degree 3 2.92 against 4.52, with the same bits there. On a CPU XLA compiles the chain
-    differently from before, and the mean, rotation and scale gradients round differently
-    (BENCHMARKS.md §7 "Dec 2, late night").
+    Its vjp stores the cotangents of the mean, rotation, scale and opacity columns (an
+    optimization barrier), then stacks them into the fields. Differentiated as plain slices
+    instead, each field's cotangent is a sum of per-column pads, which XLA fused into the
+    projection's backward: it split that into two fusions with 32 (N,) arrays between them.
+    Behind the barrier the backward writes (N,) columns only: at 10M Gaussians on an H200 it
+    took 2.67 against 3.76 ms, at 0.96M with SH degree 3 2.92 against 4.52, with the same bits
+    there. On a CPU XLA compiles the chain differently from before, and the mean, rotation and
+    scale gradients round differently (BENCHMARKS.md §7 "Dec 2, late night").
+
+    The SH cotangents stay out of the barrier: each is one product, ∂L/∂sh[k][c] =
+    Y_k(d) · ∂L/∂rgb_c (masked where the colour clamps or the row is invalid), which XLA
+    computes inside the (N, K, 3) stack's own fusion from a few stored columns. Behind the
+    barrier its K·3 columns were stored and then copied into the stack, both live at once
+    (SH degree 3, 0.96M Gaussians: 176 MiB each; the lego x16 gradient compiled for the H200
+    494.4 → 353.1 MiB, and the projection's backward one fusion instead of two; BENCHMARKS.md
+    §7 "Dec 4, fourth session"). The CPU's bits are unchanged.
     Being a `custom_vjp`, it has no forward-mode derivative (`jax.jvp`), as the rasterizers."""
     return _columns(g)
 
@@ -153,7 +161,8 @@ def _columns_fwd(g: Gaussians):
 
 
 def _columns_bwd(_, cts):
-    mean, quat, log_scale, logit, sh = lax.optimization_barrier(cts)
+    *fields, sh = cts
+    mean, quat, log_scale, logit = lax.optimization_barrier(fields)
     return (Gaussians(means=jnp.stack(mean, -1), quats=jnp.stack(quat, -1),
                       log_scales=jnp.stack(log_scale, -1), logit_opacities=logit,
                       sh=jnp.stack([jnp.stack(row, -1) for row in sh], 1)),)
