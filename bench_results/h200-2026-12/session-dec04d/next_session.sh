@@ -1,0 +1,27 @@
+# Next GPU session (issues 17 and 18), from the repository root; each step one `run` call with
+# carry ["carry"] (data: guitar, lego_sh3, skull, lego_train; wheels: gsplat 1.5.3,
+# pytest-timeout; old/: `python -m benchmarks.ab prepare da62541 --to carry/old`, the tree
+# before the SH cotangents left the barrier). Built offline and never run on a GPU: 602cc56,
+# `projection.gaussian_columns`' vjp without the SH cotangents behind its barrier: compiled for
+# the H200, lego x16 1080p forward + backward (walked rows) 494.4 -> 353.1 MiB (gsplat 346).
+#
+# 1. GPU tests of the projection and gradients, then the A/B at lego x16 (SH degree 3): memory
+#    must be 353 MiB; the means', rotations', scales' and opacities' gradient bits equal
+#    da62541's, ∂L/∂sh within float32 rounding (another fusion computes the products); time
+#    lower or equal (176 MiB less written and read):
+#      TEST_WORKERS=8 TEST_TIMEOUT=260 TEST_ARGS="tests/test_projection.py \
+#        tests/backends/test_gradients.py tests/backends/test_gaussian_grads.py \
+#        tests/train" bash scripts/scale_gpu_check.sh tests
+#      timeout 150 python3 -m benchmarks.ab run lego_x16_1080p --old carry/old \
+#        --revs da62541 --repeat 5 --data carry/data
+#    (benchmarks.ab compares every gradient's bits; if only d_sh differs, that is expected.)
+# 2. The small scenes and lego x16 against gsplat, walked rows (issue 18's table at one tree):
+#      SCENES="lego_x16_1080p lego_800 guitar_720p guitar_4k" GRAD_ROWS=localgs@walked \
+#        SCENE_TIMEOUT=100 bash scripts/scale_gpu_check.sh grad
+# 3. Skull training before and after in one call (peak memory should fall by up to 192 bytes
+#    per pooled Gaussian; ms per step equal or lower), the old tree through PYTHONPATH:
+#      for tree in head old; do pp=$PYTHONPATH; [ $tree = head ] || pp="$PWD/carry/old/tree_da62541:$pp"
+#        PYTHONPATH=$pp timeout 250 python3 benchmarks/train_vs_gsplat.py --data-root carry/data \
+#          --scenes skull --steps 3000 --eval-every 3000 --no-gsplat --out $OUT/skull_$tree; done
+#    (train_vs_gsplat imports lgs_jax, so the old tree is a plain one: `git archive da62541
+#    lgs_jax | tar x -C carry/old/tree_da62541`; benchmarks.ab's package is lgs_da62541.)
