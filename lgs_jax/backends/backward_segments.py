@@ -144,9 +144,9 @@ def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     the checkpoint. A pixel that stopped at or before hi is in its final state there, so it
     enters with (T, 0, 0, 0, 0), exactly what the checkpoint would hold; its forward block may
     have stopped before hi without storing it (half-tile forward blocks under a whole-tile
-    backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K). Until Dec 3 the test was stop > lo,
-    so those pixels with lo < stop <= hi took unwritten memory (deterministic stale values,
-    bitwise repeatable but wrong, as at 10M Gaussians at 4K)."""
+    backward block: `KernelConfig.mosaic_compact`'s default blocks at 4K). Until Dec 3 the
+    test was stop > lo, so those pixels with lo < stop <= hi took unwritten memory
+    (deterministic stale values, bitwise repeatable but wrong, as at 10M Gaussians at 4K)."""
     zero = jnp.zeros_like(trans)
     if not entry_refs:
         return trans, zero, zero, zero, zero

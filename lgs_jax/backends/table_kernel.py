@@ -3,9 +3,9 @@
 XLA writes the table, a concatenate along the minor axis, one column at a time: a warp's 32
 stores of a column land a row apart, one memory sector each. At 10M Gaussians on an H200
 that pass took 0.69 ms (rows of 14 columns then), the forward's largest XLA pass after the
-kernels (BENCHMARKS.md §7 "Dec 2, late evening"). Here each program reads `lanes` Gaussians' fields as (N,) columns
-(`pairs.table_columns`) and stores their rows as one (lanes, 16) block masked to the
-TABLE_COLUMNS (10), whose consecutive lanes write consecutive bytes.
+kernels (BENCHMARKS.md §7 "Dec 2, late evening"). Here each program reads `lanes` Gaussians'
+fields as (N,) columns (`pairs.table_columns`) and stores their rows as one (lanes, 16) block
+masked to the TABLE_COLUMNS (10), whose consecutive lanes write consecutive bytes.
 Every value is a copy: the table equals `pairs.gaussian_table`'s bit for bit (a test checks it
 in interpret mode).
 """

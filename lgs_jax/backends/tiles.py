@@ -21,10 +21,11 @@ difference form when `hoist` is off; the chunk is then blended in order (Algorit
   fast:  the paper's warp-coherent blending (w = α·T; C += f·w; T −= w, Sec. III-D): no
          per-pixel stop; a strip stops when all 32 pixels have T < 1e-4 (checked per chunk).
 
-Bound on `fast` (derived here, tested in tests/backends/test_tiles.py). Until the exact pixel's stop at
-Gaussian k*, both modes blend the same Gaussians. The exact pixel then keeps T_e = T_{k*}, with
-T_{k*}·(1 − α_{k*}) < 1e-4, so T_e < 1e-4 / (1 − cap). The fast pixel additionally blends weights
-w_j (j >= k*) with Σ w_j <= T_e, moving colour from background to those Gaussians:
+Bound on `fast` (derived here, tested in tests/backends/test_tiles.py). Until the exact
+pixel's stop at Gaussian k*, both modes blend the same Gaussians. The exact pixel then keeps
+T_e = T_{k*}, with T_{k*}·(1 − α_{k*}) < 1e-4, so T_e < 1e-4 / (1 − cap). The fast pixel
+additionally blends weights w_j (j >= k*) with Σ w_j <= T_e, moving colour from background to
+those Gaussians:
 
   |image_fast − image_exact| <= T_e · max_j |rgb_j − background| < 1e-4/(1 − cap) · max|rgb − bg|
   |alpha_fast − alpha_exact| < 1e-4/(1 − cap),  |depth_fast − depth_exact| < 1e-4/(1 − cap)·max z

@@ -25,3 +25,13 @@
 #          --scenes skull --steps 3000 --eval-every 3000 --no-gsplat --out $OUT/skull_$tree; done
 #    (train_vs_gsplat imports lgs_jax, so the old tree is a plain one: `git archive da62541
 #    lgs_jax | tar x -C carry/old/tree_da62541`; benchmarks.ab's package is lgs_da62541.)
+# 4. Where the forward kernel's time goes at the uniform scenes (issue 17's three misses: the
+#    device is 2.20 ms of the 2.68 ms blocked call at synthetic 4M, the Local-GS kernel 1.02 of
+#    it; its 116 registers allow 4 blocks per SM): Nsight Compute on one launch of ours and of
+#    gsplat's forward rasterizer, full set (stall reasons: does the chunk staging's dependent id
+#    -> row loads show as long-scoreboard stalls, or the blend loop's issue rate?):
+#      timeout 200 python3 -c "from gsplat.cuda._backend import _C"
+#      timeout 330 ncu --clock-control none -k regex:'localgs_kernel|rasterize_to_pixels' -c 2 \
+#        --set full python3 scripts/ncu_localgs.py carry/data --scene synthetic4M_1080p \
+#        --backends pallas --kernel mosaic --gsplat > $OUT/ncu_fwd_syn4M.txt
+#    then grep "Duration|Registers Per|Achieved Occupancy|Executed Ipc A|Stall|No Eligible".
