@@ -326,13 +326,20 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
     g_color, g_trans, g_depth = cotangents
+    layout = gaussian_grads.rows_of(bins, stop_at)
+    # The cotangents' per-tile planes made after the row layout, by a dependency on it: a
+    # select on a predicate that always holds (end is a pair index), the same values. XLA
+    # made them from the loss's cotangent at the program's start and kept them through the
+    # forward kernel, where the temporaries peak (lego x16 1080p gradient compiled for the
+    # H200: 353.1 -> 327.6 MiB). A barrier would keep its inputs instead: as many bytes.
+    ready = layout.end[0] >= 0
+    g_color, g_trans = (jnp.where(ready, x, jnp.zeros_like(x)) for x in (g_color, g_trans))
     if plan_.image:  # the colour image's cotangent, per tile: (n_tiles, 256, 3)
         g_color = tiled_image_to_tiles(g_color)
     masks = jnp.zeros((1,), jnp.int32) if masks is None else masks
     lane_rows = (trans, stop_at, g_color[..., 0], g_color[..., 1], g_color[..., 2], g_trans)
     if g_depth is not None or plan_.backward != "mosaic":  # the Mosaic GPU kernel takes None
         lane_rows += (backward.depth_cotangent(g_depth, trans),)
-    layout = gaussian_grads.rows_of(bins, stop_at)
     if plan_.backward == "mosaic":
         segments = (backward_segments.split(bins, layout.end, _segment(plan_),
                                             compacted=bins.row_capacity is not None) if entry
