@@ -2,16 +2,19 @@
 # carry ["carry"] (data: guitar, lego_sh3, skull, lego_train; wheels: gsplat 1.5.3,
 # pytest-timeout; old/: `python -m benchmarks.ab prepare da62541 --to carry/old`, the tree
 # before the SH cotangents left the barrier). Built offline and never run on a GPU: 602cc56,
-# `projection.gaussian_columns`' vjp without the SH cotangents behind its barrier: compiled for
-# the H200, lego x16 1080p forward + backward (walked rows) 494.4 -> 353.1 MiB (gsplat 346).
+# `projection.gaussian_columns`' vjp without the SH cotangents behind its barrier, and the
+# commit after it, the pallas backward's cotangent planes made after the row layout (a select
+# on an always-true predicate): compiled for the H200, lego x16 1080p forward + backward
+# (walked rows) 494.4 -> 353.1 -> 327.6 MiB (gsplat 346).
 #
 # 1. GPU tests of the projection and gradients, then the A/B at lego x16 (SH degree 3): memory
-#    must be 353 MiB; the means', rotations', scales' and opacities' gradient bits equal
+#    must be 328 MiB; the means', rotations', scales' and opacities' gradient bits equal
 #    da62541's, ∂L/∂sh within float32 rounding (another fusion computes the products); time
 #    lower or equal (176 MiB less written and read):
 #      TEST_WORKERS=8 TEST_TIMEOUT=260 TEST_ARGS="tests/test_projection.py \
 #        tests/backends/test_gradients.py tests/backends/test_gaussian_grads.py \
-#        tests/train" bash scripts/scale_gpu_check.sh tests
+#        tests/backends/test_backward_segments.py tests/backends/test_pallas.py tests/train" \
+#        bash scripts/scale_gpu_check.sh tests
 #      timeout 150 python3 -m benchmarks.ab run lego_x16_1080p --old carry/old \
 #        --revs da62541 --repeat 5 --data carry/data
 #    (benchmarks.ab compares every gradient's bits; if only d_sh differs, that is expected.)
