@@ -2,8 +2,8 @@
 # carry ["carry"] (data: guitar, lego_sh3, skull, lego_train; wheels: gsplat 1.5.3,
 # pytest-timeout; old/: `python -m benchmarks.ab prepare da62541 --to carry/old`, the tree
 # before the SH cotangents left the barrier). Built offline and never run on a GPU: 602cc56,
-# `projection.gaussian_columns`' vjp without the SH cotangents behind its barrier, and the
-# commit after it, the pallas backward's cotangent planes made after the row layout (a select
+# `projection.gaussian_columns`' vjp without the SH cotangents behind its barrier, and d8be94b,
+# the pallas backward's cotangent planes made after the row layout (a select
 # on an always-true predicate): compiled for the H200, lego x16 1080p forward + backward
 # (walked rows) 494.4 -> 353.1 -> 327.6 MiB (gsplat 346).
 #
