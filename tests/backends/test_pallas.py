@@ -138,8 +138,8 @@ def test_mosaic_kernels_equal_triton_kernels(name, dtype, seed):
     assert outs["mosaic"].stats.kernel == KERNEL[backend] + "-mosaic"
     for field in ("image", "alpha", "depth"):
         got, want = getattr(outs["mosaic"], field), getattr(outs["triton"], field)
-        if not ON_GPU and field == "image":  # the Triton kernels write per-tile planes
-            assert_composites_equal(got, want)
+        if not ON_GPU and field == "image" and backend == "pallas":  # the Triton kernel's
+            assert_composites_equal(got, want)  # colour is per-tile planes, this one's an image
         elif not ON_GPU or dtype == np.float64:
             np.testing.assert_allclose(got, want, rtol=0, atol=F64_ATOL if ON_GPU else 0,
                                        err_msg=field)
@@ -188,8 +188,8 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
             np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
     for field in ("image", "alpha", "depth"):
         got, want = getattr(outs[chunk, pixels], field), getattr(outs[0, 128], field)
-        if field == "image" and not ON_GPU:  # 128-pixel blocks write an image, 256 planes
-            assert_composites_equal(got, want)
+        if field == "image" and not ON_GPU and backend == "pallas":  # Local-GS: 128-pixel
+            assert_composites_equal(got, want)  # blocks write an image, 256-pixel ones planes
         else:
             np.testing.assert_array_equal(got, want, err_msg=field)
 
