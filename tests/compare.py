@@ -52,7 +52,7 @@ def assert_render_close(got, want, atol, max_flip_share=0.0, flip_atol=np.inf, w
     assert diff.max() <= flip_atol, f"{what}: max difference {diff.max():.3g} > {flip_atol}"
 
 
-def assert_composites_equal(got, want, err_msg="image"):
+def assert_composites_equal(got, want):
     """Two renders' images whose kernels produced the same colour, T and depth bits, but the
     colour in different layouts (the Local-GS Mosaic GPU forward's (H, W, 3) image,
     `KernelConfig.mosaic_image_layout`, against per-tile planes): equal to COMPOSITE_ULPS units
@@ -64,7 +64,7 @@ def assert_composites_equal(got, want, err_msg="image"):
     (`--xla_cpu_max_isa=AVX2`) the images are equal. A dropped or extra pair moves the alpha,
     which the tests still compare bit for bit."""
     got, want = np.asarray(got), np.asarray(want)
-    assert got.dtype == want.dtype, (err_msg, got.dtype, want.dtype)
+    assert got.dtype == want.dtype, (got.dtype, want.dtype)
     np.testing.assert_array_max_ulp(got, want, maxulp=COMPOSITE_ULPS)
 
 
