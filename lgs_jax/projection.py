@@ -25,7 +25,7 @@ from jax import lax
 
 from .config import ALPHA_MIN
 from .scene import Camera, Gaussians
-from .sh import sh_basis_terms
+from .sh import sh_basis_terms, sh_sums
 
 EPS2D = 0.3  # low-pass dilation added to the 2D covariance
 
@@ -115,7 +115,8 @@ def project(g: Gaussians, cam: Camera) -> Projected:
 
 @jax.checkpoint
 def _project(g: Gaussians, cam: Camera) -> dict:
-    return _projected_columns(*gaussian_columns(g), cam)
+    columns = gaussian_columns(g.means, g.quats, g.log_scales, g.logit_opacities)
+    return _projected_columns(*columns, g.sh, cam)
 
 
 def _stacked(cols: dict) -> Projected:
@@ -125,65 +126,53 @@ def _stacked(cols: dict) -> Projected:
 
 
 @jax.custom_vjp
-def gaussian_columns(g: Gaussians):
-    """The fields of `g` as (N,) columns, as `_projected_columns` takes them: (mean x, y, z),
-    (quaternion w, x, y, z), (log scales), the opacity logits, and the SH coefficients as
-    [basis][channel].
+def gaussian_columns(means, quats, log_scales, logit_opacities):
+    """The fields of a `Gaussians` but its SH coefficients as (N,) columns, as
+    `_projected_columns` takes them: (mean x, y, z), (quaternion w, x, y, z), (log scales),
+    the opacity logits.
 
-    Its vjp stores the cotangents of the mean, rotation, scale and opacity columns (an
-    optimization barrier), then stacks them into the fields. Differentiated as plain slices
-    instead, each field's cotangent is a sum of per-column pads, which XLA fused into the
-    projection's backward: it split that into two fusions with 32 (N,) arrays between them.
-    Behind the barrier the backward writes (N,) columns only: at 10M Gaussians on an H200 it
-    took 2.67 against 3.76 ms, at 0.96M with SH degree 3 2.92 against 4.52, with the same bits
-    there. On a CPU XLA compiles the chain differently from before, and the mean, rotation and
-    scale gradients round differently (BENCHMARKS.md §7 "Dec 2, late night").
-
-    The SH cotangents stay out of the barrier: each is one product, ∂L/∂sh[k][c] =
-    Y_k(d) · ∂L/∂rgb_c (masked where the colour clamps or the row is invalid), which XLA
-    computes inside the (N, K, 3) stack's own fusion from a few stored columns. Behind the
-    barrier its K·3 columns were stored and then copied into the stack, both live at once
-    (SH degree 3, 0.96M Gaussians: 176 MiB each; the lego x16 gradient compiled for the H200
-    494.4 → 353.1 MiB, and the projection's backward one fusion instead of two; BENCHMARKS.md
-    §7 "Dec 4, fourth session"). The CPU's bits are unchanged.
+    Its vjp stores the columns' cotangents (an optimization barrier), then stacks them into
+    the fields. Differentiated as plain slices instead, each field's cotangent is a sum of
+    per-column pads, which XLA fused into the projection's backward: it split that into two
+    fusions with 32 (N,) arrays between them. Behind the barrier the backward writes (N,)
+    columns only: at 10M Gaussians on an H200 it took 2.67 against 3.76 ms, at 0.96M with SH
+    degree 3 2.92 against 4.52, with the same bits there. On a CPU XLA compiles the chain
+    differently from before, and the mean, rotation and scale gradients round differently
+    (BENCHMARKS.md §7 "Dec 2, late night"). The SH coefficients stay whole (`sh_sums`).
     Being a `custom_vjp`, it has no forward-mode derivative (`jax.jvp`), as the rasterizers."""
-    return _columns(g)
+    return _columns(means, quats, log_scales, logit_opacities)
 
 
-def _columns(g: Gaussians):
-    return ([g.means[:, i] for i in range(3)], [g.quats[:, i] for i in range(4)],
-            [g.log_scales[:, i] for i in range(3)], g.logit_opacities,
-            [[g.sh[:, k, c] for c in range(3)] for k in range(g.sh.shape[1])])
+def _columns(means, quats, log_scales, logit_opacities):
+    return ([means[:, i] for i in range(3)], [quats[:, i] for i in range(4)],
+            [log_scales[:, i] for i in range(3)], logit_opacities)
 
 
-def _columns_fwd(g: Gaussians):
-    return _columns(g), None
+def _columns_fwd(*fields):
+    return _columns(*fields), None
 
 
 def _columns_bwd(_, cts):
-    *fields, sh = cts
-    mean, quat, log_scale, logit = lax.optimization_barrier(fields)
-    return (Gaussians(means=jnp.stack(mean, -1), quats=jnp.stack(quat, -1),
-                      log_scales=jnp.stack(log_scale, -1), logit_opacities=logit,
-                      sh=jnp.stack([jnp.stack(row, -1) for row in sh], 1)),)
+    mean, quat, log_scale, logit = lax.optimization_barrier(cts)
+    return jnp.stack(mean, -1), jnp.stack(quat, -1), jnp.stack(log_scale, -1), logit
 
 
 gaussian_columns.defvjp(_columns_fwd, _columns_bwd)
 
 
 def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> dict:
-    """`project` on `gaussian_columns`: `Projected`'s fields as (N,) columns, a tuple of them
-    for each vector field."""
+    """`project` on `gaussian_columns` and the SH coefficients `sh` (N, K, 3): `Projected`'s
+    fields as (N,) columns, a tuple of them for each vector field."""
     dt = mean[0].dtype
     viewmat = jnp.asarray(cam.viewmat, dt)
     fx, fy, cx, cy, near, far = (jnp.asarray(v, dt) for v in
                                  (cam.fx, cam.fy, cam.cx, cam.cy, cam.near, cam.far))
-    n_sh = len(sh)
+    n_sh = sh.shape[1]
     all_of = lambda xs: functools.reduce(jnp.logical_and, xs)
     input_ok = all_of([jnp.isfinite(x) for x in mean + quat]
                       + [~jnp.isnan(x) & (x != jnp.inf) for x in log_scale]
                       + [~jnp.isnan(logit_opacities)]
-                      + [~jnp.isnan(x) for row in sh for x in row]
+                      + [~jnp.isnan(sh[:, k, c]) for k in range(n_sh) for c in range(3)]
                       + [sum(q * q for q in quat) > 0])
     # Placeholders keep invalid rows finite so no NaN can leak through a masked arithmetic path.
     mean = [jnp.where(input_ok, x, 0.0) for x in mean]
@@ -224,8 +213,8 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) 
     dnorm = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     d = [jnp.where(dnorm > 0, x / jnp.where(dnorm > 0, dnorm, 1.0), 0.0) for x in d]
     basis = sh_basis_terms(*d, n_sh)
-    rgb = [jnp.maximum(sum(basis[k] * jnp.where(input_ok, sh[k][c], 0.0) for k in range(n_sh))
-                       + 0.5, 0.0) for c in range(3)]
+    sums = sh_sums(basis, jnp.where(input_ok[:, None, None], sh, 0.0))
+    rgb = [jnp.maximum(s + 0.5, 0.0) for s in sums]
 
     finite = all_of([jnp.isfinite(x) for x in mean2d + conic + tuple(rgb)])
     invalid = ~(input_ok & in_range & det_ok & finite)

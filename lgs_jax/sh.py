@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+
+import jax
 import jax.numpy as jnp
+from jax import lax
 
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
@@ -29,3 +33,34 @@ def sh_basis_terms(x, y, z, num_bases: int):
                 C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy), C3[4] * x * (4.0 * zz - xx - yy),
                 C3[5] * z * (xx - yy), C3[6] * x * (xx - 3.0 * yy)]
     return out
+
+
+@jax.custom_vjp
+def sh_sums(basis, sh):
+    """Σ_k basis_k · sh[:, k, c] for each channel c: a list of three (N,) columns, from the
+    basis terms (`sh_basis_terms`' list of K (N,) columns) and the coefficients sh (N, K, 3).
+
+    Its vjp: ∂L/∂sh[:, k, c] = basis_k · ∂L/∂s_c, one broadcast product of the basis stacked
+    (N, K) and the cotangents stacked (N, 3), both stored first (an optimization barrier); and
+    ∂L/∂basis_k = Σ_c ∂L/∂s_c · sh[:, k, c] (channels summed last to first, as autodiff of
+    the sums did). Differentiated as K·3 separate products, the (N, K, 3) cotangent was a
+    48-operand concatenate of them, which XLA's GPU loop emitter computes with a branch per
+    element: every warp ran most of the 48 products one after another (the lego x16 gradient
+    on an H200 took 5.42 against 4.93 ms with the products stored first, where their 48
+    columns and the stack cost 176 MiB more; BENCHMARKS.md §7 "Dec 4, fifth session")."""
+    return [sum(b * sh[:, k, c] for k, b in enumerate(basis)) for c in range(3)]
+
+
+def _sums_fwd(basis, sh):
+    return sh_sums(basis, sh), (basis, sh)
+
+
+def _sums_bwd(res, cts):
+    basis, sh = res
+    stacked, ct = lax.optimization_barrier((jnp.stack(basis, -1), jnp.stack(cts, -1)))
+    d_basis = [functools.reduce(lambda a, c: a + cts[c] * sh[:, k, c], (1, 0),
+                                cts[2] * sh[:, k, 2]) for k in range(len(basis))]
+    return d_basis, stacked[:, :, None] * ct[:, None, :]
+
+
+sh_sums.defvjp(_sums_fwd, _sums_bwd)
