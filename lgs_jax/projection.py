@@ -213,7 +213,7 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) 
     dnorm = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     d = [jnp.where(dnorm > 0, x / jnp.where(dnorm > 0, dnorm, 1.0), 0.0) for x in d]
     basis = sh_basis_terms(*d, n_sh)
-    sums = sh_sums(basis, jnp.where(input_ok[:, None, None], sh, 0.0))
+    sums = sh_sums(basis, sh, input_ok)
     rgb = [jnp.maximum(s + 0.5, 0.0) for s in sums]
 
     finite = all_of([jnp.isfinite(x) for x in mean2d + conic + tuple(rgb)])

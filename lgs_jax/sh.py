@@ -36,31 +36,44 @@ def sh_basis_terms(x, y, z, num_bases: int):
 
 
 @jax.custom_vjp
-def sh_sums(basis, sh):
-    """Σ_k basis_k · sh[:, k, c] for each channel c: a list of three (N,) columns, from the
-    basis terms (`sh_basis_terms`' list of K (N,) columns) and the coefficients sh (N, K, 3).
+def sh_sums(basis, sh, keep):
+    """Σ_k basis_k · sh'[:, k, c] for each channel c: a list of three (N,) columns, from the
+    basis terms (`sh_basis_terms`' list of K (N,) columns) and the coefficients sh (N, K, 3)
+    where `keep` (N,) holds, sh' = 0 elsewhere (the rows' coefficients read as columns: masked
+    as one (N, K, 3) array before, the mask became a pass of its own).
 
-    Its vjp: ∂L/∂sh[:, k, c] = basis_k · ∂L/∂s_c, one broadcast product of the basis stacked
+    Its vjp: ∂L/∂sh[:, k, c] = basis_k · ∂L/∂s_c (0 where not `keep`), one broadcast product of the basis stacked
     (N, K) and the cotangents stacked (N, 3), both stored first (an optimization barrier); and
     ∂L/∂basis_k = Σ_c ∂L/∂s_c · sh[:, k, c] (channels summed last to first, as autodiff of
     the sums did). Differentiated as K·3 separate products, the (N, K, 3) cotangent was a
     48-operand concatenate of them, which XLA's GPU loop emitter computes with a branch per
-    element: every warp ran most of the 48 products one after another (the lego x16 gradient
-    on an H200 took 5.42 against 4.93 ms with the products stored first, where their 48
-    columns and the stack cost 176 MiB more; BENCHMARKS.md §7 "Dec 4, fifth session")."""
-    return [sum(b * sh[:, k, c] for k, b in enumerate(basis)) for c in range(3)]
+    element, so every warp ran most of the 48 products one after another; with the products
+    stored as 48 columns first, the columns and the stack were live at once (176 MiB each at
+    0.96M Gaussians). The lego x16 gradient on an H200, one process: 4.72 ms and 328 MiB
+    against 5.16 ms (the concatenate) and 4.83 ms, 494 MiB (the stored columns), the same bits
+    (BENCHMARKS.md §7 "Dec 4, fifth session"). At SH degree 0 (K = 1) the three products are
+    stacked as they are: XLA's concatenate emitter, which it uses up to four operands, writes
+    them without branches, and storing the cotangents first added three passes (synthetic 4M:
+    7.45 against 7.31 ms)."""
+    column = lambda k, c: jnp.where(keep, sh[:, k, c], 0.0)
+    return [sum(b * column(k, c) for k, b in enumerate(basis)) for c in range(3)]
 
 
-def _sums_fwd(basis, sh):
-    return sh_sums(basis, sh), (basis, sh)
+def _sums_fwd(basis, sh, keep):
+    return sh_sums(basis, sh, keep), (basis, sh, keep)
 
 
 def _sums_bwd(res, cts):
-    basis, sh = res
-    stacked, ct = lax.optimization_barrier((jnp.stack(basis, -1), jnp.stack(cts, -1)))
-    d_basis = [functools.reduce(lambda a, c: a + cts[c] * sh[:, k, c], (1, 0),
-                                cts[2] * sh[:, k, 2]) for k in range(len(basis))]
-    return d_basis, stacked[:, :, None] * ct[:, None, :]
+    basis, sh, keep = res
+    if len(basis) == 1:  # three products: XLA's concatenate emitter writes them branch-free
+        d_sh = jnp.stack([basis[0] * ct for ct in cts], -1)[:, None, :]
+    else:
+        stacked, ct = lax.optimization_barrier((jnp.stack(basis, -1), jnp.stack(cts, -1)))
+        d_sh = stacked[:, :, None] * ct[:, None, :]
+    column = lambda k, c: jnp.where(keep, sh[:, k, c], 0.0)
+    d_basis = [functools.reduce(lambda a, c: a + cts[c] * column(k, c), (1, 0),
+                                cts[2] * column(k, 2)) for k in range(len(basis))]
+    return d_basis, jnp.where(keep[:, None, None], d_sh, 0.0), None
 
 
 sh_sums.defvjp(_sums_fwd, _sums_bwd)
