@@ -119,7 +119,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
                             backend=setup.backend, capacity=capacity).image
     fwd = jax.jit(draw)
     bwd = jax.jit(jax.grad(lambda p: jnp.sum(draw(p) * w)))
-    lossg = jax.jit(lambda p: st._loss_and_grads(setup, capacity, st.Pool(p, pool.active),
+    lossg = jax.jit(lambda p: st._loss_and_grads(setup, capacity, None, st.Pool(p, pool.active),
                                                   jax.tree.map(lambda x: x[None], cam),
                                                   target[None], bg, jnp.int32(6000)))
     ssimg = jax.jit(jax.grad(lambda im: losses.loss_fn(im, target, 0.2, "same")))
