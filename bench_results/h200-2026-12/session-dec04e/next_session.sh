@@ -1,0 +1,26 @@
+# Next GPU session (issue 17 open; issue 18 closed at 3724a2a), from the repository root; each
+# step one `run` call with carry ["carry"] (data: guitar, lego_sh3, skull, lego_train; wheels:
+# gsplat 1.5.3, pytest-timeout; old/: `python -m benchmarks.ab prepare 4ebdd1c --to carry/old`).
+#
+# 1. Nsight Compute of the forward kernels at synthetic 4M, Local-GS and our vanilla (issue
+#    17: the Local-GS kernel's lead is 1.58x there and 1.30x at synthetic 10M; which stalls
+#    and instruction counts set each kernel's time). This session's attempt segfaulted at
+#    ncu's start after two training processes, with gpu_env.sh's exports (LGS_JAX_CACHE,
+#    TORCH_EXTENSIONS_DIR, ...) in the environment; the Dec 3 runs that worked had only
+#    PYTHONPATH=$PWD and XLA_PYTHON_CLIENT_PREALLOCATE=false. Run it first, in a clean
+#    environment, one backend per ncu process:
+#      for b in pallas pallas_vanilla; do env -i PATH=$PATH HOME=$HOME PYTHONPATH=$PWD \
+#        XLA_PYTHON_CLIENT_PREALLOCATE=false timeout 240 ncu --clock-control none \
+#        -k regex:'localgs_kernel|vanilla' -c 1 --set full python3 scripts/ncu_localgs.py \
+#        carry/data --scene synthetic4M_1080p --backends $b --kernel mosaic \
+#        > $OUT/ncu_fwd_syn4M_$b.txt 2>&1; done
+#    then grep "Duration|Registers Per|Achieved Occupancy|Executed Ipc A|Executed Instructions|
+#    Stall|No Eligible" in both.
+# 2. sh_sums' final form at SH degree 0 on the GPU (compiled for the H200 it has 4ebdd1c's
+#    fusions exactly; the first form was 7.45 against 7.31 ms):
+#      . scripts/gpu_env.sh; timeout 150 python3 -m benchmarks.ab run synthetic4M_1080p \
+#        --old carry/old --revs 4ebdd1c --repeat 7 --data carry/data
+# 3. Skull 7k steps at this tree for issue 18's throughput row (12.01 ms per step without
+#    compiles on Dec 4, fourth session, before the SH changes; this session the step alone took
+#    4.11 ms against da62541's 4.73):
+#      TRAIN_SCENES=skull bash scripts/scale_gpu_check.sh train
