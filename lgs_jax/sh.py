@@ -35,28 +35,32 @@ def sh_basis_terms(x, y, z, num_bases: int):
     return out
 
 
+def _masked(sh, keep, k: int, c: int):
+    """Coefficient column sh[:, k, c] where `keep`, else 0."""
+    return jnp.where(keep, sh[:, k, c], 0.0)
+
+
 @jax.custom_vjp
 def sh_sums(basis, sh, keep):
     """Σ_k basis_k · sh'[:, k, c] for each channel c: a list of three (N,) columns, from the
-    basis terms (`sh_basis_terms`' list of K (N,) columns) and the coefficients sh (N, K, 3)
-    where `keep` (N,) holds, sh' = 0 elsewhere (the rows' coefficients read as columns: masked
-    as one (N, K, 3) array before, the mask became a pass of its own).
+    basis terms (`sh_basis_terms`' list of K (N,) columns) and the coefficients sh (N, K, 3),
+    sh' = sh where `keep` (N,) holds and 0 elsewhere. The mask is applied per column: applied
+    to the (N, K, 3) array, XLA stored it in a pass of its own.
 
-    Its vjp: ∂L/∂sh[:, k, c] = basis_k · ∂L/∂s_c (0 where not `keep`), one broadcast product of the basis stacked
-    (N, K) and the cotangents stacked (N, 3), both stored first (an optimization barrier); and
-    ∂L/∂basis_k = Σ_c ∂L/∂s_c · sh[:, k, c] (channels summed last to first, as autodiff of
-    the sums did). Differentiated as K·3 separate products, the (N, K, 3) cotangent was a
-    48-operand concatenate of them, which XLA's GPU loop emitter computes with a branch per
-    element, so every warp ran most of the 48 products one after another; with the products
-    stored as 48 columns first, the columns and the stack were live at once (176 MiB each at
-    0.96M Gaussians). The lego x16 gradient on an H200, one process: 4.72 ms and 328 MiB
-    against 5.16 ms (the concatenate) and 4.83 ms, 494 MiB (the stored columns), the same bits
-    (BENCHMARKS.md §7 "Dec 4, fifth session"). At SH degree 0 (K = 1) the three products are
-    stacked as they are: XLA's concatenate emitter, which it uses up to four operands, writes
-    them without branches, and storing the cotangents first added three passes (synthetic 4M:
-    7.45 against 7.31 ms)."""
-    column = lambda k, c: jnp.where(keep, sh[:, k, c], 0.0)
-    return [sum(b * column(k, c) for k, b in enumerate(basis)) for c in range(3)]
+    Its vjp: ∂L/∂sh[:, k, c] = basis_k · ∂L/∂s_c (0 where not `keep`), one broadcast product
+    of the basis stacked (N, K) and the cotangents stacked (N, 3), both stored first (an
+    optimization barrier); and ∂L/∂basis_k = Σ_c ∂L/∂s_c · sh'[:, k, c] (channels summed last
+    to first, as autodiff of the sums did). Differentiated as K·3 separate products, the
+    (N, K, 3) cotangent was a 48-operand concatenate of them, which XLA's GPU loop emitter
+    computes with a branch per element, so every warp ran most of the 48 products one after
+    another; with the products stored as 48 columns first, the columns and the stack were live
+    at once (176 MiB each at 0.96M Gaussians). The lego x16 gradient on an H200, one process:
+    4.72 ms and 328 MiB against 5.16 ms (the concatenate) and 4.83 ms, 494 MiB (the stored
+    columns), the same bits (BENCHMARKS.md §7 "Dec 4, fifth session"). At SH degree 0 (K = 1)
+    the three products are stacked as they are: XLA's concatenate emitter, which it uses up to
+    four operands, writes them without branches, and storing the cotangents first added three
+    passes (synthetic 4M: 7.45 against 7.31 ms)."""
+    return [sum(b * _masked(sh, keep, k, c) for k, b in enumerate(basis)) for c in range(3)]
 
 
 def _sums_fwd(basis, sh, keep):
@@ -70,9 +74,8 @@ def _sums_bwd(res, cts):
     else:
         stacked, ct = lax.optimization_barrier((jnp.stack(basis, -1), jnp.stack(cts, -1)))
         d_sh = stacked[:, :, None] * ct[:, None, :]
-    column = lambda k, c: jnp.where(keep, sh[:, k, c], 0.0)
-    d_basis = [functools.reduce(lambda a, c: a + cts[c] * column(k, c), (1, 0),
-                                cts[2] * column(k, 2)) for k in range(len(basis))]
+    d_basis = [functools.reduce(lambda acc, c: acc + cts[c] * _masked(sh, keep, k, c), (1, 0),
+                                cts[2] * _masked(sh, keep, k, 2)) for k in range(len(basis))]
     return d_basis, jnp.where(keep[:, None, None], d_sh, 0.0), None
 
 
