@@ -15,7 +15,13 @@
 #        carry/data --scene synthetic4M_1080p --backends $b --kernel mosaic \
 #        > $OUT/ncu_fwd_syn4M_$b.txt 2>&1; done
 #    then grep "Duration|Registers Per|Achieved Occupancy|Executed Ipc A|Executed Instructions|
-#    Stall|No Eligible" in both.
+#    Stall|No Eligible" in both. What to look for (scripts/strip_occupancy.py, this session):
+#    the culling bounds the lead at 2.90x at synthetic 4M (2.76 of 8 strip bits set per pair)
+#    and the SASS counts (39.6 instructions per pair and warp blending, ~9 per pair staging,
+#    against the vanilla loop's ~47 per pair and warp) predict about that, yet 1.58x is
+#    measured: if the Local-GS kernel is not issue-bound (IPC well under the 3.25 of the
+#    captures), the stalls say where (long scoreboard at the staging's id -> row loads: a
+#    prefetch of the next chunk; barrier: the two-buffer chunk hand-off).
 # 2. sh_sums' final form at SH degree 0 on the GPU (compiled for the H200 it has 4ebdd1c's
 #    fusions exactly; the first form was 7.45 against 7.31 ms):
 #      . scripts/gpu_env.sh; timeout 150 python3 -m benchmarks.ab run synthetic4M_1080p \
