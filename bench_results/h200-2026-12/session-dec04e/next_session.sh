@@ -17,8 +17,10 @@
 #    then grep "Duration|Registers Per|Achieved Occupancy|Executed Ipc A|Executed Instructions|
 #    Stall|No Eligible" in both. What to look for (scripts/strip_occupancy.py, this session):
 #    the culling bounds the lead at 2.90x at synthetic 4M (2.76 of 8 strip bits set per pair)
-#    and the SASS counts (39.6 instructions per pair and warp blending, ~9 per pair staging,
-#    against the vanilla loop's ~47 per pair and warp) predict about that, yet 1.58x is
+#    and the SASS counts (`kernel_sass.py lego_800 --row localgs / vanilla`: 317 per 8 pairs
+#    and warp blending; ~300 per lane before that branch, which if it is the staging is ~9
+#    per pair, one lane per pair; the vanilla loop 377 per 8 pairs and warp) predict about
+#    that, yet 1.58x is
 #    measured: if the Local-GS kernel is not issue-bound (IPC well under the 3.25 of the
 #    captures), the stalls say where (long scoreboard at the staging's id -> row loads: a
 #    prefetch of the next chunk; barrier: the two-buffer chunk hand-off).
