@@ -12,11 +12,22 @@ Printed per scene: Gaussians, pairs, pairs per valid Gaussian, mean set bits of 
 of pairs with 1, 2, ..., 8 bits, and the share of pairs a half-tile block's compact walk skips
 (no bit in its four strips: `KernelConfig.mosaic_compact`). All emitted pairs count, walked or
 not (early termination is not modelled: it needs the forward, too slow at 10M on a CPU).
+
+With --chunks, the Mosaic GPU Local-GS forward's blend iterations (`mosaic_staging.compact_loop`:
+per chunk of 128 pairs of a tile's sorted list, a block of four warps packs the pairs with a
+bit in any of its strips and every warp steps through all of them, `mosaic_unroll_localgs` = 8
+per iteration, a pair of another warp's strip only masked), against per-warp lists (each warp
+packing only the pairs of its own strips; the block still loops to its busiest warp's count, as
+a warpgroup program must): the blend iterations summed over every chunk and block, and their
+ratio, the blending a per-warp list would save. Blocks are half tiles (four strips, a warp
+each) below `mosaic_whole_tile_from` tiles, else whole tiles (a warp taken to hold two
+adjacent strips).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import sys
 
@@ -61,11 +72,59 @@ def occupancy(name: str, data: str) -> dict:
                 compact_skip=1 - float(halves) / (2 * n))
 
 
+def chunk_walks(name: str, data: str) -> dict:
+    """Blend iterations of the compacted forward and of per-warp lists (module docstring)."""
+    g, cam = load_scene(name, data)
+    p = jax.jit(project)(g, cam)
+    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, cam.width, cam.height)))
+    tiles_x, tiles_y = tile_grid(cam.width, cam.height)
+    tuning = lgs_jax.RasterConfig().tuning
+    whole = tiles_x * tiles_y >= tuning.mosaic_whole_tile_from
+    unroll, lanes = tuning.mosaic_unroll_localgs, 128
+    # (blocks of a tile, warps of a block, strips of a warp) as bit groups of the 8-bit mask
+    blocks = [[0b11 << 2 * w for w in range(4)]] if whole else \
+        [[1 << 4 * b + w for w in range(4)] for b in range(2)]
+
+    @jax.jit
+    def iterations(p):
+        bins = binning.bin_gaussians(p, cam.width, cam.height, cap)
+        count = bins.tile_end - bins.tile_start
+        chunks = (count + lanes - 1) // lanes
+        offset = jnp.cumsum(chunks) - chunks
+        real = bins.tile < tiles_x * tiles_y
+        t = jnp.where(real, bins.tile, 0)
+        seg = jnp.where(real, offset[t] + (jnp.arange(cap) - bins.tile_start[t]) // lanes,
+                        jnp.sum(chunks))
+        cols = [c[bins.gauss] for c in pairs.table_columns(p)]
+        mask = pairs.strip_mask_columns(cols, t % tiles_x, t // tiles_x, lgs_jax.RasterConfig())
+        n_seg = cap // lanes + tiles_x * tiles_y  # chunks: at most one partial per tile
+        per_chunk = lambda x: jax.ops.segment_sum(x.astype(jnp.int32), seg, n_seg + 1)[:-1]
+        steps = lambda n: (n + unroll - 1) // unroll
+        now = per_warp = 0
+        for warps in blocks:
+            kept = per_chunk(real & ((mask & sum(warps)) != 0))
+            busiest = functools.reduce(jnp.maximum, [per_chunk(real & ((mask & w) != 0))
+                                                     for w in warps])
+            now, per_warp = now + jnp.sum(steps(kept)), per_warp + jnp.sum(steps(busiest))
+        return now, per_warp
+
+    now, per_warp = (int(x) for x in iterations(p))
+    return dict(scene=name, blocks="whole" if whole else "half", now=now, per_warp=per_warp)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     add_data_argument(ap)
     ap.add_argument("--scenes", default=SCENES)
+    ap.add_argument("--chunks", action="store_true", help="the blend iterations (docstring)")
     args = ap.parse_args()
+    if args.chunks:
+        print(f"{'scene':>20} {'blocks':>6} {'iterations':>11} {'per-warp lists':>14} {'ratio':>6}")
+        for name in args.scenes.split(","):
+            r = chunk_walks(name, args.data)
+            print(f"{name:>20} {r['blocks']:>6} {r['now']:11d} {r['per_warp']:14d} "
+                  f"{r['now'] / r['per_warp']:6.2f}", flush=True)
+        return
     print(f"{'scene':>20} {'Gaussians':>10} {'pairs':>10} {'pairs/G':>7} {'bits':>5} "
           f"{'8/bits':>6} {'compact skip':>12}  share of pairs with 0..8 bits")
     for name in args.scenes.split(","):
