@@ -32,3 +32,10 @@
 #    compiles on Dec 4, fourth session, before the SH changes; this session the step alone took
 #    4.11 ms against da62541's 4.73):
 #      TRAIN_SCENES=skull bash scripts/scale_gpu_check.sh train
+# 4. Then build per-warp pair lists in the compacted Local-GS forward (BENCHMARKS.md §7 "Dec 4,
+#    fifth session": `strip_occupancy.py --chunks` counts 1.76x fewer blend iterations at
+#    synthetic 10M, 1.56x at 4M): `mosaic_staging._partition` ballots once per target warp and
+#    stores 4 packed index lists, `compact_loop` loops to the busiest warp's count and reads
+#    each warp's record by a per-lane shared-memory load (inline Mosaic GPU code), the stop
+#    pair a lane vector; same bits (interpret-mode tests against `staged_loop`), then the
+#    forward table's Local-GS / vanilla column at the six large scenes.
