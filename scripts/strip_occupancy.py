@@ -9,7 +9,7 @@ bits bounds the blending work the culling leaves: the Local-GS kernel's lead ove
 kernel (which blends every pair in all eight strips) from culling alone is at most
 8 / (mean set bits), less where staging, list walking and the per-pair setup do not shrink.
 Printed per scene: Gaussians, pairs, pairs per valid Gaussian, mean set bits of 8, the share
-of pairs with 1, 2, ..., 8 bits, and the share of pairs a half-tile block's compact walk skips
+of pairs with 0, 1, ..., 8 bits, and the share of pairs a half-tile block's compact walk skips
 (no bit in its four strips: `KernelConfig.mosaic_compact`). All emitted pairs count, walked or
 not (early termination is not modelled: it needs the forward, too slow at 10M on a CPU).
 
@@ -39,6 +39,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
+from lgs_jax.backends.mosaic_staging import LANES  # noqa: E402
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import project  # noqa: E402
 
@@ -46,19 +47,28 @@ SCENES = ("guitar_x16_1080p,lego_x16_1080p,guitar_x64_1080p,guitar_x110_4k,synth
           "synthetic10M_4k")
 
 
-def occupancy(name: str, data: str) -> dict:
-    """The strip-mask statistics of scene `name` (module docstring)."""
+def _scene(name: str, data: str):
+    """(g, cam, projected, pair capacity, tiles_x, tiles_y) of scene `name`."""
     g, cam = load_scene(name, data)
     p = jax.jit(project)(g, cam)
     cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, cam.width, cam.height)))
-    tiles_x, tiles_y = tile_grid(cam.width, cam.height)
+    return (g, cam, p, cap) + tile_grid(cam.width, cam.height)
+
+
+def _masks(p, tile, gauss, tiles_x: int):
+    """The strip masks of pairs (tile, gauss), as the default `RasterConfig`'s kernels cull."""
+    cols = [c[gauss] for c in pairs.table_columns(p)]
+    return pairs.strip_mask_columns(cols, tile % tiles_x, tile // tiles_x, lgs_jax.RasterConfig())
+
+
+def occupancy(name: str, data: str) -> dict:
+    """The strip-mask statistics of scene `name` (module docstring)."""
+    g, cam, p, cap, tiles_x, tiles_y = _scene(name, data)
 
     @jax.jit
     def bits(p):
         e = binning.emit_pairs(p, cam.width, cam.height, cap)
-        cols = pairs.table_columns(p)
-        mask = pairs.strip_mask_columns([c[e.gauss] for c in cols], e.tile % tiles_x,
-                                        e.tile // tiles_x, lgs_jax.RasterConfig())
+        mask = _masks(p, e.tile, e.gauss, tiles_x)
         real = e.tile < tiles_x * tiles_y  # not padding
         count = sum((mask >> i) & 1 for i in range(8))
         halves = (mask & 0xF != 0).astype(jnp.int32) + (mask >> 4 != 0).astype(jnp.int32)
@@ -74,13 +84,10 @@ def occupancy(name: str, data: str) -> dict:
 
 def chunk_walks(name: str, data: str) -> dict:
     """Blend iterations of the compacted forward and of per-warp lists (module docstring)."""
-    g, cam = load_scene(name, data)
-    p = jax.jit(project)(g, cam)
-    cap = lgs_jax.pair_capacity(int(binning.count_pairs(p, cam.width, cam.height)))
-    tiles_x, tiles_y = tile_grid(cam.width, cam.height)
+    _, cam, p, cap, tiles_x, tiles_y = _scene(name, data)
     tuning = lgs_jax.RasterConfig().tuning
     whole = tiles_x * tiles_y >= tuning.mosaic_whole_tile_from
-    unroll, lanes = tuning.mosaic_unroll_localgs, 128
+    unroll, lanes = tuning.mosaic_unroll_localgs, LANES
     # (blocks of a tile, warps of a block, strips of a warp) as bit groups of the 8-bit mask
     blocks = [[0b11 << 2 * w for w in range(4)]] if whole else \
         [[1 << 4 * b + w for w in range(4)] for b in range(2)]
@@ -95,8 +102,7 @@ def chunk_walks(name: str, data: str) -> dict:
         t = jnp.where(real, bins.tile, 0)
         seg = jnp.where(real, offset[t] + (jnp.arange(cap) - bins.tile_start[t]) // lanes,
                         jnp.sum(chunks))
-        cols = [c[bins.gauss] for c in pairs.table_columns(p)]
-        mask = pairs.strip_mask_columns(cols, t % tiles_x, t // tiles_x, lgs_jax.RasterConfig())
+        mask = _masks(p, t, bins.gauss, tiles_x)
         n_seg = cap // lanes + tiles_x * tiles_y  # chunks: at most one partial per tile
         per_chunk = lambda x: jax.ops.segment_sum(x.astype(jnp.int32), seg, n_seg + 1)[:-1]
         steps = lambda n: (n + unroll - 1) // unroll
