@@ -79,6 +79,10 @@ ROWS = {
     "localgs:planes": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                       mosaic_image_layout=False,
                                                       mosaic_block_stops=False))),
+    # every warp of a compacted forward block steps through the pairs of any of its strips
+    # (KernelConfig.mosaic_warp_lists off: the default before Dec 4, sixth session)
+    "localgs:blocks": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                      mosaic_warp_lists=False))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # the Local-GS forward's pair loop unrolled 4 times instead of 8: 95 registers for the H200
@@ -244,7 +248,8 @@ def forward_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
         r = dict(base, row=name, pairs=n_pairs, capacity=caps[name], project_ms=ms["ours:project"],
                  emit_ms=ms["ours:emit"], sort_ms=ms["ours:sort"],
                  raster_ms=ms[f"{name}:raster"], e2e_ms=ms[f"{name}:e2e"],
-                 memory_mib=memory[name])
+                 memory_mib=memory[name],
+                 same_image_as_first_row=bool(np.array_equal(images[name], images[rows[0]])))
         if builds_records_in_xla(*row_setup(name, n_pairs)[:2], n_tiles, caps[name]):
             r["pair_prep_ms"] = ms["ours:pair_prep"]
         if peer:
@@ -370,6 +375,8 @@ def _format(r) -> str:
           f"{r['psnr_vs_gsplat']:5.1f} dB" if "e2e_vs_gsplat" in r else "")
     prep = f" (pair prep {r['pair_prep_ms']:6.2f})" if "pair_prep_ms" in r else ""
     cap = f" cap {r['capacity'] / 1e6:6.2f}M" if "capacity" in r else ""
+    if r.get("same_image_as_first_row") is False:  # its image differs from the first row's
+        cap += " (image != first row's)"
     return (f"{head} e2e {r['e2e_ms']:7.2f} raster {r['raster_ms']:7.2f}{prep} proj "
             f"{r['project_ms']:6.2f} emit {r['emit_ms']:6.2f} sort {r['sort_ms']:6.2f} ms "
             f"mem {r['memory_mib']:7.0f} MiB pairs {r['pairs'] / 1e6:6.2f}M{cap}{vs}")

@@ -105,6 +105,16 @@ class KernelConfig:
         mosaic_forward_pixels says otherwise. H200 (BENCHMARKS.md §7): the forward kernel 0.68x
         its time without at 5.8M Gaussians (1080p), 0.76x at 1.45M, 0.83x at 10M (4K), 0.95x
         at 0.09M (720p).
+      mosaic_warp_lists: with mosaic_compact in half-tile blocks, each hardware warp (one strip)
+        walks its own list of each chunk's pairs, those with its strip's bit, instead of every
+        warp stepping through the pairs of any of the block's strips
+        (lgs_jax.backends.mosaic_warp_lists: the paper's warp-level culling; the block still
+        loops to its busiest warp's count). The same outputs as the full walk: bit for bit in
+        interpret mode and on the H200 (images at six scenes of 1M–10M Gaussians, and the
+        compaction's image and gradient tests). H200, the forward kernel against the
+        block-compacted walk (BENCHMARKS.md §7, Dec 4, sixth session): 0.87x its time at
+        synthetic 10M (4K), 0.84x at synthetic 4M (1080p), 0.92x at guitar x16 and lego x16
+        (1080p), 0.91x at x64, 0.92x at x110 (4K).
       mosaic_image_layout: the Local-GS Mosaic GPU forward, in blocks of 128 pixels (what
         mosaic_compact runs), writes its colour as one (H, W, 3) image (the tiles' rows, a
         stride of 3 per channel) instead of three (n_tiles, 256) planes that XLA then
@@ -143,6 +153,7 @@ class KernelConfig:
     mosaic_pair_source: Literal["records", "gaussians"] = "gaussians"
     mosaic_backward_segment: int | None = 1024
     mosaic_compact: bool = True
+    mosaic_warp_lists: bool = True
     mosaic_image_layout: bool = True
     mosaic_block_stops: bool = True
     tiles_group: int = 256
@@ -172,7 +183,8 @@ class KernelConfig:
                                  f" is not a multiple of mosaic_unroll_localgs="
                                  f"{self.mosaic_unroll_localgs} (set it to one, or to None for "
                                  f"whole walks)")
-        for name in ("mosaic_compact", "mosaic_image_layout", "mosaic_block_stops"):
+        for name in ("mosaic_compact", "mosaic_warp_lists", "mosaic_image_layout",
+                     "mosaic_block_stops"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"tuning.{name}: expected a bool, got {getattr(self, name)!r}")
         if self.mosaic_chunk % self.mosaic_unroll_localgs:

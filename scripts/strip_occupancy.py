@@ -19,9 +19,9 @@ bit in any of its strips and every warp steps through all of them, `mosaic_unrol
 per iteration, a pair of another warp's strip only masked), against per-warp lists (each warp
 packing only the pairs of its own strips; the block still loops to its busiest warp's count, as
 a warpgroup program must): the blend iterations summed over every chunk and block, and their
-ratio, the blending a per-warp list would save. Blocks are half tiles (four strips, a warp
-each) below `mosaic_whole_tile_from` tiles, else whole tiles (a warp taken to hold two
-adjacent strips).
+ratio, the blending a per-warp list would save. Blocks are those the forward runs
+(`pallas.plan`: half tiles of four strips, a warp each, wherever the walk compacts, at every
+size; whole tiles, a warp holding two adjacent strips, only where it does not).
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
+from lgs_jax.backends import pallas  # noqa: E402
 from lgs_jax.backends.mosaic_staging import LANES  # noqa: E402
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import project  # noqa: E402
@@ -85,8 +86,9 @@ def occupancy(name: str, data: str) -> dict:
 def chunk_walks(name: str, data: str) -> dict:
     """Blend iterations of the compacted forward and of per-warp lists (module docstring)."""
     _, cam, p, cap, tiles_x, tiles_y = _scene(name, data)
-    tuning = lgs_jax.RasterConfig().tuning
-    whole = tiles_x * tiles_y >= tuning.mosaic_whole_tile_from
+    gpu = lgs_jax.RasterConfig(kernel="mosaic", tuning=lgs_jax.KernelConfig(interpret=False))
+    tuning = gpu.tuning
+    whole = pallas.plan(gpu, False, tiles_x * tiles_y).forward_pixels == 256
     unroll, lanes = tuning.mosaic_unroll_localgs, LANES
     # (blocks of a tile, warps of a block, strips of a warp) as bit groups of the 8-bit mask
     blocks = [[0b11 << 2 * w for w in range(4)]] if whole else \

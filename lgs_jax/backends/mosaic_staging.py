@@ -48,9 +48,9 @@ from jaxlib.mlir.dialects import math as math_dialect
 from .. import pairs
 from ..config import RasterConfig
 from . import kernel_steps as ks
+from . import mosaic_warp_lists
 from .mosaic_rows import element
-
-LANES = 128  # pairs per staged chunk: one per thread of the warpgroup
+from .mosaic_warp_lists import LANES  # pairs per staged chunk: one per thread of the warpgroup
 _STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
 
 
@@ -270,7 +270,7 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
 
 def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, block_bits,
                  evaluate, lanes: int, dt, config: RasterConfig, last_pair: int,
-                 interpret: bool, checkpoint=None):
+                 interpret: bool, checkpoint=None, warp_shift=None):
     """The compacted Local-GS forward walk (`KernelConfig.mosaic_compact`) of pairs [start,
     end): per chunk of LANES pairs, the records built as `stage` builds them, those whose strip
     mask has a bit of `block_bits` (the block's strips) packed first (`_partition`), and only
@@ -279,7 +279,10 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
     strips, so no pixel of the block passes its α test (the masks are conservative): the state
     is the same as after walking every pair, and the outputs are `kernel_steps.staged_loop`'s
     (the same bits in interpret mode and, on the H200, in float32; float64 within ulps there:
-    the two loops compile to other multiply-add contractions). `checkpoint(j, state)` runs at
+    the two loops compile to other multiply-add contractions). With `warp_shift` (the block's
+    first strip; `KernelConfig.mosaic_warp_lists`, half-tile blocks, `scratch` =
+    `mosaic_warp_lists.scratch`) each warp walks its own strip's list instead
+    (lgs_jax.backends.mosaic_warp_lists), the same outputs. `checkpoint(j, state)` runs at
     each chunk's start j with the state before pair j (chunks start at multiples of LANES, as
     the split backward's entries do). Returns (r, g, b, T, D, stop pair) per lane."""
     buf, index_ref, sync_ref = scratch
@@ -291,9 +294,32 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         base = start + c * LANES
         cols = gather(gauss_ref, table_ref, base, last_pair, interpret)
         mask = pairs.strip_mask_columns(cols, tx, ty, config)
-        keep = (((mask & block_bits) != 0) & (base + offsets < end)).astype(jnp.int32)
-        _partition(_records(cols, tx, ty, config, mask, interpret), keep, base, buf,
-                   index_ref, sync_ref, interpret)
+        live = base + offsets < end
+        records = _records(cols, tx, ty, config, mask, interpret)
+        if warp_shift is None:
+            keep = (((mask & block_bits) != 0) & live).astype(jnp.int32)
+            _partition(records, keep, base, buf, index_ref, sync_ref, interpret)
+        else:
+            bits = jnp.where(live, (mask >> warp_shift) & ((1 << mosaic_warp_lists.WARPS) - 1),
+                             0)
+            mosaic_warp_lists.partition(records, bits, buf, index_ref, sync_ref, interpret)
+
+    def group(c, v):  # (n, left, [(record, strip mask, pair index)] of positions v .. v + unroll)
+        if warp_shift is not None:
+            left, read = mosaic_warp_lists.reads(buf, index_ref, sync_ref, v, unroll, interpret)
+            base = start + c * LANES
+            return (sync_ref[mosaic_warp_lists.BUSIEST], left,
+                    [(rec, mask, base + row) for rec, mask, row in read])
+        n = sync_ref[COUNT]
+        # v is a multiple of unroll below n <= LANES, which unroll divides (`KernelConfig`
+        # checks it): the group's records are rows [v, v + unroll), no clamp, at offsets from
+        # one address
+        rows, indices = buf.at[pl.ds(v, unroll)], index_ref.at[pl.ds(v, unroll)]
+        read = []
+        for u in range(unroll):
+            rec = [rows[u, col] for col in range(ks.REC)]
+            read.append((rec, _mask(rec[ks.REC - 1], interpret), indices[u]))
+        return n, n - v, read
 
     def cond(carry):
         c, _, st = carry
@@ -305,21 +331,15 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         if checkpoint is not None:
             checkpoint(jnp.where(first, start + c * LANES, start), st)
         pl.when(first)(lambda: stage_chunk(c))
-        n = sync_ref[COUNT]
-        # v is a multiple of unroll below n <= LANES, which unroll divides (`KernelConfig`
-        # checks it): the group's records are rows [v, v + unroll), no clamp, at offsets from
-        # one address
-        group, indices = buf.at[pl.ds(v, unroll)], index_ref.at[pl.ds(v, unroll)]
-        evaluated = []
-        for u in range(unroll):
-            rec = [group[u, col] for col in range(ks.REC)]
-            evaluated.append(evaluate(rec, _mask(rec[ks.REC - 1], interpret)))
-        left = n - v  # kept pairs from v on: pair v + u is one iff u < left (one compare)
-        for u, (alpha, hit, rgb, z) in enumerate(evaluated):
-            st = ks.blend(st, alpha, hit & (left > u), rgb, z, indices[u], config)
+        n, left, read = group(c, v)  # pair v + u is one to blend iff u < left (one compare)
+        evaluated = [evaluate(rec, mask) for rec, mask, _ in read]
+        for u, ((alpha, hit, rgb, z), (_, _, pair)) in enumerate(zip(evaluated, read)):
+            st = ks.blend(st, alpha, hit & (left > u), rgb, z, pair, config)
         wrap = v + unroll >= n
         return jnp.where(wrap, c + 1, c), jnp.where(wrap, 0, v + unroll), st
 
+    if warp_shift is not None:
+        mosaic_warp_lists.clear(index_ref, interpret)
     _, _, st = lax.while_loop(cond, body, (jnp.int32(0), jnp.int32(0),
                                            ks.empty_state(lanes, dt)))
     walked = start + (end - start + unroll - 1) // unroll * unroll  # staged_loop's last j

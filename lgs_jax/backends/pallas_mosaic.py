@@ -26,20 +26,18 @@ of the block's strips measured slower than predicating (BENCHMARKS.md §6), so t
 With `tuning.mosaic_compact` (`compacts`; the default) the block culls instead: of each chunk of
 128 pairs it builds, it walks only those with a mask bit in its own strips
 (lgs_jax.backends.mosaic_staging.compact_loop), the full walk's outputs (bit for bit in float32 on
-the H200; float64 within ulps there, another compilation's multiply-add contractions).
+the H200; float64 within ulps there, another compilation's multiply-add contractions). With
+`tuning.mosaic_warp_lists` (`warp_lists`; the default) each warp walks only the pairs of its own
+strip: per-lane shared-memory reads, one record per warp, written as inline Mosaic GPU code
+(lgs_jax.backends.mosaic_warp_lists), which makes the paper's warp-level skip real inside one
+warpgroup program (the loop runs to the busiest warp's count).
 
 Pair records. By default (`tuning.mosaic_pair_source="gaussians"`) the Local-GS forward and
 the backward build them inside the kernel, per chunk of 128 pairs, from the pairs' Gaussian ids
 and per-Gaussian rows (lgs_jax.backends.mosaic_staging: an inline per-lane gather, the records
 and strip masks on lane vectors, shared memory), with no per-pair buffer in global memory. With
-"records" they read records XLA built (`kernel_steps.pair_records`), which they stage as
-follows.
-
-Staging of XLA's records (`tuning.mosaic_chunk` > 0; float32 only: TMA has no 64-bit float
-type). The Local-GS kernel stages the tile's pair records in shared memory: chunk records per
-TMA copy, double-buffered (chunk c + 1 in flight while chunk c is blended; a copy is issued only
-where the list reaches it, and the block waits for the one in flight before it exits), the
-strip mask read from the record's last column. Bit for bit the unstaged kernel's output.
+"records" they read records XLA built (`kernel_steps.pair_records`), staged in shared memory by
+TMA where `tuning.mosaic_chunk` > 0 and they are float32 (lgs_jax.backends.mosaic_tma).
 
 Arithmetic and blending are exactly those of the Triton kernels (the same functions), so the
 images are the same to the bit in interpret mode (on the GPU the two compilers' exp and
@@ -75,7 +73,8 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from ..config import RasterConfig
 from ..layout import STRIP_PIXELS, TILE, TILE_PIXELS
 from . import kernel_steps as ks
-from . import backward_segments, mosaic_quotients, mosaic_rows, mosaic_staging
+from . import (backward_segments, mosaic_quotients, mosaic_rows, mosaic_staging, mosaic_tma,
+               mosaic_warp_lists)
 
 
 def _ranges(*columns):
@@ -139,16 +138,6 @@ def _strip_bits(wg, pixels: int):
     return jnp.left_shift(jnp.int32((1 << per_block) - 1), wg * per_block)
 
 
-def staged(config: RasterConfig, dt) -> bool:
-    """Whether the kernels stage XLA's records of dtype `dt` in shared memory by TMA: records
-    built in XLA (`tuning.mosaic_pair_source`), a chunk set, and float32 records (TMA has no
-    64-bit float type: Mosaic GPU raises "unsupported TMA dtype f64" when compiling for the
-    GPU; interpret mode has no TMA and would not notice)."""
-    t = config.tuning
-    from_xla = t.mosaic_pair_source == "records"
-    return from_xla and t.mosaic_chunk > 0 and jnp.dtype(dt) == jnp.float32
-
-
 def compacts(config: RasterConfig) -> bool:
     """Whether the Local-GS forward walks each chunk's pairs of its block only
     (`KernelConfig.mosaic_compact`, `mosaic_staging.compact_loop`): asked for, records built
@@ -162,6 +151,13 @@ def compacts(config: RasterConfig) -> bool:
             and (segment is None or segment % mosaic_staging.LANES == 0))
 
 
+def warp_lists(config: RasterConfig, pixels: int) -> bool:
+    """Whether the compacted forward walks per-warp lists (`KernelConfig.mosaic_warp_lists`,
+    lgs_jax.backends.mosaic_warp_lists): asked for, compacting, half-tile blocks (a warp is one
+    strip); whole-tile blocks compact per block."""
+    return config.tuning.mosaic_warp_lists and compacts(config) and pixels == STRIP_PIXELS * 4
+
+
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
                    interpret: bool, segment: int | None = None, image: bool = False,
@@ -170,7 +166,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     the colour image, T, D, the stop pairs; `_forward_store`), then, with a
     `segment`, the five checkpoint outputs (r, g, b, T, D before every pair start + m·segment,
     m >= 1, at row ranges_ref[tile, 2] + m − 1: lgs_jax.backends.backward_segments), then, when
-    `staged`, the shared-memory record buffers and their barriers. With
+    `mosaic_tma.staged`, the shared-memory record buffers and their barriers. With
     `tuning.mosaic_pair_source` "gaussians", (mask_ref, rec_ref) are (the pairs' Gaussian ids,
     `pairs.gaussian_table`) and the scratch is lgs_jax.backends.mosaic_staging's."""
     n_plain = 4 if image else 6
@@ -195,16 +191,17 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     if segment is not None:
         checkpoint = _checkpoint(check_refs, ranges_ref[tile, 2], start, cols, segment)
     if compacts(config):
+        shift = wg * (pixels // STRIP_PIXELS) if warp_lists(config, pixels) else None
         store(out_refs, tile, cols, mosaic_staging.compact_loop(
             mask_ref, rec_ref, scratch, start, end, tile, tiles_x, _strip_bits(wg, pixels),
-            evaluate, k.shape[0], dt, config, last_pair, interpret, checkpoint))
+            evaluate, k.shape[0], dt, config, last_pair, interpret, checkpoint, shift))
         return
     if config.tuning.mosaic_pair_source == "gaussians":
         fetch, pair_alpha, stage = mosaic_staging.forward_source(
             mask_ref, rec_ref, scratch[0], start, end, tile, tiles_x, evaluate, config,
             last_pair, interpret)
     elif scratch:
-        fetch, pair_alpha, stage = _smem_records(rec_ref, *scratch, start, end, evaluate, config)
+        fetch, pair_alpha, stage = mosaic_tma.forward_source(rec_ref, *scratch, start, end, evaluate, config)
     else:
         def fetch(j):
             jj = jnp.minimum(j, last_pair)
@@ -231,42 +228,6 @@ def _checkpoint(refs, base, start, cols, segment: int):
             _store(refs, base + m - 1, cols, state[:5])
 
     return checkpoint
-
-
-def _smem_records(rec_ref, smem, barriers, start, end, evaluate, config: RasterConfig):
-    """`staged_loop`'s (fetch, pair_alpha, stage) for records [start, end) staged in shared
-    memory: `tuning.mosaic_chunk` records at a time by TMA, double-buffered (chunk c + 1 is in
-    flight while chunk c is blended), the strip mask read from the record's last column."""
-    unroll, chunk = config.tuning.mosaic_unroll_localgs, config.tuning.mosaic_chunk
-
-    def copy(c):  # chunk c of the tile's records into slot c % 2, if the list reaches it
-        @pl.when(start + c * chunk < end)
-        def _():
-            plgpu.copy_gmem_to_smem(rec_ref.at[pl.ds(start + c * chunk, chunk)], smem.at[c % 2],
-                                    barriers.at[c % 2])
-
-    def begin(j):  # at a chunk's first group: wait for it, start the next one's copy
-        c = (j - start) // chunk
-
-        @pl.when((j - start) % chunk == 0)
-        def _():
-            plgpu.barrier_wait(barriers.at[c % 2])
-            copy(c + 1)
-
-    def finish(j):  # wait for the copy still in flight (if any) before the block exits
-        c = (j - start - unroll) // chunk + 1  # the last chunk copy() was called for
-
-        @pl.when(start + c * chunk < end)
-        def _():
-            plgpu.barrier_wait(barriers.at[c % 2])
-
-    def pair_alpha(j):
-        i = j - start
-        rec = [smem[(i // chunk) % 2, i % chunk, c] for c in range(ks.REC)]
-        return evaluate(rec, rec[ks.REC - 1].astype(jnp.int32))
-
-    copy(0)
-    return (lambda j: j), pair_alpha, (begin, finish)
 
 
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
@@ -309,13 +270,14 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
         columns.append(base)
         checks = [jax.ShapeDtypeStruct((rows, TILE_PIXELS), dt)] * 5
     scratch = ()
-    if not vanilla and compacts(config):
+    if not vanilla and warp_lists(config, pixels):
+        scratch = mosaic_warp_lists.scratch(dt)
+    elif not vanilla and compacts(config):
         scratch = mosaic_staging.compact_scratch(dt)
     elif not vanilla and config.tuning.mosaic_pair_source == "gaussians":
         scratch = mosaic_staging.scratch(dt)
-    elif not vanilla and staged(config, dt):
-        chunk = config.tuning.mosaic_chunk
-        scratch = (plgpu.SMEM((2, chunk, ks.REC), dt), plgpu.Barrier(num_barriers=2))
+    elif not vanilla and mosaic_tma.staged(config, dt):
+        scratch = mosaic_tma.scratch(config, dt)
     out = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS), dt)
     stop = jax.ShapeDtypeStruct((n_tiles, TILE_PIXELS // pixels if block_stops else TILE_PIXELS),
                                 jnp.int32)
@@ -344,8 +306,8 @@ def backward_kernel(seg_ref, mask_ref, row_ref, rec_ref, trans_ref, stop_ref, *r
     `from_checkpoints` (split segments), the buffers of the carries a segment that is not its
     tile's last enters with (`backward_segments.entries`; without D − D_hi alike);
     then rows_ref; then the scratch:
-    when `staged`, the shared-memory record buffers and their barriers
-    (`_smem_records_backward`), then the reduction's (`mosaic_rows.scratch`; the loop carries
+    when `mosaic_tma.staged`, the shared-memory record buffers and their barriers
+    (`mosaic_tma.backward_source`), then the reduction's (`mosaic_rows.scratch`; the loop carries
     which exchange buffer is next). Each pair's strip mask and row are loaded one pair ahead
     (the skip branch waits on them). With `tuning.mosaic_pair_source` "gaussians", (mask_ref,
     rec_ref) are (the pairs' Gaussian ids, `pairs.gaussian_table`), the records and masks are
@@ -415,50 +377,16 @@ def _backward_records(rec_ref, mask_ref, scratch, tile, tiles_x: int, start, las
                       config: RasterConfig, last_pair: int, interpret: bool):
     """The backward walk's (record(j), mask(j) or None, begin(i, j) or None): records built in
     the kernel from Gaussians (`mosaic_staging.backward_source`; mask_ref holds the pairs'
-    Gaussian ids and rec_ref the table), staged by TMA (`_smem_records_backward`, when
+    Gaussian ids and rec_ref the table), staged by TMA (`mosaic_tma.backward_source`, when
     `scratch` holds its buffers) or read from global memory."""
     if config.tuning.mosaic_pair_source == "gaussians":
         return mosaic_staging.backward_source(mask_ref, rec_ref, scratch[0], tile, tiles_x,
                                               config, last_pair, interpret)
     if scratch:
-        record, begin = _smem_records_backward(rec_ref, *scratch, start, last,
+        record, begin = mosaic_tma.backward_source(rec_ref, *scratch, start, last,
                                                config.tuning.mosaic_chunk)
         return record, None, begin
     return (lambda j: [rec_ref[j, c] for c in range(ks.REC - 1)]), None, None
-
-
-def _smem_records_backward(rec_ref, smem, barriers, start, last, chunk: int):
-    """(record(j), begin(i, j)) of the backward walk over pairs last − 1 down to start with
-    their records staged in shared memory: chunks of `chunk` records aligned to multiples of
-    `chunk` (chunk q holds pairs [q·chunk, (q + 1)·chunk)), copied by TMA into slot q % 2,
-    double-buffered: `begin`, at the first pair of each chunk the walk enters, waits for that
-    chunk and starts the copy of the one below it if the walk reaches it (every copy started is
-    waited for). Records are read only inside a step that reduces over the warpgroup (whose
-    barrier every warp passes after its reads), so no warp still reads a slot when the next
-    copy into it starts."""
-    def copy(q):
-        plgpu.copy_gmem_to_smem(rec_ref.at[pl.ds(q * chunk, chunk)], smem.at[q % 2],
-                                barriers.at[q % 2])
-
-    @pl.when(last > start)
-    def _():
-        copy((last - 1) // chunk)
-
-    def begin(i, j):
-        q = j // chunk
-
-        @pl.when((i == 0) | (j % chunk == chunk - 1))
-        def _():
-            plgpu.barrier_wait(barriers.at[q % 2])
-
-            @pl.when(q * chunk > start)
-            def _():
-                copy(q - 1)
-
-    def record(j):
-        return [smem[(j // chunk) % 2, j % chunk, c] for c in range(ks.REC - 1)]
-
-    return record, begin
 
 
 def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: int, segments,
@@ -486,9 +414,8 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     scratch = ()
     if config.tuning.mosaic_pair_source == "gaussians":
         scratch = mosaic_staging.scratch(dt)
-    elif staged(config, dt):
-        scratch = (plgpu.SMEM((2, config.tuning.mosaic_chunk, ks.REC), dt),
-                   plgpu.Barrier(num_barriers=2))
+    elif mosaic_tma.staged(config, dt):
+        scratch = mosaic_tma.scratch(config, dt)
     scratch += mosaic_rows.scratch(reduction, dt)
     return plgpu.kernel(kernel, out_type=out, scratch_types=scratch,
                         grid=(segments.shape[0], n), grid_names=("tile", "wg"),

@@ -116,24 +116,26 @@ def test_plans_under_differentiation():
     assert plan.for_gradients().config.tuning.mosaic_pair_source == "records"
 
 
-@pytest.mark.parametrize("dtype,compact", [
-    (np.float32, False), (np.float32, True),
-    pytest.param(np.float64, False, marks=pytest.mark.slow)])
-def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, monkeypatch):
+@pytest.mark.parametrize("dtype,compact,warps", [
+    (np.float32, False, False), (np.float32, True, False), (np.float32, True, True),
+    pytest.param(np.float64, False, False, marks=pytest.mark.slow),
+    pytest.param(np.float64, True, True, marks=pytest.mark.slow)])
+def test_in_kernel_staging_lowers_for_the_gpu(dtype, compact, warps, monkeypatch):
     """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
     lane-vector strip masks without floor or ceil, shared-memory stores, the barrier), float32
     and float64; the compacted forward (`mosaic_compact`: ballot, population counts, the
     per-lane partition) and, with it, the lean outputs (`mosaic_image_layout`: strided stores
     of (8, 16) boxes; `mosaic_block_stops`: a block's maximum, one scalar store). Not what
     the GPU compiler's LLVM translation may still reject: the tests above run the kernels on a
-    GPU."""
+    GPU. With `warps`, the per-warp lists (`mosaic_warp_lists`: four ballots per warp, per-lane
+    shared-memory reads)."""
     from jax._src.pallas.triton import gpu_info  # gaussian_grads is a Triton kernel
 
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
     config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_pair_source="gaussians",
                                          mosaic_compact=compact, mosaic_image_layout=compact,
-                                         mosaic_block_stops=compact))
+                                         mosaic_block_stops=compact, mosaic_warp_lists=warps))
     g = scenes.cast(scenes.scene(0), dtype)
     image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
                                         capacity=scenes.CAPACITY).image
@@ -153,10 +155,16 @@ def test_bad_pair_source_settings_raise(tuning, match):
         K(**tuning)
 
 
-def _compact_config(compact: bool, segment=None, backward_pixels=128):
-    return C(kernel="mosaic", tuning=K(mosaic_compact=compact, mosaic_forward_pixels=128,
+WALKS = (False, True, "warps")  # the full walk, compacted per block, per-warp lists
+
+
+def _compact_config(compact, segment=None, backward_pixels=128):
+    """The Mosaic GPU kernels in half-tile forward blocks, walking every pair (compact False),
+    compacted per block (True) or per warp ("warps": `KernelConfig.mosaic_warp_lists`)."""
+    return C(kernel="mosaic", tuning=K(mosaic_compact=bool(compact), mosaic_forward_pixels=128,
                                         mosaic_backward_pixels=backward_pixels,
-                                        mosaic_backward_segment=segment))
+                                        mosaic_backward_segment=segment,
+                                        mosaic_warp_lists=compact == "warps"))
 
 
 def _dense_tile(seed):
@@ -186,15 +194,18 @@ def _assert_same(got, want, err_msg=""):
 @given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
 def test_compacted_forward_is_the_forward_to_the_bit(seed, dtype):
     """`KernelConfig.mosaic_compact`: each half-tile block walks only the pairs whose strip mask
-    reaches its strips (of a list crossing three 128-pair chunks): the same images (exact
-    blending: a dropped pair blends nothing in the block), bit for bit (`_assert_same`)."""
+    reaches its strips (of a list crossing three 128-pair chunks), and with `mosaic_warp_lists`
+    each warp only those of its strip: the same images (exact blending: a dropped pair blends
+    nothing in the block or warp; each list keeps pair order), bit for bit (`_assert_same`)."""
     g, cam = _dense_tile(seed)
     g, cam = scenes.cast(g, dtype), scenes.camera(dtype=dtype, **TILE_CAMERA)
     out = {c: lgs_jax.render(g, cam, backend="pallas", config=_compact_config(c),
-                             capacity=CAPACITY) for c in (False, True)}
-    assert out[True].stats.kernel == "localgs-mosaic"
-    for field in ("image", "alpha", "depth"):
-        _assert_same(getattr(out[True], field), getattr(out[False], field), err_msg=field)
+                             capacity=CAPACITY) for c in WALKS}
+    for compact in WALKS[1:]:
+        assert out[compact].stats.kernel == "localgs-mosaic"
+        for field in ("image", "alpha", "depth"):
+            _assert_same(getattr(out[compact], field), getattr(out[False], field),
+                         err_msg=f"{compact} {field}")
 
 
 @settings(max_examples=3)
@@ -202,13 +213,15 @@ def test_compacted_forward_is_the_forward_to_the_bit(seed, dtype):
 def test_compacted_forward_on_partial_tiles_and_short_lists(seed, dtype):
     """The compaction on the suite's small scenes (every kind, 3x2 tiles, partial edge tiles,
     lists within one chunk, half-tile blocks with nothing to keep): the full walk's images and
-    pair counts."""
+    pair counts, per block and per warp."""
     g, cam = scenes.cast(scenes.scene(seed), dtype), scenes.camera(dtype=dtype)
     out = {c: lgs_jax.render(g, cam, backend="pallas", config=_compact_config(c),
-                             capacity=scenes.CAPACITY) for c in (False, True)}
-    for field in ("image", "alpha", "depth"):
-        _assert_same(getattr(out[True], field), getattr(out[False], field), err_msg=field)
-    assert int(out[True].stats.pairs_walked) == int(out[False].stats.pairs_walked)
+                             capacity=scenes.CAPACITY) for c in WALKS}
+    for compact in WALKS[1:]:
+        for field in ("image", "alpha", "depth"):
+            _assert_same(getattr(out[compact], field), getattr(out[False], field),
+                         err_msg=f"{compact} {field}")
+        assert int(out[compact].stats.pairs_walked) == int(out[False].stats.pairs_walked)
 
 
 @pytest.mark.slow
@@ -226,13 +239,14 @@ def test_compacted_forward_gives_the_same_gradients_and_split_entries(backward_p
     w = np.random.default_rng(seed % 2**16).normal(size=(cam.height, cam.width, 3))
     w = w.astype(np.float32)
     grads = {}
-    for compact in (False, True):
+    for compact in WALKS:
         config = _compact_config(compact, segment=128, backward_pixels=backward_pixels)
         loss = lambda g, config=config: jax.numpy.sum(lgs_jax.render(
             g, cam, backend="pallas", config=config, capacity=CAPACITY).image * w)
         grads[compact] = jax.tree.leaves(jax.grad(loss)(g))
-    for got, want in zip(grads[True], grads[False]):
-        np.testing.assert_array_equal(got, want)
+    for compact in WALKS[1:]:
+        for got, want in zip(grads[compact], grads[False]):
+            np.testing.assert_array_equal(got, want, err_msg=str(compact))
 
 
 def test_compaction_applies_where_its_conditions_hold():
@@ -254,6 +268,18 @@ def test_compaction_applies_where_its_conditions_hold():
     compact = C(kernel="mosaic")
     assert pallas.plan(compact, False, 10**5).forward_pixels == 128  # whole tiles otherwise
     assert pallas.plan(compact, True, 10**5).forward_pixels == 256  # the vanilla kernel's
+
+
+def test_warp_lists_apply_in_compacted_half_tile_blocks():
+    """`mosaic_warp_lists` walks per-warp lists where the forward compacts in half-tile blocks
+    (a warp is one strip); whole-tile blocks and full walks keep their own walks."""
+    assert pallas_mosaic.warp_lists(C(), 128)  # the default
+    assert not pallas_mosaic.warp_lists(C(), 256)
+    assert not pallas_mosaic.warp_lists(C(tuning=K(mosaic_warp_lists=False)), 128)
+    assert not pallas_mosaic.warp_lists(C(blend="fast"), 128)
+    assert not pallas_mosaic.warp_lists(C(tuning=K(mosaic_compact=False)), 128)
+    with pytest.raises(ValueError, match="tuning.mosaic_warp_lists"):
+        K(mosaic_warp_lists="yes")
 
 
 def _lean(on: bool, segment=None):

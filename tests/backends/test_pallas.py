@@ -18,7 +18,7 @@ from hypothesis import example, given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax.backends import kernel_steps as ks
-from lgs_jax.backends import mosaic_rows, pallas, pallas_mosaic
+from lgs_jax.backends import mosaic_rows, mosaic_tma, pallas
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import (ALPHA_CAP, F32_ATOL, F32_FLIP_SHARE, F64_ATOL, GRAD_F64_REL,
@@ -171,9 +171,9 @@ def test_mosaic_layouts_equal(backend, chunk, pixels, seed):
     float TMA)."""
     dtype = np.float32
     xla_records = C(tuning=K(mosaic_pair_source="records"))
-    assert not pallas_mosaic.staged(xla_records, np.float64)
-    assert pallas_mosaic.staged(xla_records, np.float32)
-    assert not pallas_mosaic.staged(C(), np.float32)  # records built in the kernels instead
+    assert not mosaic_tma.staged(xla_records, np.float64)
+    assert mosaic_tma.staged(xla_records, np.float32)
+    assert not mosaic_tma.staged(C(), np.float32)  # records built in the kernels instead
     g = scenes.cast(scenes.scene(seed), dtype)
     empty = scenes.cast(scenes.scene(seed, kinds=("behind", "invalid")), dtype)
     cam = scenes.camera(dtype=dtype)

@@ -1,0 +1,206 @@
+"""Per-warp pair lists of the compacted Local-GS forward (`KernelConfig.mosaic_warp_lists`): the
+paper's warp-level culling (Sec. III-C) at the granularity of a hardware warp, inside one
+Mosaic GPU warpgroup program.
+
+A half-tile block is four hardware warps, warp w the 32 pixels of the block's strip w (lane l
+of the block is tile pixel 128·wg + l, lgs_jax.backends.pallas_mosaic). Of each staged chunk
+of LANES = 128 pairs (lane t: pair base + t, its record built as `mosaic_staging.stage` builds
+it), `partition` stores every record at row t of a shared-memory buffer and, per warp w, the
+rows of the pairs whose strip mask has warp w's bit, in pair order, as list w; `reads` then
+gives lane l, at list position v, the record of row lists[l // 32][v]: one record per warp,
+each warp stepping through its own list, where the block-compacted walk
+(`mosaic_staging._partition`) steps every warp through the pairs of any of its four strips.
+The warpgroup's loop still runs to the busiest warp's count (one control flow per warpgroup),
+so per chunk it takes max_w n_w / unroll iterations instead of |∪_w list w| / unroll
+(scripts/strip_occupancy.py --chunks counts both over whole scenes).
+
+Same outputs as the full walk: a pair outside warp w's list has its bit clear, so no pixel of
+strip w passes its α test for it (the masks are conservative), and each list keeps pair order,
+so every pixel blends the same pairs in the same order; a lane's stop pair is the pair's own
+index (base + row). Positions past a warp's count hold rows of an earlier chunk, or 0 (`clear`
+at the walk's start): records of this chunk all the same (every row holds one), finite, and
+never blended (`reads`' `left`).
+
+On the GPU inline Mosaic GPU code (per-lane shared-memory addresses, ballots, population
+counts, which Pallas cannot express); in interpret mode, which cannot run inline code, whole-ref
+loads, sorts and array gathers give the same lists and lane vectors.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
+from jax.experimental.mosaic.gpu import utils as mgpu_utils
+from jax.experimental.pallas import mosaic_gpu as plgpu
+from jaxlib.mlir import ir
+from jaxlib.mlir.dialects import arith, memref, nvvm, scf, vector
+from jaxlib.mlir.dialects import math as math_dialect
+
+from . import kernel_steps as ks
+from .mosaic_rows import element
+
+LANES = 128  # pairs per staged chunk and lanes per block (mosaic_staging.LANES)
+WARPS, WARP = 4, 32
+TOTALS = WARPS * WARPS  # sync_ref: counts[source warp, target warp] at 0..15, then n_w
+BUSIEST = TOTALS + WARPS  # ... then max_w n_w
+_STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
+
+
+def scratch(dt) -> tuple:
+    """Shared memory: one chunk's records (LANES, REC), the warps' lists (WARPS, LANES) of
+    rows, and the counts (BUSIEST + 1, padded to 24)."""
+    return (plgpu.SMEM((LANES, ks.REC), dt), plgpu.SMEM((WARPS, LANES), jnp.int32),
+            plgpu.SMEM((24,), jnp.int32))
+
+
+def _lane(i32):
+    """(thread of the warpgroup, its lane in the warp, its warp) as i32 values."""
+    tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
+    return (tid, arith.remui(tid, mgpu_utils.c(WARP, i32)),
+            arith.divui(tid, mgpu_utils.c(WARP, i32)))
+
+
+def _fragment(x, signed: bool | None = None):
+    """A (LANES,) strided lane vector holding scalar x at each thread (`signed`: an integer's
+    signedness, None for a float)."""
+    return mgpu_fa.FragmentedArray(
+        _registers=np.array([vector.broadcast(ir.VectorType.get((1,), x.type), x)], dtype=object),
+        _layout=mgpu_fa.WGStridedFragLayout((LANES,), 1), _is_signed=signed)
+
+
+def clear(lists_ref, interpret: bool):
+    """Set every list entry to row 0 (before the first `partition`, whose first barrier orders
+    these stores before its own), so that no position ever holds an invalid row."""
+    if interpret:
+        lists_ref[...] = jnp.zeros((WARPS, LANES), jnp.int32)
+        return
+
+    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),))
+    def store(_, lists_ref):
+        i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
+        tid, _, _ = _lane(i32)
+        for w in range(WARPS):
+            memref.store(mgpu_utils.c(0, i32), lists_ref,
+                         [arith.constant(index, w), arith.index_cast(index, tid)])
+
+    store(lists_ref)
+
+
+def partition(records, bits, buf, lists_ref, sync_ref, interpret: bool):
+    """Row t of `buf` = lane t's record (`records`: REC lane vectors); list w of `lists_ref` =
+    the rows t with bit w of `bits` (int32 lane vector, the warps' bits of lane t's strip mask,
+    0 past the tile's list) in increasing order; sync_ref[TOTALS + w] = its length n_w and
+    sync_ref[BUSIEST] = max_w n_w. Every thread may read them when this returns. On the GPU:
+    per source warp and target warp a ballot and population counts (lane t's rank among its
+    warp's lanes with the bit, the warp's count), the counts through `sync_ref` (one barrier),
+    then lane t's position in list w is its rank plus the counts of the warps below it; the
+    stores, then a second barrier (after which the next chunk's first barrier may overwrite
+    nothing still read: the loop reads between this barrier and the next chunk's first)."""
+    if interpret:
+        for c, v in enumerate(records):
+            buf[:, c] = v
+        keep = [(bits >> w) & 1 for w in range(WARPS)]
+        lists_ref[...] = jnp.stack([jnp.argsort(k == 0, stable=True).astype(jnp.int32)
+                                    for k in keep])
+        totals = [jnp.sum(k, dtype=jnp.int32) for k in keep]
+        for w, n in enumerate(totals):
+            sync_ref[TOTALS + w] = n
+        sync_ref[BUSIEST] = jnp.maximum(jnp.maximum(totals[0], totals[1]),
+                                        jnp.maximum(totals[2], totals[3]))
+        return
+
+    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (_STRIDED,) * (len(records) + 1))
+    def store(_, buf, lists_ref, sync_ref, *arrays):
+        i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
+        c = lambda v: mgpu_utils.c(v, i32)
+        at = lambda v: arith.index_cast(index, v)
+        value = lambda a: element(a.registers.flat[0], 0)
+        eq = lambda a, b: arith.cmpi(arith.CmpIPredicate.eq, a, b)
+        tid, lane, warp = _lane(i32)
+        bits = value(arrays[-1])
+        below = nvvm.read_ptx_sreg_lanemask_lt(results=[i32])
+        kept, ranks = [], []
+        for w in range(WARPS):
+            k = arith.cmpi(arith.CmpIPredicate.ne, arith.andi(bits, c(1 << w)), c(0))
+            ballot = nvvm.vote_sync(c(0xFFFFFFFF), k, "ballot", results=[i32])
+            kept.append(k)
+            ranks.append(math_dialect.ctpop(arith.andi(ballot, below)))
+            with ir.InsertionPoint(scf.IfOp(eq(lane, c(0))).then_block):
+                memref.store(math_dialect.ctpop(ballot), sync_ref,
+                             [at(arith.addi(arith.muli(warp, c(WARPS)), c(w)))])
+                scf.yield_([])
+        mgpu_utils.warpgroup_barrier()
+        for col, a in enumerate(arrays[:-1]):
+            memref.store(value(a), buf, [at(tid), at(c(col))])
+        counts = [vector.load(ir.VectorType.get((WARPS,), i32), sync_ref, [at(c(WARPS * s))])
+                  for s in range(WARPS)]  # counts[s]: source warp s's count per target warp
+        totals = []
+        for w in range(WARPS):
+            pos, total = ranks[w], c(0)
+            for s in range(WARPS):
+                n = element(counts[s], w)
+                pos = arith.addi(pos, arith.select(
+                    arith.cmpi(arith.CmpIPredicate.ugt, warp, c(s)), n, c(0)))
+                total = arith.addi(total, n)
+            totals.append(total)
+            with ir.InsertionPoint(scf.IfOp(kept[w]).then_block):
+                memref.store(tid, lists_ref, [at(c(w)), at(pos)])
+                scf.yield_([])
+        with ir.InsertionPoint(scf.IfOp(eq(tid, c(0))).then_block):
+            busiest = c(0)
+            for w, total in enumerate(totals):
+                memref.store(total, sync_ref, [at(c(TOTALS + w))])
+                busiest = arith.maxsi(busiest, total)
+            memref.store(busiest, sync_ref, [at(c(BUSIEST))])
+            scf.yield_([])
+        mgpu_utils.warpgroup_barrier()
+
+    store(buf, lists_ref, sync_ref, *records, bits)
+
+
+def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
+    """(left, [(record, mask, row) for positions v .. v + unroll − 1]): lane l's warp w = l // 32
+    reads position v + u of its list, the record (REC − 1 lane vectors; its mask column as
+    int32 bits) at that row of `buf`, and left = n_w − v (position v + u holds a pair of list w
+    iff u < left). v + unroll <= LANES (the caller's)."""
+    dt = buf.dtype
+    if interpret:
+        warp = lax.broadcasted_iota(jnp.int32, (LANES,), 0) // WARP
+        left = sync_ref[...][TOTALS + warp] - v
+        lists, records = lists_ref[...], buf[...]
+        out = []
+        for u in range(unroll):
+            row = lists[warp, v + u]
+            rec = [records[row, col] for col in range(ks.REC)]
+            out.append((rec[:-1], rec[-1].astype(jnp.int32), row))
+        return left, out
+    i32_type = plgpu.ShapeDtypeStruct((LANES,), jnp.int32, layout=_STRIDED)
+    per_pair = (plgpu.ShapeDtypeStruct((LANES,), dt, layout=_STRIDED),) * (ks.REC - 1) + (
+        i32_type, i32_type)
+
+    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (plgpu.Layout.WG_SPLAT(()),),
+                       return_type=(i32_type,) + per_pair * unroll)
+    def load(_, buf, lists_ref, sync_ref, first):
+        i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
+        c = lambda x: mgpu_utils.c(x, i32)
+        at = lambda x: arith.index_cast(index, x)
+        _, _, warp = _lane(i32)
+        v = first.registers.item()
+        ints = [arith.subi(memref.load(sync_ref, [at(arith.addi(warp, c(TOTALS)))]), v)]
+        out = []
+        for u in range(unroll):
+            # the offset added as an index, which the compiler folds into the load's address
+            row = memref.load(lists_ref, [at(warp), arith.addi(at(v), arith.constant(index, u))])
+            rec = [memref.load(buf, [at(row), at(c(col))]) for col in range(ks.REC)]
+            mask = (arith.bitcast(i32, rec[-1]) if jnp.dtype(dt) == jnp.float32
+                    else arith.fptosi(i32, rec[-1]))
+            out.append([_fragment(x) for x in rec[:-1]] + [_fragment(x, True)
+                                                           for x in (mask, row)])
+        return (_fragment(ints[0], True),) + tuple(x for per_pair in out for x in per_pair)
+
+    flat = load(buf, lists_ref, sync_ref, v)
+    n = ks.REC + 1
+    return flat[0], [(list(flat[1 + n * u:ks.REC + n * u]), flat[ks.REC + n * u],
+                      flat[ks.REC + 1 + n * u]) for u in range(unroll)]
