@@ -13,13 +13,14 @@ of pairs with 0, 1, ..., 8 bits, and the share of pairs a half-tile block's comp
 (no bit in its four strips: `KernelConfig.mosaic_compact`). All emitted pairs count, walked or
 not (early termination is not modelled: it needs the forward, too slow at 10M on a CPU).
 
-With --chunks, the Mosaic GPU Local-GS forward's blend iterations (`mosaic_staging.compact_loop`:
-per chunk of 128 pairs of a tile's sorted list, a block of four warps packs the pairs with a
-bit in any of its strips and every warp steps through all of them, `mosaic_unroll_localgs` = 8
-per iteration, a pair of another warp's strip only masked), against per-warp lists (each warp
-packing only the pairs of its own strips; the block still loops to its busiest warp's count, as
-a warpgroup program must): the blend iterations summed over every chunk and block, and their
-ratio, the blending a per-warp list would save. Blocks are those the forward runs
+With --chunks, the Mosaic GPU Local-GS forward's blend iterations compacted per block
+(`mosaic_staging.compact_loop` with `KernelConfig.mosaic_warp_lists` off: per chunk of 128
+pairs of a tile's sorted list, a block of four warps packs the pairs with a bit in any of its
+strips and every warp steps through all of them, `mosaic_unroll_localgs` = 8 per iteration, a
+pair of another warp's strip only masked), against per-warp lists (the default,
+lgs_jax.backends.mosaic_warp_lists: each warp only the pairs of its own strips; the block still
+loops to its busiest warp's count, as a warpgroup program must): the blend iterations summed
+over every chunk and block, and their ratio, the blending the per-warp lists save. Blocks are those the forward runs
 (`pallas.plan`: half tiles of four strips, a warp each, wherever the walk compacts, at every
 size; whole tiles, a warp holding two adjacent strips, only where it does not).
 """
