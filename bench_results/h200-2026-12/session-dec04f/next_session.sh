@@ -2,13 +2,13 @@
 # Local-GS lead 1.48-1.50x there; everything else met, BENCHMARKS.md §7 "Dec 4, sixth
 # session"), from the repository root; each step one `run` call with carry ["carry"].
 #
-# 1. One stage per tile instead of two: at every size the compacted forward runs two half-tile
-#    blocks per tile, each building the same 128 records per chunk (375 instructions per
-#    thread per chunk). A whole-tile block of two warpgroups cannot exit early independently
-#    (CUDA_ERROR_ILLEGAL_INSTRUCTION on the H100, pallas_mosaic's docstring), but a whole-tile
-#    block of one warpgroup with two pixels per lane could walk per-warp lists of two strips
-#    (scripts/strip_occupancy.py --chunks models it: set `whole` by hand). Model first, on a
-#    CPU; build only if it predicts more than the staging it saves.
+# 1. (Modelled on a CPU this session, not worth building: whole-tile blocks of one
+#    warpgroup, two pixels per lane, walking per-warp lists of two strips each, stage each
+#    chunk once per tile instead of twice, but their loop iterations (strip_occupancy.py
+#    --chunks with `whole` forced: synthetic 10M 1,721,795 against 2,863,133 half-tile
+#    iterations) each blend two pixels per lane, about 570 instead of 331 instructions per 8
+#    pairs: 2.5% fewer instructions in all at synthetic 10M, less than run-to-run noise, and
+#    without the half tiles' independent early exits. BENCHMARKS.md §7, Dec 4, sixth session.)
 # 2. The forward's host share at synthetic 10M (about 0.45 ms per blocked call: XLA re-records
 #    its command buffers every call, and the CUB sorts' host side): kernel_times.py --host 40
 #      . scripts/gpu_env.sh; timeout 200 python3 scripts/kernel_times.py --data carry/data \
