@@ -23,7 +23,7 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, nvvm, vector
 
-from .mosaic_rows import element
+from .mosaic_inline import element
 
 
 def of(interpret: bool, dtype):

@@ -25,6 +25,7 @@ from jaxlib.mlir.dialects import arith, memref, scf, vector
 from jaxlib.mlir.dialects import math as math_dialect
 
 from . import kernel_steps as ks
+from .mosaic_inline import element, threads
 
 REDUCTIONS = ("terms", "transposed")
 
@@ -200,7 +201,7 @@ def transposed_row(terms, pixels: int, exchange, row, tile):
         + (plgpu.Layout.WG_STRIDED((pixels,), vec_size=vec),) * len(inputs))
     def reduce(_, exchange_ref, row_ref, tile_value, *arrays):
         el = ir.VectorType(arrays[0].registers.flat[0].type).element_type
-        tid = arith.remui(mgpu_utils.thread_idx(), _i32(128))
+        tid, _, _ = threads(ir.IntegerType.get_signless(32))
         lanes = [[element(a.registers.reshape(-1)[0], e) for e in range(vec)] for a in arrays]
         elements = [tuple(lanes[i] for i in sp) for sp in specs]
         value = _butterfly(elements, scaled, halves, arith.remui(tid, _i32(32)),
@@ -213,11 +214,6 @@ def transposed_row(terms, pixels: int, exchange, row, tile):
 
 def _i32(v: int):
     return mgpu_utils.c(v, ir.IntegerType.get_signless(32))
-
-
-def element(vec, i: int):
-    """Element i of a vector register (inline Mosaic GPU code's lane values)."""
-    return vector.extract(vec, dynamic_position=[], static_position=ir.DenseI64ArrayAttr.get([i]))
 
 
 def _shuffle(v, d: int):
@@ -315,7 +311,7 @@ def zero_row(_, row_ref, tile_value):
     store from Pallas would have every thread write every column)."""
     i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
     width = ir.MemRefType(row_ref.type).shape[0]
-    tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(128, i32))
+    tid, _, _ = threads(i32)
     last = mgpu_utils.c(width - 1, i32)
     value = tile_value.registers.item()
     with ir.InsertionPoint(scf.IfOp(arith.cmpi(arith.CmpIPredicate.ule, tid, last)).then_block):

@@ -35,7 +35,6 @@ Float32 and float64 (no TMA involved).
 from __future__ import annotations
 
 import jax.numpy as jnp
-import numpy as np
 from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
@@ -49,9 +48,7 @@ from .. import pairs
 from ..config import RasterConfig
 from . import kernel_steps as ks
 from . import mosaic_warp_lists
-from .mosaic_rows import element
-from .mosaic_warp_lists import LANES  # pairs per staged chunk: one per thread of the warpgroup
-_STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
+from .mosaic_inline import LANES, STRIDED, element, lane_vector, threads
 
 
 def scratch(dt) -> tuple:
@@ -74,22 +71,16 @@ def gather(gauss_ref, table_ref, base, last_pair: int, interpret: bool):
 
     @plgpu.inline_mgpu(
         arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(())),
-        return_type=tuple(plgpu.ShapeDtypeStruct((LANES,), dt, layout=_STRIDED)
+        return_type=tuple(plgpu.ShapeDtypeStruct((LANES,), dt, layout=STRIDED)
                           for _ in range(columns)))
     def load(_, ids, table, first):
         index, i32 = ir.IndexType.get(), ir.IntegerType.get_signless(32)
-        tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
+        tid, _, _ = threads(i32)
         pair = arith.minsi(arith.addi(first.registers.item(), tid),
                            mgpu_utils.c(last_pair, i32))
         row = arith.index_cast(index, memref.load(ids, [arith.index_cast(index, pair)]))
-        out = []
-        for c in range(columns):
-            x = memref.load(table, [row, arith.constant(index, c)])
-            out.append(mgpu_fa.FragmentedArray(
-                _registers=np.array([vector.broadcast(ir.VectorType.get((1,), x.type), x)],
-                                    dtype=object),
-                _layout=mgpu_fa.WGStridedFragLayout((LANES,), 1), _is_signed=None))
-        return tuple(out)
+        return tuple(lane_vector(memref.load(table, [row, arith.constant(index, c)]))
+                     for c in range(columns))
 
     return list(load(gauss_ref, table_ref, base))
 
@@ -140,10 +131,10 @@ def _store_rows(buffer, *columns):
     """buffer[t, c] = columns[c] at lane t (a record per row: the pair loop's scalar reads of
     one record are then adjacent), one store per column from each thread (a strided store
     Pallas' shared-memory lowering rejects), then a warpgroup barrier."""
-    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) + (_STRIDED,) * len(columns))
+    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) + (STRIDED,) * len(columns))
     def store(_, buf, *arrays):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
-        tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
+        tid, _, _ = threads(i32)
         for col, a in enumerate(arrays):
             memref.store(element(a.registers.flat[0], 0), buf,
                          [arith.index_cast(index, tid),
@@ -231,14 +222,13 @@ def _partition(records, keep, base, buf, index_ref, sync_ref, interpret: bool):
 
     @plgpu.inline_mgpu(
         arg_types=(plgpu.RefType(), plgpu.RefType(), plgpu.RefType(), plgpu.Layout.WG_SPLAT(()))
-        + (_STRIDED,) * (len(records) + 1))
+        + (STRIDED,) * (len(records) + 1))
     def store(_, buf, index_ref, sync_ref, first, *arrays):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
         c = lambda v: mgpu_utils.c(v, i32)
         at = lambda v: arith.index_cast(index, v)
         value = lambda a: element(a.registers.flat[0], 0)
-        tid = arith.remui(mgpu_utils.thread_idx(), c(LANES))
-        lane, warp = arith.remui(tid, c(32)), arith.divui(tid, c(32))
+        tid, lane, warp = threads(i32)
         kept = arith.cmpi(arith.CmpIPredicate.ne, value(arrays[-1]), c(0))
         ballot = nvvm.vote_sync(c(0xFFFFFFFF), kept, "ballot", results=[i32])
         below = nvvm.read_ptx_sreg_lanemask_lt(results=[i32])  # lanes under this one

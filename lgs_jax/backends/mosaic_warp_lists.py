@@ -29,9 +29,7 @@ loads, sorts and array gathers give the same lists and lane vectors.
 from __future__ import annotations
 
 import jax.numpy as jnp
-import numpy as np
 from jax import lax
-from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
 from jax.experimental.mosaic.gpu import utils as mgpu_utils
 from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
@@ -39,13 +37,11 @@ from jaxlib.mlir.dialects import arith, memref, nvvm, scf, vector
 from jaxlib.mlir.dialects import math as math_dialect
 
 from . import kernel_steps as ks
-from .mosaic_rows import element
+from .mosaic_inline import LANES, STRIDED, WARP, element, lane_vector, threads
 
-LANES = 128  # pairs per staged chunk and lanes per block (mosaic_staging.LANES)
-WARPS, WARP = 4, 32
+WARPS = LANES // WARP
 TOTALS = WARPS * WARPS  # sync_ref: counts[source warp, target warp] at 0..15, then n_w
 BUSIEST = TOTALS + WARPS  # ... then max_w n_w
-_STRIDED = plgpu.Layout.WG_STRIDED((LANES,), vec_size=1)
 
 
 def scratch(dt) -> tuple:
@@ -53,21 +49,6 @@ def scratch(dt) -> tuple:
     rows, and the counts (BUSIEST + 1, padded to 24)."""
     return (plgpu.SMEM((LANES, ks.REC), dt), plgpu.SMEM((WARPS, LANES), jnp.int32),
             plgpu.SMEM((24,), jnp.int32))
-
-
-def _lane(i32):
-    """(thread of the warpgroup, its lane in the warp, its warp) as i32 values."""
-    tid = arith.remui(mgpu_utils.thread_idx(), mgpu_utils.c(LANES, i32))
-    return (tid, arith.remui(tid, mgpu_utils.c(WARP, i32)),
-            arith.divui(tid, mgpu_utils.c(WARP, i32)))
-
-
-def _fragment(x, signed: bool | None = None):
-    """A (LANES,) strided lane vector holding scalar x at each thread (`signed`: an integer's
-    signedness, None for a float)."""
-    return mgpu_fa.FragmentedArray(
-        _registers=np.array([vector.broadcast(ir.VectorType.get((1,), x.type), x)], dtype=object),
-        _layout=mgpu_fa.WGStridedFragLayout((LANES,), 1), _is_signed=signed)
 
 
 def clear(lists_ref, interpret: bool):
@@ -80,7 +61,7 @@ def clear(lists_ref, interpret: bool):
     @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),))
     def store(_, lists_ref):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
-        tid, _, _ = _lane(i32)
+        tid, _, _ = threads(i32)
         for w in range(WARPS):
             memref.store(mgpu_utils.c(0, i32), lists_ref,
                          [arith.constant(index, w), arith.index_cast(index, tid)])
@@ -111,14 +92,14 @@ def partition(records, bits, buf, lists_ref, sync_ref, interpret: bool):
                                         jnp.maximum(totals[2], totals[3]))
         return
 
-    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (_STRIDED,) * (len(records) + 1))
+    @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (STRIDED,) * (len(records) + 1))
     def store(_, buf, lists_ref, sync_ref, *arrays):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
         c = lambda v: mgpu_utils.c(v, i32)
         at = lambda v: arith.index_cast(index, v)
         value = lambda a: element(a.registers.flat[0], 0)
         eq = lambda a, b: arith.cmpi(arith.CmpIPredicate.eq, a, b)
-        tid, lane, warp = _lane(i32)
+        tid, lane, warp = threads(i32)
         bits = value(arrays[-1])
         below = nvvm.read_ptx_sreg_lanemask_lt(results=[i32])
         kept, ranks = [], []
@@ -176,8 +157,8 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
             rec = [records[row, col] for col in range(ks.REC)]
             out.append((rec[:-1], rec[-1].astype(jnp.int32), row))
         return left, out
-    i32_type = plgpu.ShapeDtypeStruct((LANES,), jnp.int32, layout=_STRIDED)
-    per_pair = (plgpu.ShapeDtypeStruct((LANES,), dt, layout=_STRIDED),) * (ks.REC - 1) + (
+    i32_type = plgpu.ShapeDtypeStruct((LANES,), jnp.int32, layout=STRIDED)
+    per_pair = (plgpu.ShapeDtypeStruct((LANES,), dt, layout=STRIDED),) * (ks.REC - 1) + (
         i32_type, i32_type)
 
     @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (plgpu.Layout.WG_SPLAT(()),),
@@ -186,7 +167,7 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
         i32, index = ir.IntegerType.get_signless(32), ir.IndexType.get()
         c = lambda x: mgpu_utils.c(x, i32)
         at = lambda x: arith.index_cast(index, x)
-        _, _, warp = _lane(i32)
+        _, _, warp = threads(i32)
         v = first.registers.item()
         ints = [arith.subi(memref.load(sync_ref, [at(arith.addi(warp, c(TOTALS)))]), v)]
         out = []
@@ -196,9 +177,9 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
             rec = [memref.load(buf, [at(row), at(c(col))]) for col in range(ks.REC)]
             mask = (arith.bitcast(i32, rec[-1]) if jnp.dtype(dt) == jnp.float32
                     else arith.fptosi(i32, rec[-1]))
-            out.append([_fragment(x) for x in rec[:-1]] + [_fragment(x, True)
+            out.append([lane_vector(x) for x in rec[:-1]] + [lane_vector(x, True)
                                                            for x in (mask, row)])
-        return (_fragment(ints[0], True),) + tuple(x for per_pair in out for x in per_pair)
+        return (lane_vector(ints[0], True),) + tuple(x for per_pair in out for x in per_pair)
 
     flat = load(buf, lists_ref, sync_ref, v)
     n = ks.REC + 1
