@@ -88,8 +88,7 @@ def partition(records, bits, buf, lists_ref, sync_ref, interpret: bool):
         totals = [jnp.sum(k, dtype=jnp.int32) for k in keep]
         for w, n in enumerate(totals):
             sync_ref[TOTALS + w] = n
-        sync_ref[BUSIEST] = jnp.maximum(jnp.maximum(totals[0], totals[1]),
-                                        jnp.maximum(totals[2], totals[3]))
+        sync_ref[BUSIEST] = jnp.max(jnp.stack(totals))
         return
 
     @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (STRIDED,) * (len(records) + 1))
@@ -169,7 +168,7 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
         at = lambda x: arith.index_cast(index, x)
         _, _, warp = threads(i32)
         v = first.registers.item()
-        ints = [arith.subi(memref.load(sync_ref, [at(arith.addi(warp, c(TOTALS)))]), v)]
+        left = arith.subi(memref.load(sync_ref, [at(arith.addi(warp, c(TOTALS)))]), v)
         out = []
         for u in range(unroll):
             # the offset added as an index, which the compiler folds into the load's address
@@ -179,7 +178,7 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
                     else arith.fptosi(i32, rec[-1]))
             out.append([lane_vector(x) for x in rec[:-1]] + [lane_vector(x, True)
                                                            for x in (mask, row)])
-        return (lane_vector(ints[0], True),) + tuple(x for per_pair in out for x in per_pair)
+        return (lane_vector(left, True),) + tuple(x for per_pair in out for x in per_pair)
 
     flat = load(buf, lists_ref, sync_ref, v)
     n = ks.REC + 1

@@ -324,7 +324,9 @@ def test_lean_forward_gives_the_planes_gradients(seed):
     planes', bit for bit, and so are the walked pairs under differentiation (the forward a
     backward follows keeps its pixels' stops and reduces them), with split backward segments
     (their entries gathered from the image) and the walked rows, on partial tiles (40x24) with
-    a background."""
+    a background. The image itself: bit for bit on the GPU; in interpret mode to
+    `assert_composites_equal`'s ulp (XLA on the CPU blends the background into the lean image
+    in another fusion than into the planes': seed 0 differs by one ulp at 2 of 2880 values)."""
     dtype = np.float32
     g, cam = scenes.saturating(seed, 150, dtype), scenes.camera(40, 24, dtype=dtype)
     w = np.random.default_rng(seed % 2**16).normal(size=(24, 40, 3)).astype(dtype)
@@ -345,7 +347,10 @@ def test_lean_forward_gives_the_planes_gradients(seed):
     got, want = run(g, True), run(g, False)
     for name, a, b in zip(scenes.FIELDS + ("image", "alpha", "depth", "pairs_walked"),
                           jax.tree.leaves(got), jax.tree.leaves(want)):
-        _assert_same(a, b, err_msg=name)
+        if name == "image" and not ON_GPU:  # as test_lean_forward_renders_the_planes_images
+            assert_composites_equal(a, b)
+        else:
+            _assert_same(a, b, err_msg=name)
 
 
 def test_lean_forward_applies_where_its_conditions_hold():
