@@ -77,8 +77,9 @@ def partition(records, bits, buf, lists_ref, sync_ref, interpret: bool):
     per source warp and target warp a ballot and population counts (lane t's rank among its
     warp's lanes with the bit, the warp's count), the counts through `sync_ref` (one barrier),
     then lane t's position in list w is its rank plus the counts of the warps below it; the
-    stores, then a second barrier (after which the next chunk's first barrier may overwrite
-    nothing still read: the loop reads between this barrier and the next chunk's first)."""
+    stores, then a second barrier. The loop reads the buffers between this second barrier and
+    the next chunk's first, and the next chunk writes them (counts aside) only after its first
+    barrier, so no warp overwrites a record, list entry or total another still reads."""
     if interpret:
         for c, v in enumerate(records):
             buf[:, c] = v
