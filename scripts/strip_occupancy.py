@@ -20,9 +20,10 @@ strips and every warp steps through all of them, `mosaic_unroll_localgs` = 8 per
 pair of another warp's strip only masked), against per-warp lists (the default,
 lgs_jax.backends.mosaic_warp_lists: each warp only the pairs of its own strips; the block still
 loops to its busiest warp's count, as a warpgroup program must): the blend iterations summed
-over every chunk and block, and their ratio, the blending the per-warp lists save. Blocks are those the forward runs
-(`pallas.plan`: half tiles of four strips, a warp each, wherever the walk compacts, at every
-size; whole tiles, a warp holding two adjacent strips, only where it does not).
+over every chunk and block, and their ratio, the blending the per-warp lists save. Blocks are
+those the forward runs (`pallas.plan`: half tiles of four strips, a warp each, wherever the walk
+compacts, at every size; whole tiles, a warp holding two adjacent strips, only where it does
+not).
 """
 
 from __future__ import annotations

@@ -153,9 +153,10 @@ def compacts(config: RasterConfig) -> bool:
 
 def warp_lists(config: RasterConfig, pixels: int) -> bool:
     """Whether the compacted forward walks per-warp lists (`KernelConfig.mosaic_warp_lists`,
-    lgs_jax.backends.mosaic_warp_lists): asked for, compacting, half-tile blocks (a warp is one
-    strip); whole-tile blocks compact per block."""
-    return config.tuning.mosaic_warp_lists and compacts(config) and pixels == STRIP_PIXELS * 4
+    lgs_jax.backends.mosaic_warp_lists): asked for, compacting, half-tile blocks (one pixel per
+    lane, so a warp is one strip); whole-tile blocks compact per block."""
+    return (config.tuning.mosaic_warp_lists and compacts(config)
+            and pixels == mosaic_warp_lists.LANES)
 
 
 def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
@@ -201,7 +202,8 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
             mask_ref, rec_ref, scratch[0], start, end, tile, tiles_x, evaluate, config,
             last_pair, interpret)
     elif scratch:
-        fetch, pair_alpha, stage = mosaic_tma.forward_source(rec_ref, *scratch, start, end, evaluate, config)
+        fetch, pair_alpha, stage = mosaic_tma.forward_source(rec_ref, *scratch, start, end,
+                                                             evaluate, config)
     else:
         def fetch(j):
             jj = jnp.minimum(j, last_pair)
