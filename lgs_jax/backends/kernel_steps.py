@@ -83,28 +83,33 @@ def record_alpha(rec, frame_xy, pixel, config: RasterConfig):
     return alpha, hit, power
 
 
+NOT_STOPPED = jnp.iinfo(jnp.int32).max  # a stop pair no pair has (indices are int32 offsets)
+
+
 def blend(state, alpha, hit, rgb, z, pair, config: RasterConfig):
     """One Gaussian (pair index `pair`) over a lane vector of pixels by the blending rule
-    (`lgs_jax.composite.blend_weights`); state = (r, g, b, T, D, done, stop pair), `done` as
-    int32 0/1 (Mosaic GPU holds no 1-bit registers); exact blending records the pair at which
-    a pixel's stop test fired."""
-    r, g, b, t, d, done, stop_at = state
+    (`lgs_jax.composite.blend_weights`); state = (r, g, b, T, D, stop pair): exact blending
+    records the pair at which a pixel's stop test fired, and a pixel is done once it has one
+    (stop pair != NOT_STOPPED: one int32 serves as flag and index; Mosaic GPU holds no 1-bit
+    registers)."""
+    r, g, b, t, d, stop_at = state
     exact = config.blend == "exact"
-    w, t, stopped = blend_weights(t, alpha, hit & (done == 0) if exact else hit, config)
+    w, t, stopped = blend_weights(t, alpha, hit & (stop_at == NOT_STOPPED) if exact else hit,
+                                  config)
     if exact:
-        done, stop_at = jnp.where(stopped, 1, done), jnp.where(stopped, pair, stop_at)
-    return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, done, stop_at
+        stop_at = jnp.where(stopped, pair, stop_at)
+    return r + w * rgb[0], g + w * rgb[1], b + w * rgb[2], t, d + w * z, stop_at
 
 
 def running(state, config: RasterConfig):
     """Whether any lane still blends: the program-uniform loop condition."""
     if config.blend == "exact":
-        return jnp.min(state[5]) == 0
+        return jnp.max(state[5]) == NOT_STOPPED
     return jnp.min(stops(state[3], config).astype(jnp.int32)) == 0
 
 
 def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterConfig, unroll: int,
-                take=None, stage=None, checkpoint=None):
+                take=None, stage=None, checkpoint=None, more=None):
     """Walk pairs [start, end) `unroll` at a time while some lane still blends; returns
     (r, g, b, T, D, stop pair) per lane.
 
@@ -116,12 +121,14 @@ def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCon
     program-uniform branch. `stage = (begin, finish)` (optional): `begin(j)` runs at the start of
     each iteration (before its pairs are evaluated) and `finish(j)` after the loop, with the first
     pair not processed. `checkpoint(j, state)` (optional) runs at the start of each iteration
-    with the state before pair j. A lane's stop pair is where its stop test fired (exact), else
-    the first pair the loop did not process (`end` or beyond when it ran to the end).
+    with the state before pair j. `more(state)` (optional): `running`'s test, another way (the
+    Mosaic GPU kernels' one reduction, `mosaic_inline.running`). A lane's stop pair is where its
+    stop test fired (exact), else the first pair the loop did not process (`end` or beyond when
+    it ran to the end).
     """
     def cond(carry):
         j, _, st = carry
-        return (j < end) & running(st, config)
+        return (j < end) & (running(st, config) if more is None else more(st))
 
     def body(carry):
         j, cur, st = carry
@@ -147,16 +154,16 @@ def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCon
     j, _, st = lax.while_loop(cond, body, (start, first, empty_state(lanes, dt)))
     if stage is not None:
         stage[1](j)
-    stop_at = jnp.minimum(st[6], j) if config.blend == "exact" else jnp.full((lanes,), j)
+    stop_at = jnp.minimum(st[5], j) if config.blend == "exact" else jnp.full((lanes,), j)
     return st[:5] + (stop_at,)
 
 
 def empty_state(lanes: int, dt):
     """The blend state (`blend`) of `lanes` pixels before any pair: r = g = b = D = 0, T = 1,
-    not done, no stop pair (int32 max)."""
+    no stop pair."""
     zero = jnp.zeros((lanes,), dt)
-    return (zero, zero, zero, jnp.ones((lanes,), dt), zero, jnp.zeros((lanes,), jnp.int32),
-            jnp.full((lanes,), jnp.iinfo(jnp.int32).max, jnp.int32))
+    return (zero, zero, zero, jnp.ones((lanes,), dt), zero,
+            jnp.full((lanes,), NOT_STOPPED, jnp.int32))
 
 
 def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: int):

@@ -47,7 +47,7 @@ from jaxlib.mlir.dialects import math as math_dialect
 from .. import pairs
 from ..config import RasterConfig
 from . import kernel_steps as ks
-from . import mosaic_warp_lists
+from . import mosaic_inline, mosaic_warp_lists
 from .mosaic_inline import LANES, STRIDED, element, lane_vector, threads
 
 
@@ -279,6 +279,7 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
     unroll = config.tuning.mosaic_unroll_localgs
     tx, ty = tile % tiles_x, tile // tiles_x
     offsets = lax.broadcasted_iota(jnp.int32, (LANES,), 0)
+    more = mosaic_inline.running(config, interpret)
 
     def stage_chunk(c):
         base = start + c * LANES
@@ -298,8 +299,9 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         if warp_shift is not None:
             left, read = mosaic_warp_lists.reads(buf, index_ref, sync_ref, v, unroll, interpret)
             base = start + c * LANES
+            # no strip-mask test: a listed pair has the warp's bit (`evaluate` takes None)
             return (sync_ref[mosaic_warp_lists.BUSIEST], left,
-                    [(rec, mask, base + row) for rec, mask, row in read])
+                    [(rec, None, base + row) for rec, row in read])
         n = sync_ref[COUNT]
         # v is a multiple of unroll below n <= LANES, which unroll divides (`KernelConfig`
         # checks it): the group's records are rows [v, v + unroll), no clamp, at offsets from
@@ -313,7 +315,7 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
 
     def cond(carry):
         c, _, st = carry
-        return (start + c * LANES < end) & ks.running(st, config)
+        return (start + c * LANES < end) & more(st)
 
     def body(carry):
         c, v, st = carry
@@ -333,4 +335,4 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
     _, _, st = lax.while_loop(cond, body, (jnp.int32(0), jnp.int32(0),
                                            ks.empty_state(lanes, dt)))
     walked = start + (end - start + unroll - 1) // unroll * unroll  # staged_loop's last j
-    return st[:5] + (jnp.minimum(st[6], walked),)
+    return st[:5] + (jnp.minimum(st[5], walked),)

@@ -142,10 +142,11 @@ def partition(records, bits, buf, lists_ref, sync_ref, interpret: bool):
 
 
 def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
-    """(left, [(record, mask, row) for positions v .. v + unroll − 1]): lane l's warp w = l // 32
-    reads position v + u of its list, the record (REC − 1 lane vectors; its mask column as
-    int32 bits) at that row of `buf`, and left = n_w − v (position v + u holds a pair of list w
-    iff u < left). v + unroll <= LANES (the caller's)."""
+    """(left, [(record, row) for positions v .. v + unroll − 1]): lane l's warp w = l // 32
+    reads position v + u of its list, the record (its first REC − 1 lane vectors: the strip
+    mask is not read, every listed pair has warp w's bit) at that row of `buf`, and left =
+    n_w − v (position v + u holds a pair of list w iff u < left). v + unroll <= LANES (the
+    caller's)."""
     dt = buf.dtype
     if interpret:
         warp = lax.broadcasted_iota(jnp.int32, (LANES,), 0) // WARP
@@ -154,12 +155,11 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
         out = []
         for u in range(unroll):
             row = lists[warp, v + u]
-            rec = [records[row, col] for col in range(ks.REC)]
-            out.append((rec[:-1], rec[-1].astype(jnp.int32), row))
+            out.append(([records[row, col] for col in range(ks.REC - 1)], row))
         return left, out
     i32_type = plgpu.ShapeDtypeStruct((LANES,), jnp.int32, layout=STRIDED)
     per_pair = (plgpu.ShapeDtypeStruct((LANES,), dt, layout=STRIDED),) * (ks.REC - 1) + (
-        i32_type, i32_type)
+        i32_type,)
 
     @plgpu.inline_mgpu(arg_types=(plgpu.RefType(),) * 3 + (plgpu.Layout.WG_SPLAT(()),),
                        return_type=(i32_type,) + per_pair * unroll)
@@ -174,14 +174,11 @@ def reads(buf, lists_ref, sync_ref, v, unroll: int, interpret: bool):
         for u in range(unroll):
             # the offset added as an index, which the compiler folds into the load's address
             row = memref.load(lists_ref, [at(warp), arith.addi(at(v), arith.constant(index, u))])
-            rec = [memref.load(buf, [at(row), at(c(col))]) for col in range(ks.REC)]
-            mask = (arith.bitcast(i32, rec[-1]) if jnp.dtype(dt) == jnp.float32
-                    else arith.fptosi(i32, rec[-1]))
-            out.append([lane_vector(x) for x in rec[:-1]] + [lane_vector(x, True)
-                                                           for x in (mask, row)])
+            rec = [memref.load(buf, [at(row), at(c(col))]) for col in range(ks.REC - 1)]
+            out.append([lane_vector(x) for x in rec] + [lane_vector(row, True)])
         return (lane_vector(left, True),) + tuple(x for per_pair in out for x in per_pair)
 
     flat = load(buf, lists_ref, sync_ref, v)
-    n = ks.REC + 1
-    return flat[0], [(list(flat[1 + n * u:ks.REC + n * u]), flat[ks.REC + n * u],
-                      flat[ks.REC + 1 + n * u]) for u in range(unroll)]
+    n = ks.REC
+    return flat[0], [(list(flat[1 + n * u:ks.REC + n * u]), flat[ks.REC + n * u])
+                     for u in range(unroll)]

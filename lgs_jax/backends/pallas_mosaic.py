@@ -73,8 +73,8 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from ..config import RasterConfig
 from ..layout import STRIP_PIXELS, TILE, TILE_PIXELS
 from . import kernel_steps as ks
-from . import (backward_segments, mosaic_quotients, mosaic_rows, mosaic_staging, mosaic_tma,
-               mosaic_warp_lists)
+from . import (backward_segments, mosaic_inline, mosaic_quotients, mosaic_rows, mosaic_staging,
+               mosaic_tma, mosaic_warp_lists)
 
 
 def _ranges(*columns):
@@ -182,9 +182,9 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     bit = jnp.left_shift(jnp.int32(1), strip)
     store = _forward_store(image, block_stops, tiles_x, wg, pixels)
 
-    def evaluate(rec, mask_word):
+    def evaluate(rec, mask_word):  # mask_word None: a pair known to have this lane's bit
         alpha, hit, _ = ks.record_alpha(rec, frame, pixel, config)
-        if config.warp_cull:
+        if config.warp_cull and mask_word is not None:
             hit = hit & ((mask_word & bit) != 0)
         return alpha, hit, rec[7:10], rec[10]
 
@@ -216,7 +216,7 @@ def localgs_kernel(order_ref, ranges_ref, mask_ref, rec_ref, *refs,
     store(out_refs, tile, cols,
           ks.staged_loop(start, end, k.shape[0], dt, fetch, pair_alpha, config,
                          config.tuning.mosaic_unroll_localgs, stage=stage,
-                         checkpoint=checkpoint))
+                         checkpoint=checkpoint, more=mosaic_inline.running(config, interpret)))
 
 
 def _checkpoint(refs, base, start, cols, segment: int):
@@ -233,7 +233,8 @@ def _checkpoint(refs, base, start, cols, segment: int):
 
 
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
-                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int):
+                   config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
+                   interpret: bool):
     """The original 3DGS forward for one warpgroup."""
     dt = rows_ref.dtype
     tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
@@ -243,7 +244,8 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
     fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
     _store(out_refs, tile, cols,
            ks.staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], k.shape[0], dt, fetch,
-                          pair_alpha, config, config.tuning.mosaic_unroll_vanilla))
+                          pair_alpha, config, config.tuning.mosaic_unroll_vanilla,
+                          more=mosaic_inline.running(config, interpret)))
 
 
 def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, tiles_x: int,
@@ -261,10 +263,10 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
         raise ValueError("image, block_stops: the Local-GS kernel's (image: blocks of 128)")
     n_tiles = bins.tile_start.shape[0]
     common = dict(config=config, tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
-                  pixels=pixels)
+                  pixels=pixels, interpret=interpret)
     kernel = (functools.partial(vanilla_kernel, **common) if vanilla else
-              functools.partial(localgs_kernel, **common, interpret=interpret,
-                                segment=segment, image=image, block_stops=block_stops))
+              functools.partial(localgs_kernel, **common, segment=segment, image=image,
+                                block_stops=block_stops))
     columns = [bins.tile_start, bins.tile_end]
     checks = []
     if segment is not None:
