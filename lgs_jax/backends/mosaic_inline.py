@@ -42,15 +42,15 @@ def lane_vector(x, signed: bool | None = None):
 
 
 def any_equal(x, value: int):
-    """Whether some element of the warpgroup's int32 vector `x` (one or more elements per
-    thread, `STRIDED`-like) equals `value`, as an int32 0/1 the whole warpgroup holds: each
+    """Whether some element of the warpgroup's int32 vector `x` (n / LANES consecutive elements
+    per thread) equals `value`, as an int32 0/1 the whole warpgroup holds: each
     thread ors its own elements' tests, then one `bar.red.or.pred` over the warpgroup's named
     barrier (the one Mosaic GPU's `warpgroup_barrier` uses) reduces the 128 threads'
     predicates. jnp.any(x == value)'s value (`kernel_steps.running`'s test) without the
     butterfly of shuffles, the shared-memory exchange and the two barriers its lowering
     takes."""
-    n = x.shape[0]
-    layout = plgpu.Layout.WG_STRIDED((n,), vec_size=1)
+    n = x.shape[0]  # thread t holds elements [t·v, (t + 1)·v): the layout iota's lanes take
+    layout = plgpu.Layout.WG_STRIDED((n,), vec_size=max(1, n // LANES))
 
     @plgpu.inline_mgpu(arg_types=(layout,),
                        return_type=plgpu.ShapeDtypeStruct((), jnp.int32,
