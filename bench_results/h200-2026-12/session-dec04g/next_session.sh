@@ -1,0 +1,38 @@
+# Next GPU session (Dec 4, seventh session had no GPU lent: fdfa05f and 93a8194 are built and
+# compiled for the H200 offline only; BENCHMARKS.md §7 "Dec 4, seventh session"). From the
+# repository root, each call one `run` with carry ["carry"] (carry/old holds lgs_06294ad, the
+# tree before them: `python3 -m benchmarks.ab prepare 06294ad --to carry/old` if missing).
+#
+# Call 1 (about 8 min): the changed kernels on the GPU, then their bits and time against
+# 06294ad in one process. If a test hangs or fails, or an "equal" column says no, revert
+# fdfa05f and 93a8194 (the loop's bar.red, the stop pair as the done flag, the per-warp lists'
+# skipped mask test) before anything else.
+. scripts/gpu_env.sh
+export LGS_JAX_CACHE="$PWD/build/jax_cache"; t0=$(date +%s)
+timeout 330 python3 -m pytest -q -p no:cacheprovider -n 8 -m 'slow or not slow' -rf \
+  --tb=short tests/backends/test_backward_segments.py tests/backends/test_gradients.py \
+  tests/backends/test_mosaic_staging.py tests/backends/test_pallas.py > $out/tests.log 2>&1
+echo "tests rc=$? $(( $(date +%s) - t0 )) s" >> $out/times.log
+for s in synthetic10M_4k guitar_x16_1080p; do
+  timeout 90 python3 -m benchmarks.ab run $s --old carry/old --revs 06294ad --fwd --repeat 10 \
+    --data carry/data > $out/ab_fwd_$s.log 2>&1
+  echo "ab fwd $s rc=$? $(( $(date +%s) - t0 )) s" >> $out/times.log
+done
+timeout 100 python3 -m benchmarks.ab run synthetic4M_1080p --old carry/old --revs 06294ad \
+  --repeat 5 --data carry/data > $out/ab_grad_syn4M.log 2>&1
+echo "ab grad rc=$? $(( $(date +%s) - t0 )) s" >> $out/times.log
+cat $out/times.log; grep "^FAILED\|passed\|failed" $out/tests.log | tail -5
+tail -n 6 $out/ab_*.log | cut -c1-150
+tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
+#
+# Call 2 (about 7 min): issue 17's table where it is closest to its targets, 20 rounds, gsplat
+# in the process; the vanilla kernel's row gives the Local-GS lead (both kernels changed).
+#   . scripts/gpu_env.sh; for s in synthetic10M_4k guitar_x110_4k synthetic4M_1080p; do
+#     timeout 150 python3 -m benchmarks.scale --data carry/data --scenes $s \
+#       --rows localgs,vanilla --repeat 20 --csv $out/fwd_$s.csv > $out/fwd_$s.log 2>&1; done
+#
+# Call 3 (about 8 min): the forward's host share at synthetic 10M, then skull's 7k steps with
+# this session's kernels (the gradient's forward runs the compacted walk):
+#   . scripts/gpu_env.sh; timeout 200 python3 scripts/kernel_times.py --data carry/data \
+#     --scenes synthetic10M_4k --host 40 > $out/kt_syn10M.log 2>&1
+#   TRAIN_SCENES=skull bash scripts/scale_gpu_check.sh train
