@@ -11,7 +11,8 @@
 export LGS_JAX_CACHE="$PWD/build/jax_cache"; t0=$(date +%s)
 timeout 330 python3 -m pytest -q -p no:cacheprovider -n 8 -m 'slow or not slow' -rf \
   --tb=short tests/backends/test_backward_segments.py tests/backends/test_gradients.py \
-  tests/backends/test_mosaic_staging.py tests/backends/test_pallas.py > $out/tests.log 2>&1
+  tests/backends/test_mosaic_staging.py tests/backends/test_pallas.py \
+  tests/backends/test_mosaic_inline.py > $out/tests.log 2>&1
 echo "tests rc=$? $(( $(date +%s) - t0 )) s" >> $out/times.log
 for s in synthetic10M_4k guitar_x16_1080p; do
   timeout 90 python3 -m benchmarks.ab run $s --old carry/old --revs 06294ad --fwd --repeat 10 \
