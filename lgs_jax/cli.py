@@ -1,6 +1,5 @@
-"""Command line: `python -m lgs_jax render ...`, `python -m lgs_jax info SCENE.ply` and
-`python -m lgs_jax fit --data DIR --out DIR [--strategy default|mcmc] [--steps N] ...`
-(lgs_jax.train).
+"""Command line: `python -m lgs_jax render ...`, `video ...` (lgs_jax.video), `info SCENE.ply`
+and `fit --data DIR --out DIR [--strategy default|mcmc] [--steps N] ...` (lgs_jax.train).
 
 Compiled programs are kept in JAX's persistent cache (`use_compile_cache`: $LGS_JAX_CACHE,
 default ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off).
@@ -24,6 +23,7 @@ import numpy as np
 from .config import CONVENTIONS
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
+VIDEO_EXTENSIONS = (".mp4",)  # lgs_jax.video.write_video (H.264)
 EXIT_FAILURE, EXIT_USAGE = 1, 2
 
 
@@ -79,13 +79,13 @@ def _check_input(path: str, what: str) -> None:
         raise UsageError(f"{what}: {path}: not a file")
 
 
-def _check_out(path: str) -> None:
-    """Raise `UsageError` unless `path` can be written as an image: a known image extension in
-    an existing, writable directory (checked before rendering, not after)."""
+def _check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") -> None:
+    """Raise `UsageError` unless `path` can be written as `kind`: one of `extensions` in an
+    existing, writable directory (checked before rendering, not after)."""
     ext = os.path.splitext(path)[1].lower()
-    if ext not in IMAGE_EXTENSIONS:
-        raise UsageError(f"--out: {path}: extension {ext or '(none)'!r} is not an image format "
-                         f"written here; use one of {', '.join(IMAGE_EXTENSIONS)}")
+    if ext not in extensions:
+        raise UsageError(f"--out: {path}: extension {ext or '(none)'!r} is not {kind} format "
+                         f"written here; use {' or '.join(extensions)}")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise UsageError(f"--out: {path}: directory {folder} does not exist")
@@ -183,6 +183,61 @@ def _render(args) -> int:
     return 0
 
 
+def _video_cameras(args):
+    """The cameras a video's path is fitted to: --cameras, or the default scene's 8 orbit views,
+    at --width/--height."""
+    import lgs_jax
+    from lgs_jax import data
+
+    if args.cameras:
+        cams = lgs_jax.load_cameras(args.cameras, width=args.width, height=args.height)
+        if not cams:
+            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
+    elif args.scene:
+        raise UsageError("--cameras: needed for a video of a scene file (the default scene has "
+                         "its own)")
+    else:
+        cams = [lgs_jax.default_camera(v, args.width, args.height)
+                for v in range(data.ORBIT_VIEWS)]
+    if cams[0].width % 2 or cams[0].height % 2:
+        raise UsageError(f"--width/--height: H.264 needs an even width and height, got "
+                         f"{cams[0].width}x{cams[0].height}")
+    return cams
+
+
+def _video(args) -> int:
+    """`video`: check the arguments, fit the path, render every frame, write the MP4."""
+    import jax
+    from tqdm import tqdm
+
+    import lgs_jax
+    from lgs_jax import video
+
+    for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
+        if path:
+            _check_input(path, what)
+    _check_out(args.out, VIDEO_EXTENSIONS, "a video")
+    cams = _video_cameras(args)
+    try:
+        path = (video.orbit_path(cams, args.frames, args.turns) if args.path == "orbit"
+                else video.camera_path(cams, args.frames))
+    except ValueError as e:
+        raise UsageError(f"--path {args.path}: {e}") from None
+    scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
+    frames = video.render_frames(
+        scene, tqdm(path, desc="frames", unit="frame"), backend=args.backend,
+        background=np.asarray(args.background, np.float32),
+        config=lgs_jax.RasterConfig(convention=args.convention))
+    t0 = time.time()
+    count = video.write_video(args.out, frames, fps=args.fps)
+    seconds = time.time() - t0
+    print(f"scene: {scene.num} Gaussians; {count} frames {path[0].width}x{path[0].height} at "
+          f"{args.fps:g} fps; device {jax.devices()[0].platform}; {seconds:.1f} s "
+          f"(the first frame compiles)")
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _info(args) -> int:
     """`info`: counts, SH degree, bounds and non-finite values of a PLY."""
     import lgs_jax
@@ -233,10 +288,30 @@ def _fit(args) -> int:
     return 0
 
 
-def _render_parser(sub, common) -> None:
-    """The `render` subcommand's options (backends from lgs_jax.BACKENDS)."""
+def _view_options(p) -> None:
+    """The options `render` and `video` share: the scene, its cameras, the image size, the
+    backend (lgs_jax.BACKENDS), the compositing rule and the background."""
     from .render import BACKENDS
 
+    p.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
+                                            "scene, a label reading MIXED DROPS)")
+    p.add_argument("--cameras", help="cameras.json or transforms.json (needed with a scene file)")
+    p.add_argument("--width", type=_int_at_least(1),
+                   help="image width in pixels (default: the camera's, 1280 for the default scene)")
+    p.add_argument("--height", type=_int_at_least(1),
+                   help="image height in pixels (default: the camera's, 720 for the default scene)")
+    p.add_argument("--backend", default=None, choices=BACKENDS,
+                   help="rasterizer (default: the fastest exact one for the platform, pallas on "
+                        "a GPU, tiles elsewhere; pallas and pallas_vanilla run interpreted "
+                        "without a GPU)")
+    p.add_argument("--convention", default="3dgs", choices=CONVENTIONS,
+                   help="compositing rule (default: 3dgs)")
+    p.add_argument("--background", type=_finite_float, nargs=3, default=[0.0, 0.0, 0.0],
+                   metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
+
+
+def _render_parser(sub, common) -> None:
+    """The `render` subcommand's options."""
     r = sub.add_parser(
         "render", parents=[common], help="render a scene (the bundled default scene if none given)",
         description="Render one view once and write it as an image (--out). Prints the scene and "
@@ -246,27 +321,34 @@ def _render_parser(sub, common) -> None:
                     "aspect ratio scale the view to cover that size and crop its centre (never "
                     "stretched). Errors: one line on stderr, exit code 2 for a bad command line "
                     "(checked before rendering), 1 for a failure (e.g. a malformed file).")
-    r.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
-                                            "scene, a label reading MIXED DROPS)")
-    r.add_argument("--cameras", help="cameras.json or transforms.json (needed with a scene file)")
+    _view_options(r)
     r.add_argument("--view", type=_int_at_least(0),
                    help="camera index (default: 0 of --cameras; for the default scene its "
                         "framing camera, or orbit view 0..7)")
-    r.add_argument("--width", type=_int_at_least(1),
-                   help="image width in pixels (default: the camera's, 1280 for the default scene)")
-    r.add_argument("--height", type=_int_at_least(1),
-                   help="image height in pixels (default: the camera's, 720 for the default scene)")
-    r.add_argument("--backend", default=None, choices=BACKENDS,
-                   help="rasterizer (default: the fastest exact one for the platform, pallas on "
-                        "a GPU, tiles elsewhere; pallas and pallas_vanilla run interpreted "
-                        "without a GPU)")
-    r.add_argument("--convention", default="3dgs", choices=CONVENTIONS,
-                   help="compositing rule (default: 3dgs)")
-    r.add_argument("--background", type=_finite_float, nargs=3, default=[0.0, 0.0, 0.0],
-                   metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
     r.add_argument("--out", default="out.png",
                    help=f"image to write, {'/'.join(IMAGE_EXTENSIONS)} (default: out.png)")
     r.set_defaults(func=_render)
+
+
+def _video_parser(sub, common) -> None:
+    """The `video` subcommand's options (lgs_jax.video)."""
+    v = sub.add_parser(
+        "video", parents=[common], help="render a video along a camera path",
+        description="Render a camera path and write it as an H.264 MP4 (--out): an orbit fitted "
+                    "to the cameras (the point nearest their optical axes, about their mean up "
+                    "axis, at their mean height and distance; lgs_jax.video.orbit_path) or the "
+                    "cameras themselves in order, poses interpolated between them. The frames "
+                    "share one compiled render. Sizes as `render`'s, and even (H.264).")
+    _view_options(v)
+    v.add_argument("--path", choices=["orbit", "cameras"], default="orbit",
+                   help="orbit (default) or the cameras in order")
+    v.add_argument("--frames", type=_int_at_least(1), default=120, help="default: 120")
+    v.add_argument("--fps", type=_number_at_least(1.0, float), default=30.0,
+                   help="frames per second (default: 30)")
+    v.add_argument("--turns", type=_finite_float, default=1.0,
+                   help="times around the orbit (default: 1; negative turns the other way)")
+    v.add_argument("--out", default="video.mp4", help="video to write, .mp4 (default: video.mp4)")
+    v.set_defaults(func=_video)
 
 
 def _fit_parser(sub, common) -> None:
@@ -343,13 +425,14 @@ def _fit_parser(sub, common) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    """The command line: `render`, `info` and `fit`, each with `--debug`."""
+    """The command line: `render`, `video`, `info` and `fit`, each with `--debug`."""
     common = _Parser(add_help=False)
     common.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     ap = _Parser(prog="python -m lgs_jax", description=__doc__,
                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     _render_parser(sub, common)
+    _video_parser(sub, common)
     i = sub.add_parser("info", parents=[common],
                        help="print counts, SH degree, bounds and non-finite values")
     i.add_argument("scene")

@@ -1,0 +1,204 @@
+"""Videos of a scene along a camera path: an orbit fitted to a capture's cameras, or the
+capture's own cameras in order with the poses between them interpolated; every frame one
+`lgs_jax.render` call (one compile: the frames share the image size), written as an H.264 MP4
+through imageio-ffmpeg.
+
+    cams = orbit_path(lgs_jax.load_cameras("cameras.json"), frames=120)
+    write_video("orbit.mp4", render_frames(scene, cams), fps=30)
+
+The orbit (`orbit_path`): the centre is the point nearest to every camera's optical axis (least
+squares: Σ_i (I − d_i d_iᵀ)(c − o_i) = 0 for camera centres o_i and viewing directions d_i),
+the axis is the cameras' mean "up" (−y of OpenCV camera axes), and the path is the circle about
+that axis through the cameras' mean height and mean distance from it, starting at the first
+camera, every frame looking at the centre. Intrinsics and image size are the first camera's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+import numpy as np
+
+from .scene import Camera
+
+
+def _pose(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """(camera centre, world-to-camera rotation) in float64."""
+    view = np.asarray(cam.viewmat, np.float64)
+    rot = view[:3, :3]
+    return -rot.T @ view[:3, 3], rot
+
+
+def _at(cam: Camera, centre, rot) -> Camera:
+    """`cam`'s intrinsics and size at the pose (centre, world-to-camera rotation)."""
+    view = np.eye(4)
+    view[:3, :3] = rot
+    view[:3, 3] = -rot @ centre
+    return dataclasses.replace(cam, viewmat=view.astype(np.float32))
+
+
+def look_at(position, target, up) -> np.ndarray:
+    """World-to-camera rotation (OpenCV axes: rows x right, y down, z forward) of a camera at
+    `position` looking at `target`, image up as close to `up` as the view direction allows."""
+    forward = np.asarray(target, np.float64) - np.asarray(position, np.float64)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, np.float64))
+    norm = np.linalg.norm(right)
+    if norm < 1e-9:
+        raise ValueError("look_at: the view direction is parallel to up")
+    right /= norm
+    return np.stack([right, np.cross(forward, right), forward])
+
+
+def _check_frames(frames) -> None:
+    if not isinstance(frames, (int, np.integer)) or isinstance(frames, bool) or frames < 1:
+        raise ValueError(f"frames: expected an int >= 1, got {frames!r}")
+
+
+def orbit_path(cameras, frames: int, turns: float = 1.0) -> list[Camera]:
+    """`frames` cameras on the orbit fitted to `cameras` (module docstring), `turns` times
+    around from the first camera off the axis (the last frame one step short of the start,
+    so the video loops). Raises
+    `ValueError` for fewer than two cameras, optical axes too close to parallel to meet, or
+    cameras on the orbit's axis."""
+    _check_frames(frames)
+    if len(cameras) < 2:
+        raise ValueError(f"cameras: an orbit needs at least 2 cameras, got {len(cameras)}")
+    poses = [_pose(c) for c in cameras]
+    origins = np.stack([o for o, _ in poses])
+    dirs = np.stack([r[2] for _, r in poses])
+    projectors = np.eye(3) - dirs[:, :, None] * dirs[:, None, :]
+    a, b = projectors.sum(0), np.einsum("nij,nj->i", projectors, origins)
+    if np.linalg.cond(a) > 1e6:
+        raise ValueError("cameras: their optical axes are (nearly) parallel; no centre to "
+                         "orbit about")
+    centre = np.linalg.solve(a, b)
+    up = -np.mean([r[1] for _, r in poses], 0)
+    up /= np.linalg.norm(up)
+    rel = origins - centre
+    height = float(np.mean(rel @ up))
+    flat = rel - np.outer(rel @ up, up)
+    off_axis = np.linalg.norm(flat, axis=1)
+    radius = float(np.mean(off_axis))
+    if radius <= 1e-9 * (1 + np.abs(origins).max()):
+        raise ValueError("cameras: they lie on the orbit's axis")
+    first = int(np.argmax(off_axis > 1e-6 * radius))  # the first camera off the axis
+    e1 = flat[first] / off_axis[first]
+    e2 = np.cross(up, e1)
+    out = []
+    for k in range(frames):
+        theta = 2 * math.pi * turns * k / frames
+        position = centre + height * up + radius * (math.cos(theta) * e1 + math.sin(theta) * e2)
+        out.append(_at(cameras[0], position, look_at(position, centre, up)))
+    return out
+
+
+def _quaternion(rot) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix."""
+    w = math.sqrt(max(0.0, 1 + np.trace(rot))) / 2
+    x = math.copysign(math.sqrt(max(0.0, 1 + rot[0, 0] - rot[1, 1] - rot[2, 2])) / 2,
+                      rot[2, 1] - rot[1, 2])
+    y = math.copysign(math.sqrt(max(0.0, 1 - rot[0, 0] + rot[1, 1] - rot[2, 2])) / 2,
+                      rot[0, 2] - rot[2, 0])
+    z = math.copysign(math.sqrt(max(0.0, 1 - rot[0, 0] - rot[1, 1] + rot[2, 2])) / 2,
+                      rot[1, 0] - rot[0, 1])
+    q = np.array([w, x, y, z])
+    return q / np.linalg.norm(q)
+
+
+def _rotation(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _slerp(q0, q1, t: float) -> np.ndarray:
+    """Spherical interpolation between unit quaternions along the shorter arc."""
+    dot = float(q0 @ q1)
+    if dot < 0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:  # nearly equal: the chord, normalised
+        q = q0 + t * (q1 - q0)
+        return q / np.linalg.norm(q)
+    angle = math.acos(dot)
+    return (math.sin((1 - t) * angle) * q0 + math.sin(t * angle) * q1) / math.sin(angle)
+
+
+def camera_path(cameras, frames: int) -> list[Camera]:
+    """`frames` cameras through `cameras` in order, the first to the last: centres linear and
+    rotations spherically interpolated between neighbours, at equal steps of the path's
+    parameter (one unit per pair of neighbours). Intrinsics and size are the first camera's."""
+    _check_frames(frames)
+    if not cameras:
+        raise ValueError("cameras: none given")
+    poses = [(o, _quaternion(r)) for o, r in map(_pose, cameras)]
+    if len(poses) == 1 or frames == 1:
+        o, q = poses[0]
+        return [_at(cameras[0], o, _rotation(q))] * frames
+    out = []
+    for k in range(frames):
+        s = k * (len(poses) - 1) / (frames - 1)
+        i = min(int(s), len(poses) - 2)
+        t = s - i
+        (o0, q0), (o1, q1) = poses[i], poses[i + 1]
+        out.append(_at(cameras[0], (1 - t) * o0 + t * o1, _rotation(_slerp(q0, q1, t))))
+    return out
+
+
+def render_frames(scene, cameras, **render_kwargs):
+    """Each camera's image as (height, width, 3) uint8 (colour clipped to [0, 1], rounded),
+    rendered by `lgs_jax.render(scene, camera, **render_kwargs)`; a generator. The pair buffer
+    is the first frame's `pair_capacity` and grows (one recompile) only when a frame needs more,
+    so that frames share compiled programs."""
+    from .render import CapacityError, render
+
+    capacity = None
+    for cam in cameras:
+        try:
+            out = render(scene, cam, capacity=capacity, **render_kwargs)
+        except CapacityError:
+            if capacity is None:  # more pairs than int32 indexes: nothing to grow into
+                raise
+            out = render(scene, cam, **render_kwargs)  # counted and sized anew
+        capacity = int(out.stats.capacity)
+        image = np.asarray(out.image)
+        yield np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
+
+
+def write_video(path: str, frames, fps: float = 30.0, quality: float = 8.0) -> int:
+    """Write uint8 (height, width, 3) `frames` (an iterable) to `path` as H.264 MP4 (yuv420p,
+    imageio-ffmpeg's bundled ffmpeg; `quality` 0–10, its scale); returns the frame count.
+    Raises `ValueError` for frames of another shape or dtype, or of odd width or height
+    (H.264's 4:2:0 chroma needs even sizes; ffmpeg would otherwise rescale them)."""
+    import imageio_ffmpeg
+
+    writer, shape, count = None, None, 0
+    try:
+        for frame in frames:
+            frame = np.asarray(frame)
+            if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3:
+                raise ValueError(f"frames: expected (height, width, 3) uint8, got "
+                                 f"{frame.shape} {frame.dtype}")
+            if writer is None:
+                shape = frame.shape
+                h, w = shape[:2]
+                if h % 2 or w % 2:
+                    raise ValueError(f"frames: H.264 needs an even width and height, got "
+                                     f"{w}x{h}")
+                writer = imageio_ffmpeg.write_frames(path, (w, h), fps=fps, quality=quality,
+                                                     macro_block_size=1)
+                with warnings.catch_warnings():  # ffmpeg is exec'd at once: JAX's warning
+                    warnings.filterwarnings("ignore", "os.fork", RuntimeWarning)  # is moot
+                    writer.send(None)  # start ffmpeg
+            elif frame.shape != shape:
+                raise ValueError(f"frames: frame {count} is {frame.shape}, the first {shape}")
+            writer.send(np.ascontiguousarray(frame))
+            count += 1
+    finally:
+        if writer is not None:
+            writer.close()
+    return count
