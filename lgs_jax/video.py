@@ -15,41 +15,13 @@ camera, every frame looking at the centre. Intrinsics and image size are the fir
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import warnings
 
 import numpy as np
 
+from . import poses
 from .scene import Camera
-
-
-def _pose(cam: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """(camera centre, world-to-camera rotation) in float64."""
-    view = np.asarray(cam.viewmat, np.float64)
-    rot = view[:3, :3]
-    return -rot.T @ view[:3, 3], rot
-
-
-def _at(cam: Camera, centre, rot) -> Camera:
-    """`cam`'s intrinsics and size at the pose (centre, world-to-camera rotation)."""
-    view = np.eye(4)
-    view[:3, :3] = rot
-    view[:3, 3] = -rot @ centre
-    return dataclasses.replace(cam, viewmat=view.astype(np.float32))
-
-
-def look_at(position, target, up) -> np.ndarray:
-    """World-to-camera rotation (OpenCV axes: rows x right, y down, z forward) of a camera at
-    `position` looking at `target`, image up as close to `up` as the view direction allows."""
-    forward = np.asarray(target, np.float64) - np.asarray(position, np.float64)
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(up, np.float64))
-    norm = np.linalg.norm(right)
-    if norm < 1e-9:
-        raise ValueError("look_at: the view direction is parallel to up")
-    right /= norm
-    return np.stack([right, np.cross(forward, right), forward])
 
 
 def _check_frames(frames) -> None:
@@ -66,16 +38,16 @@ def orbit_path(cameras, frames: int, turns: float = 1.0) -> list[Camera]:
     _check_frames(frames)
     if len(cameras) < 2:
         raise ValueError(f"cameras: an orbit needs at least 2 cameras, got {len(cameras)}")
-    poses = [_pose(c) for c in cameras]
-    origins = np.stack([o for o, _ in poses])
-    dirs = np.stack([r[2] for _, r in poses])
+    placed = [poses.pose(c) for c in cameras]
+    origins = np.stack([o for o, _ in placed])
+    dirs = np.stack([r[2] for _, r in placed])
     projectors = np.eye(3) - dirs[:, :, None] * dirs[:, None, :]
     a, b = projectors.sum(0), np.einsum("nij,nj->i", projectors, origins)
     if np.linalg.cond(a) > 1e6:
         raise ValueError("cameras: their optical axes are (nearly) parallel; no centre to "
                          "orbit about")
     centre = np.linalg.solve(a, b)
-    up = -np.mean([r[1] for _, r in poses], 0)
+    up = -np.mean([r[1] for _, r in placed], 0)
     up /= np.linalg.norm(up)
     rel = origins - centre
     height = float(np.mean(rel @ up))
@@ -91,41 +63,8 @@ def orbit_path(cameras, frames: int, turns: float = 1.0) -> list[Camera]:
     for k in range(frames):
         theta = 2 * math.pi * turns * k / frames
         position = centre + height * up + radius * (math.cos(theta) * e1 + math.sin(theta) * e2)
-        out.append(_at(cameras[0], position, look_at(position, centre, up)))
+        out.append(poses.posed(cameras[0], position, poses.look_at(position, centre, up)))
     return out
-
-
-def _quaternion(rot) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix."""
-    w = math.sqrt(max(0.0, 1 + np.trace(rot))) / 2
-    x = math.copysign(math.sqrt(max(0.0, 1 + rot[0, 0] - rot[1, 1] - rot[2, 2])) / 2,
-                      rot[2, 1] - rot[1, 2])
-    y = math.copysign(math.sqrt(max(0.0, 1 - rot[0, 0] + rot[1, 1] - rot[2, 2])) / 2,
-                      rot[0, 2] - rot[2, 0])
-    z = math.copysign(math.sqrt(max(0.0, 1 - rot[0, 0] - rot[1, 1] + rot[2, 2])) / 2,
-                      rot[1, 0] - rot[0, 1])
-    q = np.array([w, x, y, z])
-    return q / np.linalg.norm(q)
-
-
-def _rotation(q) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-def _slerp(q0, q1, t: float) -> np.ndarray:
-    """Spherical interpolation between unit quaternions along the shorter arc."""
-    dot = float(q0 @ q1)
-    if dot < 0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:  # nearly equal: the chord, normalised
-        q = q0 + t * (q1 - q0)
-        return q / np.linalg.norm(q)
-    angle = math.acos(dot)
-    return (math.sin((1 - t) * angle) * q0 + math.sin(t * angle) * q1) / math.sin(angle)
 
 
 def camera_path(cameras, frames: int) -> list[Camera]:
@@ -135,38 +74,45 @@ def camera_path(cameras, frames: int) -> list[Camera]:
     _check_frames(frames)
     if not cameras:
         raise ValueError("cameras: none given")
-    poses = [(o, _quaternion(r)) for o, r in map(_pose, cameras)]
-    if len(poses) == 1 or frames == 1:
-        o, q = poses[0]
-        return [_at(cameras[0], o, _rotation(q))] * frames
+    keys = [(o, poses.quaternion(r)) for o, r in map(poses.pose, cameras)]
+    if len(keys) == 1 or frames == 1:
+        o, q = keys[0]
+        return [poses.posed(cameras[0], o, poses.rotation(q))] * frames
     out = []
     for k in range(frames):
-        s = k * (len(poses) - 1) / (frames - 1)
-        i = min(int(s), len(poses) - 2)
+        s = k * (len(keys) - 1) / (frames - 1)
+        i = min(int(s), len(keys) - 2)
         t = s - i
-        (o0, q0), (o1, q1) = poses[i], poses[i + 1]
-        out.append(_at(cameras[0], (1 - t) * o0 + t * o1, _rotation(_slerp(q0, q1, t))))
+        (o0, q0), (o1, q1) = keys[i], keys[i + 1]
+        rot = poses.rotation(poses.slerp(q0, q1, t))
+        out.append(poses.posed(cameras[0], (1 - t) * o0 + t * o1, rot))
     return out
 
 
-def render_frames(scene, cameras, **render_kwargs):
-    """Each camera's image as (height, width, 3) uint8 (colour clipped to [0, 1], rounded),
-    rendered by `lgs_jax.render(scene, camera, **render_kwargs)`; a generator. The pair buffer
-    is the first frame's `pair_capacity` and grows (one recompile) only when a frame needs more,
-    so that frames share compiled programs."""
+def render_image(scene, cam, capacity: int | None = None, **render_kwargs):
+    """(image, capacity): `lgs_jax.render(scene, cam, capacity=capacity, **render_kwargs)`'s
+    colour as (height, width, 3) uint8 (clipped to [0, 1], rounded), and the pair buffer it
+    used. Pass that capacity to the next call so that views share compiled programs: it is
+    counted and sized anew (one recompile) only when a view needs more pairs."""
     from .render import CapacityError, render
 
+    try:
+        out = render(scene, cam, capacity=capacity, **render_kwargs)
+    except CapacityError:
+        if capacity is None:  # more pairs than int32 indexes: nothing to grow into
+            raise
+        out = render(scene, cam, **render_kwargs)
+    image = np.round(np.clip(np.asarray(out.image), 0.0, 1.0) * 255).astype(np.uint8)
+    return image, int(out.stats.capacity)
+
+
+def render_frames(scene, cameras, **render_kwargs):
+    """Each camera's image (`render_image`, the capacity carried from frame to frame); a
+    generator."""
     capacity = None
     for cam in cameras:
-        try:
-            out = render(scene, cam, capacity=capacity, **render_kwargs)
-        except CapacityError:
-            if capacity is None:  # more pairs than int32 indexes: nothing to grow into
-                raise
-            out = render(scene, cam, **render_kwargs)  # counted and sized anew
-        capacity = int(out.stats.capacity)
-        image = np.asarray(out.image)
-        yield np.round(np.clip(image, 0.0, 1.0) * 255).astype(np.uint8)
+        image, capacity = render_image(scene, cam, capacity, **render_kwargs)
+        yield image
 
 
 def write_video(path: str, frames, fps: float = 30.0, quality: float = 8.0) -> int:

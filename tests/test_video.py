@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import lgs_jax
-from lgs_jax import data, video
+from lgs_jax import data, poses, video
 from lgs_jax.cli import main
 
 
@@ -38,8 +38,8 @@ def test_orbit_through_the_default_scenes_orbit_cameras_is_those_cameras():
 
 def test_orbit_frames_look_at_the_centre_from_equal_distance():
     path = video.orbit_path(_orbit_cameras(), 13, turns=-0.5)
-    centres = np.stack([video._pose(c)[0] for c in path])
-    forward = np.stack([video._pose(c)[1][2] for c in path])
+    centres = np.stack([poses.pose(c)[0] for c in path])
+    forward = np.stack([poses.pose(c)[1][2] for c in path])
     # every optical axis passes through one point: the axes' nearest point lies on all of them
     off = np.eye(3) - forward[:, :, None] * forward[:, None, :]
     point = np.linalg.solve(off.sum(0), np.einsum("nij,nj->i", off, centres))
@@ -50,8 +50,8 @@ def test_orbit_frames_look_at_the_centre_from_equal_distance():
 
 @pytest.mark.parametrize("make,match", [
     (lambda cams: cams[:1], "at least 2 cameras"),
-    (lambda cams: [cams[0], video._at(cams[0], video._pose(cams[0])[0] + [1.0, 0, 0],
-                                      video._pose(cams[0])[1])], "parallel"),
+    (lambda cams: [cams[0], poses.posed(cams[0], poses.pose(cams[0])[0] + [1.0, 0, 0],
+                                      poses.pose(cams[0])[1])], "parallel"),
 ])
 def test_orbit_refuses_cameras_it_cannot_fit(make, match):
     with pytest.raises(ValueError, match=match):
@@ -70,21 +70,21 @@ def test_camera_path_starts_and_ends_at_the_cameras_and_interpolates_between():
     for i, k in ((0, 0), (1, 2), (2, 4)):
         np.testing.assert_allclose(np.asarray(path[k].viewmat), np.asarray(cams[i].viewmat),
                                    atol=1e-6)
-    (o0, r0), (o1, r1) = video._pose(cams[0]), video._pose(cams[1])
-    mid, rot = video._pose(path[1])
+    (o0, r0), (o1, r1) = poses.pose(cams[0]), poses.pose(cams[1])
+    mid, rot = poses.pose(path[1])
     np.testing.assert_allclose(mid, (o0 + o1) / 2, atol=1e-6)
     np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-6)
     np.testing.assert_allclose(rot @ r0.T, r1 @ rot.T, atol=1e-6)  # the geodesic's midpoint
-    third = video._pose(video.camera_path(cams[:2], 4)[1])[1] @ r0.T  # a third of the way
+    third = poses.pose(video.camera_path(cams[:2], 4)[1])[1] @ r0.T  # a third of the way
     np.testing.assert_allclose(third @ third @ third, r1 @ r0.T, atol=1e-5)  # equal steps
     assert len(video.camera_path(cams[:1], 3)) == 3
 
 
 def test_look_at_puts_the_target_ahead_and_up_up():
-    rot = video.look_at([0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [0.0, -1.0, 0.0])
+    rot = poses.look_at([0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [0.0, -1.0, 0.0])
     np.testing.assert_allclose(rot, np.eye(3), atol=1e-12)  # OpenCV: y down, so up is −y
     with pytest.raises(ValueError, match="parallel"):
-        video.look_at([0, 0, 0], [0, 1, 0], [0, 1, 0])
+        poses.look_at([0, 0, 0], [0, 1, 0], [0, 1, 0])
 
 
 def test_written_video_decodes_to_the_frames(tmp_path):

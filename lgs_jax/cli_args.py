@@ -1,0 +1,105 @@
+"""The command line's shared pieces (lgs_jax.cli and its subcommands' modules): one-line usage
+errors (exit code 2), option types that name the option and the bad value, input and output path
+checks made before any work, and the view options `render` and `video` share."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+from .config import CONVENTIONS
+
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
+VIDEO_EXTENSIONS = (".mp4",)  # lgs_jax.video.write_video (H.264)
+EXIT_FAILURE, EXIT_USAGE = 1, 2
+
+
+class UsageError(Exception):
+    """A bad command line found before any work starts (exit code 2)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage dump), exit code 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def number_at_least(low, kind=int):
+    """An argparse type: a finite number of `kind` (int or float) >= `low`."""
+    name = "an integer" if kind is int else "a number"
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {name}, got {text!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if v < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
+        return v
+    return parse
+
+
+def int_at_least(low: int):
+    """An argparse type: an int >= `low`."""
+    return number_at_least(low, int)
+
+
+def finite_float(text: str) -> float:
+    """An argparse type: a finite float (no nan or inf)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return v
+
+
+def check_input(path: str, what: str) -> None:
+    """Raise `UsageError` unless `path` is an existing file."""
+    if not os.path.exists(path):
+        raise UsageError(f"{what}: {path}: no such file")
+    if not os.path.isfile(path):
+        raise UsageError(f"{what}: {path}: not a file")
+
+
+def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") -> None:
+    """Raise `UsageError` unless `path` can be written as `kind`: one of `extensions` in an
+    existing, writable directory (checked before rendering, not after)."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in extensions:
+        raise UsageError(f"--out: {path}: extension {ext or '(none)'!r} is not {kind} format "
+                         f"written here; use {' or '.join(extensions)}")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"--out: {path}: directory {folder} does not exist")
+    if os.path.isdir(path):
+        raise UsageError(f"--out: {path} is a directory")
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise UsageError(f"--out: {path}: not writable")
+
+
+def view_options(p) -> None:
+    """The options `render` and `video` share: the scene, its cameras, the image size, the
+    backend (lgs_jax.BACKENDS), the compositing rule and the background."""
+    from .render import BACKENDS
+
+    p.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
+                                            "scene, a label reading MIXED DROPS)")
+    p.add_argument("--cameras", help="cameras.json or transforms.json (needed with a scene file)")
+    p.add_argument("--width", type=int_at_least(1),
+                   help="image width in pixels (default: the camera's, 1280 for the default scene)")
+    p.add_argument("--height", type=int_at_least(1),
+                   help="image height in pixels (default: the camera's, 720 for the default scene)")
+    p.add_argument("--backend", default=None, choices=BACKENDS,
+                   help="rasterizer (default: the fastest exact one for the platform, pallas on "
+                        "a GPU, tiles elsewhere; pallas and pallas_vanilla run interpreted "
+                        "without a GPU)")
+    p.add_argument("--convention", default="3dgs", choices=CONVENTIONS,
+                   help="compositing rule (default: 3dgs)")
+    p.add_argument("--background", type=finite_float, nargs=3, default=[0.0, 0.0, 0.0],
+                   metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
