@@ -1,5 +1,6 @@
-"""Command line: `python -m lgs_jax render ...`, `video ...` (lgs_jax.video), `info SCENE.ply`
-and `fit --data DIR --out DIR [--strategy default|mcmc] [--steps N] ...` (lgs_jax.train).
+"""Command line: `python -m lgs_jax render ...`, `video ...` (lgs_jax.video), `view ...`
+(lgs_jax.viewer), `info SCENE.ply` and `fit --data DIR --out DIR [--strategy default|mcmc]
+[--steps N] ...` (lgs_jax.train).
 
 Compiled programs are kept in JAX's persistent cache (`use_compile_cache`: $LGS_JAX_CACHE,
 default ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off).
@@ -20,7 +21,7 @@ import time
 
 import numpy as np
 
-from . import cli_video
+from . import cli_video, cli_view
 from .cli_args import (EXIT_FAILURE, EXIT_USAGE, IMAGE_EXTENSIONS, Parser, UsageError,
                        check_input, check_out, int_at_least, number_at_least, view_options)
 from .config import CONVENTIONS
@@ -258,7 +259,7 @@ def _fit_parser(sub, common) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    """The command line: `render`, `video`, `info` and `fit`, each with `--debug`."""
+    """The command line: `render`, `video`, `view`, `info` and `fit`, each with `--debug`."""
     common = Parser(add_help=False)
     common.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     ap = Parser(prog="python -m lgs_jax", description=__doc__,
@@ -266,6 +267,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     _render_parser(sub, common)
     cli_video.parser(sub, common)
+    cli_view.parser(sub, common)
     i = sub.add_parser("info", parents=[common],
                        help="print counts, SH degree, bounds and non-finite values")
     i.add_argument("scene")

@@ -83,18 +83,19 @@ def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") ->
         raise UsageError(f"--out: {path}: not writable")
 
 
-def view_options(p) -> None:
-    """The options `render` and `video` share: the scene, its cameras, the image size, the
-    backend (lgs_jax.BACKENDS), the compositing rule and the background."""
+def view_options(p, sizes: bool = True) -> None:
+    """The options `render`, `video` and `view` share: the scene, its cameras, the image size
+    (with `sizes`), the backend (lgs_jax.BACKENDS), the compositing rule and the background."""
     from .render import BACKENDS
 
     p.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
                                             "scene, a label reading MIXED DROPS)")
     p.add_argument("--cameras", help="cameras.json or transforms.json (needed with a scene file)")
-    p.add_argument("--width", type=int_at_least(1),
-                   help="image width in pixels (default: the camera's, 1280 for the default scene)")
-    p.add_argument("--height", type=int_at_least(1),
-                   help="image height in pixels (default: the camera's, 720 for the default scene)")
+    if sizes:
+        p.add_argument("--width", type=int_at_least(1), help="image width in pixels (default: "
+                       "the camera's, 1280 for the default scene)")
+        p.add_argument("--height", type=int_at_least(1), help="image height in pixels "
+                       "(default: the camera's, 720 for the default scene)")
     p.add_argument("--backend", default=None, choices=BACKENDS,
                    help="rasterizer (default: the fastest exact one for the platform, pallas on "
                         "a GPU, tiles elsewhere; pallas and pallas_vanilla run interpreted "

@@ -1,0 +1,69 @@
+"""`python -m lgs_jax view`: the scene in a browser (lgs_jax.viewer, viser's server), starting
+at a camera of the capture."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cli_args import UsageError, check_input, int_at_least, view_options
+
+
+def parser(sub, common) -> None:
+    """The `view` subcommand's options."""
+    v = sub.add_parser(
+        "view", parents=[common], help="view a scene in a browser (viser)",
+        description="Serve the scene to a browser (http://localhost:PORT): the mouse orbits, "
+                    "pans and zooms, and every camera change renders the view at the canvas's "
+                    "aspect ratio, its longer side --max-size pixels (a slider in the page "
+                    "changes it; a new size compiles once). Needs viser: pip install "
+                    "\"lgs_jax[viewer]\". Ctrl-C stops.")
+    view_options(v, sizes=False)
+    v.add_argument("--view", type=int_at_least(0),
+                   help="the camera to start at (default: 0 of --cameras; for the default "
+                        "scene its framing camera)")
+    v.add_argument("--port", type=int_at_least(1), default=8080,
+                   help="HTTP port (default: 8080; the next free one if taken)")
+    v.add_argument("--host", default="0.0.0.0", help="address to listen on (default: all)")
+    v.add_argument("--max-size", type=int_at_least(16), default=1024,
+                   help="longer side of the rendered frames in pixels (default: 1024)")
+    v.set_defaults(func=run)
+
+
+def _cameras(args):
+    """[the starting camera, ...]: --view of --cameras (0 by default), or the default scene's
+    framing camera."""
+    import lgs_jax
+    from lgs_jax import data
+
+    if args.cameras:
+        cams = lgs_jax.load_cameras(args.cameras)
+        if not cams:
+            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
+        view = args.view or 0
+        if view >= len(cams):
+            raise UsageError(f"--view: {view} is out of range: {args.cameras} has {len(cams)} "
+                             f"cameras (0..{len(cams) - 1})")
+        return [cams[view]]
+    if args.scene:
+        raise UsageError("--cameras: needed to view a scene file (the default scene has its "
+                         "own)")
+    if args.view is not None and args.view >= data.ORBIT_VIEWS:
+        raise UsageError(f"--view: {args.view} is out of range: the default scene has "
+                         f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
+    return [lgs_jax.default_camera(args.view)]
+
+
+def run(args) -> int:
+    """`view`: check the arguments, load, serve until Ctrl-C."""
+    import lgs_jax
+    from lgs_jax import viewer
+
+    for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
+        if path:
+            check_input(path, what)
+    cams = _cameras(args)
+    scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
+    viewer.serve(scene, cams, host=args.host, port=args.port, max_size=args.max_size,
+                 backend=args.backend, background=np.asarray(args.background, np.float32),
+                 config=lgs_jax.RasterConfig(convention=args.convention))
+    return 0

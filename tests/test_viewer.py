@@ -1,0 +1,141 @@
+"""lgs_jax.viewer: viser's camera states as our cameras (and back), the frame sizes, the frames
+themselves, the render loop's coalescing with stand-in clients, and the server answering."""
+
+import socket
+import threading
+import time
+import types
+import urllib.request
+
+import numpy as np
+import pytest
+
+import lgs_jax
+from lgs_jax import data, viewer
+from lgs_jax.cli import main
+from lgs_jax.video import render_image
+
+
+def test_viewer_pose_and_camera_from_pose_are_inverse():
+    for view in range(data.ORBIT_VIEWS):
+        cam = lgs_jax.default_camera(view)
+        position, wxyz, fov = viewer.viewer_pose(cam)
+        back = viewer.camera_from_pose(position, wxyz, fov, cam.width, cam.height)
+        np.testing.assert_allclose(np.asarray(back.viewmat), np.asarray(cam.viewmat), atol=1e-6)
+        for name in ("fx", "fy", "cx", "cy"):
+            np.testing.assert_allclose(float(getattr(back, name)), float(getattr(cam, name)),
+                                       rtol=1e-6)
+
+
+def test_camera_from_pose_follows_visers_opencv_axes():
+    """wxyz is the camera-to-world rotation: a quarter turn about world y points the camera's
+    +z (forward) along world +x and leaves its y (down) on world y."""
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    cam = viewer.camera_from_pose([1.0, 2.0, 3.0], [c, 0.0, s, 0.0], np.pi / 2, 64, 32)
+    view = np.asarray(cam.viewmat, np.float64)
+    for world, want in (([6.0, 2.0, 3.0], [0, 0, 5]), ([1.0, 4.0, 3.0], [0, 2, 0])):
+        np.testing.assert_allclose(view[:3, :3] @ world + view[:3, 3], want, atol=1e-6)
+    assert float(cam.fy) == pytest.approx(16.0)  # 32 / (2 tan 45°)
+
+
+@pytest.mark.parametrize("aspect,max_size,size", [
+    (16 / 9, 1024, (1024, 576)), (9 / 16, 1024, (576, 1024)), (1.0, 100, (96, 96)),
+    (50.0, 64, (64, 16)), (1.5, 8, (16, 16)),
+])
+def test_canvas_sizes_are_whole_tiles_at_the_canvas_aspect(aspect, max_size, size):
+    assert viewer.canvas_size(aspect, max_size) == size
+
+
+@pytest.mark.parametrize("aspect", [0.0, -1.0, float("nan"), float("inf")])
+def test_canvas_size_refuses_bad_aspects(aspect):
+    with pytest.raises(ValueError, match="aspect"):
+        viewer.canvas_size(aspect, 512)
+
+
+def test_frames_are_the_render_of_the_pose_and_share_their_program():
+    scene = lgs_jax.default_scene()
+    renderer = viewer.FrameRenderer(scene)
+    position, wxyz, fov = viewer.viewer_pose(lgs_jax.default_camera(0))
+    image, _ = renderer.frame(position, wxyz, fov, 2.0, 128)
+    cam = viewer.camera_from_pose(position, wxyz, fov, 128, 64)
+    np.testing.assert_array_equal(image, render_image(scene, cam)[0])
+    assert image.shape == (64, 128, 3) and image.max() > 50
+    capacity = dict(renderer.capacity)
+    renderer.frame(*viewer.viewer_pose(lgs_jax.default_camera(3)), 2.0, 128)
+    assert renderer.capacity == capacity  # the same size: the same pair buffer
+
+
+class _Client:
+    """A stand-in for viser's ClientHandle: a camera state and the images it was sent."""
+
+    def __init__(self, client_id, view, timestamp=1.0):
+        position, wxyz, fov = viewer.viewer_pose(lgs_jax.default_camera(view))
+        self.client_id, self.images = client_id, []
+        self.camera = types.SimpleNamespace(position=position, wxyz=wxyz, fov=fov, aspect=2.0,
+                                            update_timestamp=timestamp)
+        self.scene = types.SimpleNamespace(
+            set_background_image=lambda image, **_: self.images.append(image))
+
+
+def test_the_loop_renders_each_clients_latest_camera_once():
+    reports = []
+    loop = viewer.FrameLoop(viewer.FrameRenderer(lgs_jax.default_scene()), lambda: 64,
+                            reports.append)
+    a, b, silent = _Client(1, 0), _Client(2, 4), _Client(3, 0, timestamp=0.0)
+    loop.request(a)
+    a.camera.position, a.camera.wxyz, _ = viewer.viewer_pose(lgs_jax.default_camera(2))
+    for client in (a, b, silent, a):
+        loop.request(client)
+    worker = threading.Thread(target=loop.run)
+    worker.start()
+    deadline = time.time() + 120
+    while len(a.images) + len(b.images) < 2 and time.time() < deadline:
+        time.sleep(0.05)
+    loop.stop()
+    worker.join()
+    assert (len(a.images), len(b.images), len(silent.images)) == (1, 1, 0)
+    want = viewer.FrameRenderer(lgs_jax.default_scene()).frame(
+        *viewer.viewer_pose(lgs_jax.default_camera(2)), 2.0, 64)[0]
+    np.testing.assert_array_equal(a.images[0], want)  # the latest pose, not the first
+    assert reports and reports[0].startswith("64x32, ")
+
+
+def test_a_failed_render_is_reported_and_the_loop_goes_on():
+    reports = []
+    loop = viewer.FrameLoop(viewer.FrameRenderer(lgs_jax.default_scene()), lambda: 64,
+                            reports.append)
+    bad = _Client(1, 0)
+    bad.camera.aspect = float("nan")
+    loop.render(bad)
+    assert reports == ["render failed: ValueError: aspect: expected a finite number > 0, "
+                       "got nan"] and not bad.images
+
+
+def test_the_server_serves_the_page():
+    pytest.importorskip("viser")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    port, stop = viewer.serve(lgs_jax.default_scene(), [lgs_jax.default_camera()],
+                              host="127.0.0.1", port=port, block=False)
+    try:
+        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30).read()
+        assert b"<html" in page
+    finally:
+        stop()
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--view", "8"], "--view: 8 is out of range: the default scene has 8 orbit views"),
+    (["{ply}"], "--cameras: needed to view a scene file"),
+    (["--max-size", "8"], "--max-size: must be >= 16"),
+])
+def test_view_command_line_errors(tmp_path, capsys, args, match):
+    ply = tmp_path / "s.ply"
+    lgs_jax.save_ply(ply, lgs_jax.default_scene())
+    try:
+        code = main(["view", *[a.format(ply=ply) for a in args]])
+    except SystemExit as e:
+        code = e.code
+    assert code == 2
+    assert match in capsys.readouterr().err
