@@ -159,8 +159,8 @@ def _fit(args) -> int:
                        max_gaussians=args.max_gaussians, downscale=args.downscale,
                        crop=tuple(args.crop) if args.crop else None, seed=args.seed,
                        backend=args.backend, pool_size=args.pool_size, resume=args.resume,
-                       overwrite=args.overwrite,
-                       compile_ahead=ahead_mode(args))
+                       overwrite=args.overwrite, compile_ahead=ahead_mode(args),
+                       devices=args.devices)
     print(json.dumps(result, indent=1))
     return 0
 
@@ -221,6 +221,9 @@ def _fit_parser(sub, common) -> None:
                    help="default strategy: reset opacities every 3000 steps (3DGS; gsplat "
                         "1.5.3 never does, through a bug)")
     f.add_argument("--batch", type=int_at_least(1), default=1, help="views per step")
+    f.add_argument("--devices", type=int_at_least(1), default=1,
+                   help="split each step's views across this many devices (data parallel; "
+                        "--batch a multiple of it; default 1)")
     f.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
                    help="compositing rule of training and evaluation renders (alpha cap 0.99 "
                         "or gsplat's 0.999)")

@@ -38,7 +38,7 @@ from .losses import PADDINGS
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
 from .settings import Settings, Setup
-from .step import refine, render_views, train_step
+from .step import refine, render_views, replicated, train_step
 from .strategy import DefaultStrategy, Strategy
 
 @dataclasses.dataclass
@@ -186,11 +186,21 @@ def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background,
             + (f"; the compile ahead failed: {stepper.failure}" if stepper.failure else ""))
 
 
+def _place(setup: Setup, st: _State) -> None:
+    """A data-parallel run's state whole on each of its devices (`step.replicated`; a no-op
+    where it is already, and for one device)."""
+    where = replicated(setup.devices)
+    if where is not None:
+        st.pool, st.opt_state, st.strategy_state = jax.device_put(
+            (st.pool, st.opt_state, st.strategy_state), where)
+
+
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
     """The strategy's refinement at step st.step, recorded, the pool's growth logged; returns
     the number of active Gaussians after it."""
     st.strategy_state, st.pool, st.opt_state, rep = refine(
         setup.strategy, st.strategy_state, st.pool, st.opt_state, st.step, key, cap)
+    _place(setup, st)
     if rep["grown_to"]:
         say(f"step {st.step}: pool grown to {rep['grown_to']} slots (one recompile)")
     if not rep["ok"]:
@@ -209,6 +219,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
     say = lambda message: progress.write(log, message)
     stepper = _stepper(setup, ahead_mode)
     busy = 0.0
+    _place(setup, st)
     try:
         with open(os.path.join(out, "metrics.jsonl"), "a", buffering=1) as f:
             record = lambda **row: f.write(json.dumps(row) + "\n")
@@ -262,6 +273,18 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
             raise ValueError(f"{name}: expected one of {known}, got {v!r}")
 
 
+def _check_devices(devices, batch: int) -> None:
+    """Raise `ValueError` unless `devices` is an int in 1..len(jax.devices()) dividing batch."""
+    have = len(jax.devices())
+    if not isinstance(devices, (int, np.integer)) or isinstance(devices, bool) \
+            or not 1 <= devices <= have:
+        raise ValueError(f"devices: expected an int from 1 to {have} (the {jax.default_backend()}"
+                         f" devices here), got {devices!r}")
+    if batch % devices:
+        raise ValueError(f"devices: {devices} devices split settings.batch = {batch} views "
+                         f"unevenly; make the batch a multiple of them")
+
+
 def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -> RunData:
     """Check OUT and load the data (before touching OUT: a bad folder deletes nothing)."""
     problem = checkpoint.run_dir_problem(out, resume, overwrite)
@@ -282,7 +305,7 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         settings: Settings = Settings(), max_gaussians: int = 1_000_000, downscale: int = 1,
         crop=None, seed: int = 0, backend: str | None = None, pool_size: int | None = None,
         resume: bool = False, overwrite: bool = False,
-        compile_ahead: bool | str | None = None,
+        compile_ahead: bool | str | None = None, devices: int = 1,
         log=print) -> dict:
     """Train on `data` (a dataset folder or a `Dataset`) for `steps` steps into run directory
     `out`; returns the final metrics (also in OUT/result.json).
@@ -301,17 +324,22 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     H200, `ahead.py`), False not at all; None (default):
     "thread" where the step runs on a GPU, so that the compile takes host cores the step does
     not use (on a CPU it competes with the step for them), else False.
-    Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
+    devices: split each step's views across this many of `jax.devices()` (data parallel: each
+    renders its share of the batch with the whole scene, the gradients summed across them;
+    `settings.batch` a multiple of it); results equal one device's up to the order of that
+    sum (float rounding). Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
     and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
     time of the steps and refinements, their compilation included, evaluations and checkpoints
     not; None when no step ran) and compile_seconds (of that, the time spent compiling or
     waiting for a compile ahead; compiles ahead that finish in time cost the run nothing).
     """
     _check_args(steps, max_gaussians, settings)
+    _check_devices(devices, settings.batch)
     ahead_mode = mode_of(compile_ahead)
     rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
     backend = backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
-    setup = Setup(settings, strategy or DefaultStrategy(), steps, rd.scene_scale, backend)
+    setup = Setup(settings, strategy or DefaultStrategy(), steps, rd.scene_scale, backend,
+                  devices)
     if resume and os.path.exists(os.path.join(out, "checkpoint.json")):
         st = _resumed(out, setup, rd, seed, log)
     else:
@@ -340,7 +368,7 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
                   ms_per_step=1e3 * busy / ran if ran else None,
                   compile_seconds=compile_seconds,
                   strategy=type(setup.strategy).__name__, backend=setup.backend,
-                  device=jax.devices()[0].device_kind)
+                  device=jax.devices()[0].device_kind, devices=setup.devices)
     with open(os.path.join(out, "result.json"), "w") as f:
         json.dump(result, f, indent=1)
     return result

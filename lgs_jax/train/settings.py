@@ -65,10 +65,12 @@ class Settings:
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """What the jitted functions of one run depend on statically (hashable): the recipe, the
-    strategy, the run length (the means' schedule), the scene scale, the backend."""
+    strategy, the run length (the means' schedule), the scene scale, the backend, and the
+    devices a step's views are split across (data parallel: `step._over_views`)."""
 
     settings: Settings = Settings()
     strategy: Strategy = DefaultStrategy()
     steps: int = 30_000
     scene_scale: float = 1.0
     backend: str = "tiles"
+    devices: int = 1

@@ -55,6 +55,38 @@ def _select(flag, new, old):
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
 
 
+@functools.cache
+def mesh(devices: int):
+    """The 1-D mesh "views" over the first `devices` devices (`Setup.devices`)."""
+    return jax.make_mesh((devices,), ("views",), devices=jax.devices()[:devices],
+                         axis_types=(jax.sharding.AxisType.Auto,))  # XLA moves the inputs
+
+
+def replicated(devices: int):
+    """Where a data-parallel run keeps its state: whole on every device of `mesh` (None for
+    one device). The steps' outputs are constrained to it and `fit` places its state there,
+    so that every step sees the shardings it was compiled for (no second compile)."""
+    if devices == 1:
+        return None
+    return jax.sharding.NamedSharding(mesh(devices), jax.sharding.PartitionSpec())
+
+
+def _over_views(one, devices: int):
+    """`one(g, cam, target, offsets)` mapped over a batch of views (g shared): `jax.vmap`, and
+    with `devices` > 1 the batch split across the first `devices` devices (a `shard_map` over
+    a mesh axis "views", each device rendering its share of the views with the whole scene;
+    the gradient of the shared scene sums the devices' parts, an all-reduce)."""
+    batched = jax.vmap(one, in_axes=(None, 0, 0, 0))
+    if devices == 1:
+        return batched
+    views = jax.sharding.PartitionSpec("views")
+    # check_vma off: the renderer's loops start from replicated carries that become per-device
+    # values, which the check would have us cast by hand; nothing in `one` communicates
+    return jax.shard_map(batched, mesh=mesh(devices), in_specs=(jax.sharding.PartitionSpec(), views,
+                                                        views, views), out_specs=views,
+                         check_vma=False)
+
+
 def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
                     background, step):
     """((loss, (mse, stats, visible)), (param grads, screen grads or None))."""
@@ -66,14 +98,14 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
     def loss_of(params, offsets):
         g = render_gaussians(params, pool.active, bands)
 
-        def one(cam, target, off):
+        def one(g, cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=RasterConfig(s.settings.convention), screen_offsets=off,
                        row_capacity=rows)
             return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
 
-        losses, mse, stats, visible = jax.vmap(one)(cams, targets, offsets)
+        losses, mse, stats, visible = _over_views(one, s.devices)(g, cams, targets, offsets)
         total = jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
         return total, (jnp.mean(mse), stats, visible)
 
@@ -115,6 +147,9 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx,
         ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
     pool, opt_state, strategy_state = _select(ok, (new_pool, new_opt, new_state),
                                               (pool, opt_state, strategy_state))
+    if setup.devices > 1:
+        pool, opt_state, strategy_state = jax.lax.with_sharding_constraint(
+            (pool, opt_state, strategy_state), replicated(setup.devices))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
                    pairs=jnp.max(stats.pairs_required),
                    row_overflow=jnp.any(stats.row_overflow), walked=jnp.max(stats.pairs_walked),

@@ -1,0 +1,88 @@
+"""Data-parallel training (`fit(..., devices=N)`, `step._over_views`): on two CPU devices
+(`--xla_force_host_platform_device_count`, set before JAX starts, so in a child process) a run
+with refinements follows the one-device run to float rounding (the gradients' sum is taken in
+another order), compiles its step no more often, and repeats itself to the bit; bad device
+counts are refused by name."""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from lgs_jax import train
+
+CHILD = textwrap.dedent("""
+    import dataclasses, json, os, sys
+    import jax, numpy as np
+    import lgs_jax
+    from lgs_jax import train
+    compiles = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda event, seconds, fun_name="", **_: compiles.append(fun_name)
+        if event == "/jax/core/compile/backend_compile_duration" else None)
+    d = lgs_jax.load_dataset(sys.argv[1], downscale=32)
+    keep = np.linspace(0, len(d.points) - 1, 200).astype(int)
+    d = dataclasses.replace(d, points=d.points[keep], colors=d.colors[keep], train=d.train[:4],
+                            test=d.test[:1])
+    strategy = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=1e-4,
+                                     prune_opa=0.02)
+    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100)
+    out = {}
+    for run, devices in (("one", 1), ("two", 2), ("again", 2)):
+        before = len(compiles)
+        result = train.fit(d, 6, os.path.join(sys.argv[2], run), strategy=strategy,
+                           settings=settings, max_gaussians=512, pool_size=512,
+                           backend="reference", devices=devices, log=lambda m: None)
+        rows = [json.loads(line) for line in open(os.path.join(sys.argv[2], run,
+                                                               "metrics.jsonl"))]
+        steps = [name for name in compiles[before:] if name == "jit(train_step)"]
+        out[run] = dict(rows=[r for r in rows if "loss" in r], compiles=len(steps),
+                        devices=result["devices"], psnr=result["heldout_psnr"])
+    print(json.dumps(out))
+""")
+
+
+def test_two_devices_follow_one_and_repeat_themselves(data_dir, tmp_path):
+    skull = os.path.join(data_dir, "skull")
+    if not os.path.isdir(skull):
+        pytest.skip("skull not found")
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
+               JAX_PLATFORMS="cpu")
+    done = subprocess.run([sys.executable, "-c", CHILD, skull, str(tmp_path)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    one, two, again = out["one"], out["two"], out["again"]
+    assert (one["devices"], two["devices"]) == (1, 2)
+    assert len(one["rows"]) == len(two["rows"]) == 6
+    for a, b in zip(one["rows"][:2], two["rows"][:2]):  # the same start: the same loss
+        assert b["loss"] == pytest.approx(a["loss"], rel=1e-6)
+    for a, b in zip(one["rows"], two["rows"]):  # then the gradients' sums round apart
+        assert a["gaussians"] == b["gaussians"]  # the same refinements
+        assert b["loss"] == pytest.approx(a["loss"], rel=1e-3)
+    assert two["psnr"] == pytest.approx(one["psnr"], abs=0.05)
+    # one compile of the step each (the pairs need no growth here): none for new shardings
+    assert one["compiles"] == two["compiles"] == 1 and again["compiles"] == 0
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]
+    assert strip(again["rows"]) == strip(two["rows"]) and again["psnr"] == two["psnr"]
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(devices=0), "devices: expected an int from 1 to"),
+    (dict(devices=64), "devices: expected an int from 1 to"),
+    (dict(devices=True), "devices: expected an int"),
+])
+def test_bad_device_counts_are_refused(tmp_path, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        train.fit("unused", 1, str(tmp_path / "o"), **kwargs)
+
+
+def test_the_batch_must_split_evenly(monkeypatch, tmp_path):
+    monkeypatch.setattr("jax.devices", lambda *a: ["d0", "d1"])
+    with pytest.raises(ValueError, match="devices: 2 devices split settings.batch = 3 views "
+                                         "unevenly"):
+        train.fit("unused", 1, str(tmp_path / "o"), settings=train.Settings(batch=3),
+                  devices=2)
