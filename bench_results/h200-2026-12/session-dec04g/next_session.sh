@@ -37,3 +37,12 @@ tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 #   . scripts/gpu_env.sh; timeout 200 python3 scripts/kernel_times.py --data carry/data \
 #     --scenes synthetic10M_4k --host 40 > $out/kt_syn10M.log 2>&1
 #   TRAIN_SCENES=skull bash scripts/scale_gpu_check.sh train
+#
+# Call 4, on kind "nvidia-h200-x2" (two GPUs; ask only if the budget has 10 min left): the
+# data-parallel step (fit --devices, built this session on two CPU devices only). The same
+# skull run, batch 2, on one and on two GPUs: ms per step and held-out PSNR (the runs follow
+# each other to float rounding, so the PSNR should agree within the seeds' spread):
+#   . scripts/gpu_env.sh; for n in 1 2; do timeout 270 python3 -m lgs_jax fit \
+#     --data carry/data/skull --downscale 4 --steps 1500 --batch 2 --devices $n \
+#     --eval-every 1500 --out /tmp/dp$n > $out/fit_dev$n.log 2>&1; \
+#     tail -n 20 $out/fit_dev$n.log | grep -E "ms_per_step|heldout_psnr|compile_seconds"; done
