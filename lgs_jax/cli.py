@@ -23,31 +23,9 @@ import numpy as np
 
 from . import cli_video, cli_view
 from .cli_args import (EXIT_FAILURE, EXIT_USAGE, IMAGE_EXTENSIONS, Parser, UsageError,
-                       check_input, check_out, int_at_least, number_at_least, view_options)
+                       check_input, check_out, chosen_camera, int_at_least, number_at_least,
+                       view_options)
 from .config import CONVENTIONS
-
-
-def _camera(args):
-    """The camera to render: --view of --cameras (0 by default), or of the default scene (its
-    framing camera by default), resized by --width/--height."""
-    import lgs_jax
-    from lgs_jax import data
-
-    if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras, width=args.width, height=args.height)
-        if not cams:
-            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
-        view = args.view or 0
-        if view >= len(cams):
-            raise UsageError(f"--view: {view} is out of range: {args.cameras} has {len(cams)} "
-                             f"cameras (0..{len(cams) - 1})")
-        return cams[view]
-    if args.scene:
-        raise UsageError("--cameras: needed to render a scene file (the default scene has its own)")
-    if args.view is not None and args.view >= data.ORBIT_VIEWS:
-        raise UsageError(f"--view: {args.view} is out of range: the default scene has "
-                         f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
-    return lgs_jax.default_camera(args.view, args.width, args.height)
 
 
 def _merged_seconds(spans) -> float:
@@ -94,7 +72,7 @@ def _render(args) -> int:
             check_input(path, what)
     check_out(args.out)
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
-    cam = _camera(args)
+    cam = chosen_camera(args, "render")
     out, seconds, compiling = _timed_render(
         scene, cam, background=np.asarray(args.background, np.float32), backend=args.backend,
         config=lgs_jax.RasterConfig(convention=args.convention))

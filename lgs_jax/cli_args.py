@@ -48,15 +48,7 @@ def int_at_least(low: int):
     return number_at_least(low, int)
 
 
-def finite_float(text: str) -> float:
-    """An argparse type: a finite float (no nan or inf)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return v
+finite_float = number_at_least(-math.inf, float)  # an argparse type: a finite float
 
 
 def check_input(path: str, what: str) -> None:
@@ -104,3 +96,29 @@ def view_options(p, sizes: bool = True) -> None:
                    help="compositing rule (default: 3dgs)")
     p.add_argument("--background", type=finite_float, nargs=3, default=[0.0, 0.0, 0.0],
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
+
+
+def chosen_camera(args, verb: str):
+    """The camera to `verb` ("render", "view"): --view of --cameras (0 by default), or of the
+    default scene (its framing camera by default), at --width/--height where the command has
+    them (`Camera.resized` rules)."""
+    import lgs_jax
+    from lgs_jax import data
+
+    width, height = getattr(args, "width", None), getattr(args, "height", None)
+    if args.cameras:
+        cams = lgs_jax.load_cameras(args.cameras, width=width, height=height)
+        if not cams:
+            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
+        view = args.view or 0
+        if view >= len(cams):
+            raise UsageError(f"--view: {view} is out of range: {args.cameras} has {len(cams)} "
+                             f"cameras (0..{len(cams) - 1})")
+        return cams[view]
+    if args.scene:
+        raise UsageError(f"--cameras: needed to {verb} a scene file (the default scene has its "
+                         f"own)")
+    if args.view is not None and args.view >= data.ORBIT_VIEWS:
+        raise UsageError(f"--view: {args.view} is out of range: the default scene has "
+                         f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
+    return lgs_jax.default_camera(args.view, width, height)

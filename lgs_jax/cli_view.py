@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cli_args import UsageError, check_input, int_at_least, view_options
+from .cli_args import check_input, chosen_camera, int_at_least, view_options
 
 
 def parser(sub, common) -> None:
@@ -29,30 +29,6 @@ def parser(sub, common) -> None:
     v.set_defaults(func=run)
 
 
-def _cameras(args):
-    """[the starting camera, ...]: --view of --cameras (0 by default), or the default scene's
-    framing camera."""
-    import lgs_jax
-    from lgs_jax import data
-
-    if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras)
-        if not cams:
-            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
-        view = args.view or 0
-        if view >= len(cams):
-            raise UsageError(f"--view: {view} is out of range: {args.cameras} has {len(cams)} "
-                             f"cameras (0..{len(cams) - 1})")
-        return [cams[view]]
-    if args.scene:
-        raise UsageError("--cameras: needed to view a scene file (the default scene has its "
-                         "own)")
-    if args.view is not None and args.view >= data.ORBIT_VIEWS:
-        raise UsageError(f"--view: {args.view} is out of range: the default scene has "
-                         f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
-    return [lgs_jax.default_camera(args.view)]
-
-
 def run(args) -> int:
     """`view`: check the arguments, load, serve until Ctrl-C."""
     import lgs_jax
@@ -61,7 +37,7 @@ def run(args) -> int:
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
         if path:
             check_input(path, what)
-    cams = _cameras(args)
+    cams = [chosen_camera(args, "view")]
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
     viewer.serve(scene, cams, host=args.host, port=args.port, max_size=args.max_size,
                  backend=args.backend, background=np.asarray(args.background, np.float32),
