@@ -18,6 +18,7 @@ _ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}
 CONVENTIONS = tuple(_ALPHA_CAP)
 IMPLEMENTATIONS = ("triton", "mosaic")
 PAIR_SOURCES = ("records", "gaussians")
+BLOCK_ORDERS = ("sort", "buckets")
 
 
 def _check(name: str, value, allowed):
@@ -131,6 +132,12 @@ class KernelConfig:
         `stats.pairs_walked` reads only each tile's latest. With mosaic_image_layout, forward
         memory on the H200 at 0.09M Gaussians at 4K 200 -> 169 MiB (gsplat 181), at 720p
         27 -> 23 (29), lego_sh3 19 -> 16 (19).
+      block_order: the order the Pallas kernels' blocks take tiles (forward) and segments (the
+        split backward), longest first (lgs_jax.backends.block_order): "sort", a stable
+        argsort of the lengths (CUB on GPUs from 16k keys: host time each call), or "buckets",
+        a counting sort by buckets of four per octave (a few fused XLA passes). Only the schedule
+        changes, never a bit. Not yet measured on a GPU (BENCHMARKS.md §7, Dec 4, seventh
+        session), hence "sort".
 
     `tiles` backend (XLA):
       tiles_group: strips processed together; tiles_chunk: Gaussians per staged batch (the fast
@@ -156,6 +163,7 @@ class KernelConfig:
     mosaic_warp_lists: bool = True
     mosaic_image_layout: bool = True
     mosaic_block_stops: bool = True
+    block_order: Literal["sort", "buckets"] = "sort"
     tiles_group: int = 256
     tiles_chunk: int = 16
 
@@ -173,6 +181,7 @@ class KernelConfig:
             _check_int("tuning.vanilla_from_pairs", self.vanilla_from_pairs, 1)
         _check_int("tuning.mosaic_chunk", self.mosaic_chunk, 0)
         _check("tuning.mosaic_pair_source", self.mosaic_pair_source, PAIR_SOURCES)
+        _check("tuning.block_order", self.block_order, BLOCK_ORDERS)
         if self.mosaic_pair_source == "gaussians" and 128 % self.mosaic_unroll_localgs:
             raise ValueError(f"tuning.mosaic_unroll_localgs: must divide the 128 pairs of a "
                              f"chunk staged from Gaussians, got {self.mosaic_unroll_localgs}")

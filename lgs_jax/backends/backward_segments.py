@@ -38,6 +38,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from ..binning import TileBins, segment_of_slot
+from . import block_order
 
 COLUMNS = 4  # a segment's (tile, lo, hi, checkpoint index or −1)
 
@@ -105,12 +106,13 @@ def whole_tiles(order, bins: TileBins, last):
                       jnp.full_like(order, -1)], -1)
 
 
-def split(bins: TileBins, last, segment: int, compacted: bool = False):
+def split(bins: TileBins, last, segment: int, compacted: bool = False, order: str = "sort"):
     """(n_tiles + capacity // segment, COLUMNS) segments of `segment` pairs of each tile's walked
     pairs [tile_start, last) (`RowLayout.end`; module docstring), longest first; rows past the
     real segments are empty (lo = hi), as is the one segment of a tile that walked nothing.
     Checkpoint indices into the forward's buffers (`checkpoints`) or, `compacted`, into
-    `entries`' (`walked_checkpoints`; clipped to its rows)."""
+    `entries`' (`walked_checkpoints`; clipped to its rows). `order`: how the longest first is
+    found (`KernelConfig.block_order`)."""
     n_tiles, capacity = bins.tile_start.shape[0], bins.gauss.shape[0]
     start = bins.tile_start
     count = jnp.maximum((last - start + segment - 1) // segment, 1)
@@ -129,8 +131,8 @@ def split(bins: TileBins, last, segment: int, compacted: bool = False):
     else:
         base, _ = checkpoints(bins, segment)
         index = jnp.where(real & ~top, base[tile] + m, -1)
-    order = jnp.argsort(lo - hi, stable=True)
-    return jnp.stack([tile, lo, hi, index], -1)[order]
+    first_longest = block_order.longest_first(hi - lo, order)
+    return jnp.stack([tile, lo, hi, index], -1)[first_longest]
 
 
 def enter(trans, stop_at, hi, entry_refs, check, inside, half):

@@ -59,8 +59,8 @@ from ..composite import PixelState
 from ..config import RasterConfig
 from ..layout import STRIPS, TILE_PIXELS, image_tiles, tile_grid, tiled_image_to_tiles
 from ..projection import Projected
-from . import (backward, backward_segments, gaussian_grads, kernel_steps, pallas_mosaic,
-               pallas_triton, table_kernel)
+from . import (backward, backward_segments, block_order, gaussian_grads, kernel_steps,
+               pallas_mosaic, pallas_triton, table_kernel)
 from .interface import Backend, RasterResult, stop_within, tile_last
 
 
@@ -173,9 +173,9 @@ def describe(vanilla: bool):
     return kernel
 
 
-def _longest_first(bins: TileBins):
-    """Tiles in order of decreasing list length (stable)."""
-    return jnp.argsort(bins.tile_start - bins.tile_end, stable=True).astype(jnp.int32)
+def _longest_first(bins: TileBins, config: RasterConfig):
+    """Tiles from the longest list to the shortest (`KernelConfig.block_order`)."""
+    return block_order.longest_first(bins.tile_end - bins.tile_start, config.tuning.block_order)
 
 
 def _vanilla_model(config: RasterConfig) -> RasterConfig:
@@ -278,7 +278,7 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, plan_: Plan,
     no backward follows (the kernel writes block stops itself, and the pixels' are None)."""
     dt = p.mean2d.dtype
     tiles_x, _ = tile_grid(width, height)
-    order = _longest_first(bins)
+    order = _longest_first(bins, plan_.config)
     data, strip_pairs, saved = _kernel_inputs(p, bins, tiles_x, plan_)
     args = (plan_.vanilla, plan_.config, plan_.interpret)
     if plan_.forward == "mosaic":
@@ -342,7 +342,8 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, plan_: Pla
         lane_rows += (backward.depth_cotangent(g_depth, trans),)
     if plan_.backward == "mosaic":
         segments = (backward_segments.split(bins, layout.end, _segment(plan_),
-                                            compacted=bins.row_capacity is not None) if entry
+                                            compacted=bins.row_capacity is not None,
+                                            order=config.tuning.block_order) if entry
                     else backward_segments.whole_tiles(order, bins, layout.end))
         # without a depth cotangent the kernel takes no D − D_hi entry either (XLA then drops
         # its subtraction: 10 MiB at 10M Gaussians at 4K)

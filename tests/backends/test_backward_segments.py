@@ -14,7 +14,7 @@ from hypothesis import given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax import binning
-from lgs_jax.backends import REGISTRY, backward_segments, pallas_mosaic
+from lgs_jax.backends import REGISTRY, backward_segments, block_order, pallas_mosaic
 from lgs_jax.projection import project
 from tests import scenes
 from tests.devices import gpu_only
@@ -35,16 +35,17 @@ def _random_walks(g, seed: int, share: float):
 
 
 @settings(max_examples=10)
-@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]))
-def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment):
+@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]),
+       order=st.sampled_from(["sort", "buckets"]))
+def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment, order):
     """Random walks: each tile's real segments tile its walked pairs [start, last) in order,
     every one but the last exactly `segment` pairs with checkpoint base + m (the forward's row
     for pair lo + segment), the last one the rest, no checkpoint; the table's other rows are
-    empty; segments come longest first."""
+    empty; segments come longest first (exactly, or by `block_order.bucket`)."""
     g = scenes.cast(scenes.scene(seed), np.float64)
     bins, start, last, rng = _random_walks(g, seed, share)
-    table = np.asarray(jax.jit(backward_segments.split, static_argnums=2)(
-        bins, jnp.asarray(last), segment))
+    table = np.asarray(jax.jit(backward_segments.split, static_argnums=(2, 3, 4))(
+        bins, jnp.asarray(last), segment, False, order))
     base, n_rows = jax.jit(backward_segments.checkpoints, static_argnums=1)(bins, segment)
     base = np.asarray(base)
     assert table.shape == (start.size + 1024 // segment, backward_segments.COLUMNS)
@@ -63,7 +64,8 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
         assert np.all(segs[:-1, 3] < n_rows)
     assert np.all(table[~real, 1] == table[~real, 2])  # the rest: empty
     length = table[:, 2] - table[:, 1]
-    assert np.all(np.diff(length) <= 0)
+    key = length if order == "sort" else np.asarray(block_order.bucket(jnp.asarray(length)))
+    assert np.all(np.diff(key) <= 0)
 
 
 @settings(max_examples=10)
@@ -154,6 +156,24 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
         assert np.all(np.isfinite(b)), name
         np.testing.assert_allclose(b, a, rtol=0, atol=tol * (np.max(np.abs(a)) + 1e-300),
                                    err_msg=name)
+
+
+def test_the_block_order_changes_no_bit():
+    """Tiles and segments taken by buckets of length (`KernelConfig.block_order` "buckets")
+    instead of the exact longest first, which differs here (asserted): the same gradients and
+    stats, bit for bit (every block writes its own outputs)."""
+    size, dtype = 32, np.float32
+    g, cam = scenes.saturating(3, 200, dtype), scenes.camera(size, size, dtype=dtype)
+    w = np.random.default_rng(3).normal(size=(size, size, 3)).astype(dtype)
+    bins = binning.bin_gaussians(project(g, cam), size, size, 2048)
+    lengths = bins.tile_end - bins.tile_start
+    assert np.any(np.asarray(block_order.longest_first(lengths, "sort"))
+                  != np.asarray(block_order.longest_first(lengths, "buckets")))
+    config = lambda order: C(kernel="mosaic", tuning=K(mosaic_backward_segment=16,
+                                                       block_order=order))
+    exact, buckets = _grads(g, cam, w, config("sort")), _grads(g, cam, w, config("buckets"))
+    for a, b in zip(jax.tree.leaves(exact), jax.tree.leaves(buckets)):
+        np.testing.assert_array_equal(np.asarray(b), np.asarray(a))
 
 
 @pytest.mark.slow  # interpret mode, 700 pairs: about a minute

@@ -26,11 +26,16 @@ cat $out/times.log; grep "^FAILED\|passed\|failed" $out/tests.log | tail -5
 tail -n 6 $out/ab_*.log | cut -c1-150
 tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 #
-# Call 2 (about 7 min): issue 17's table where it is closest to its targets, 20 rounds, gsplat
-# in the process; the vanilla kernel's row gives the Local-GS lead (both kernels changed).
+# Call 2 (about 8 min): issue 17's table where it is closest to its targets, 20 rounds, gsplat
+# in the process; the vanilla kernel's row gives the Local-GS lead (both kernels changed);
+# `localgs:buckets` the blocks' order without the CUB sort of 32,400 tiles at 4K
+# (KernelConfig.block_order, built this session: one CUB launch fewer, host time per call):
+# if its e2e is lower at both 4K scenes, make "buckets" the default, then the gradient
+# (`--grad --rows localgs@walked,localgs:buckets@walked`: the split backward's segments too).
 #   . scripts/gpu_env.sh; for s in synthetic10M_4k guitar_x110_4k synthetic4M_1080p; do
-#     timeout 150 python3 -m benchmarks.scale --data carry/data --scenes $s \
-#       --rows localgs,vanilla --repeat 20 --csv $out/fwd_$s.csv > $out/fwd_$s.log 2>&1; done
+#     timeout 160 python3 -m benchmarks.scale --data carry/data --scenes $s \
+#       --rows localgs,localgs:buckets,vanilla --repeat 20 --csv $out/fwd_$s.csv \
+#       > $out/fwd_$s.log 2>&1; done
 #
 # Call 3 (about 8 min): the forward's host share at synthetic 10M, then skull's 7k steps with
 # this session's kernels (the gradient's forward runs the compacted walk):
