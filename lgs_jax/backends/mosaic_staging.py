@@ -297,10 +297,11 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
 
     def group(c, v):  # (n, left, [(record, strip mask, pair index)] of positions v .. v + unroll)
         if warp_shift is not None:
-            left, read = mosaic_warp_lists.reads(buf, index_ref, sync_ref, v, unroll, interpret)
+            read = mosaic_warp_lists.reads(buf, index_ref, v, unroll, interpret)
             base = start + c * LANES
-            # no strip-mask test: a listed pair has the warp's bit (`evaluate` takes None)
-            return (sync_ref[mosaic_warp_lists.BUSIEST], left,
+            # no strip-mask test (a listed pair has the warp's bit: `evaluate` takes None) and
+            # no count test (positions past a list's end hold its never-blended sentinel)
+            return (sync_ref[mosaic_warp_lists.BUSIEST], None,
                     [(rec, None, base + row) for rec, row in read])
         n = sync_ref[COUNT]
         # v is a multiple of unroll below n <= LANES, which unroll divides (`KernelConfig`
@@ -326,12 +327,13 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
         n, left, read = group(c, v)  # pair v + u is one to blend iff u < left (one compare)
         evaluated = [evaluate(rec, mask) for rec, mask, _ in read]
         for u, ((alpha, hit, rgb, z), (_, _, pair)) in enumerate(zip(evaluated, read)):
-            st = ks.blend(st, alpha, hit & (left > u), rgb, z, pair, config)
+            st = ks.blend(st, alpha, hit if left is None else hit & (left > u), rgb, z, pair,
+                          config)
         wrap = v + unroll >= n
         return jnp.where(wrap, c + 1, c), jnp.where(wrap, 0, v + unroll), st
 
     if warp_shift is not None:
-        mosaic_warp_lists.clear(index_ref, interpret)
+        mosaic_warp_lists.clear(buf, interpret)
     _, _, st = lax.while_loop(cond, body, (jnp.int32(0), jnp.int32(0),
                                            ks.empty_state(lanes, dt)))
     walked = start + (end - start + unroll - 1) // unroll * unroll  # staged_loop's last j
