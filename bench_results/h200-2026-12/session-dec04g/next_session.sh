@@ -4,9 +4,10 @@
 # tree before them: `python3 -m benchmarks.ab prepare 06294ad --to carry/old` if missing).
 #
 # Call 1 (about 8 min): the changed kernels on the GPU, then their bits and time against
-# 06294ad in one process. If a test hangs or fails, or an "equal" column says no, revert
-# fdfa05f and 93a8194 (the loop's bar.red, the stop pair as the done flag, the per-warp lists'
-# skipped mask test) before anything else.
+# 06294ad in one process. If a test hangs or fails, or an "equal" column says no, find which
+# of this session's kernel commits did it (fdfa05f: the loop's bar.red, the stop pair as the
+# done flag, the per-warp lists' skipped mask test; 93a8194: the bar.red's layout; the
+# sentinel commit after them: no per-pair count test) and revert it before anything else.
 . scripts/gpu_env.sh
 export LGS_JAX_CACHE="$PWD/build/jax_cache"; t0=$(date +%s)
 timeout 330 python3 -m pytest -q -p no:cacheprovider -n 8 -m 'slow or not slow' -rf \
