@@ -327,7 +327,8 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     devices: split each step's views across this many of `jax.devices()` (data parallel: each
     renders its share of the batch with the whole scene, the gradients summed across them;
     `settings.batch` a multiple of it); results equal one device's up to the order of that
-    sum (float rounding). Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
+    sum (float rounding).
+    Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
     and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
     time of the steps and refinements, their compilation included, evaluations and checkpoints
     not; None when no step ran) and compile_seconds (of that, the time spent compiling or
