@@ -137,3 +137,20 @@ def test_video_command_line_errors(tmp_path, capsys, args, match):
         code = e.code
     assert code == 2
     assert match in capsys.readouterr().err
+
+
+def test_orbit_of_a_real_capture_circles_its_points(data_dir):
+    """Skull (COLMAP, 66 cameras of a hand-held capture): the fitted orbit's centre, where its
+    frames' optical axes meet, lies at the SfM points' median (within 10% of the radius)."""
+    import os
+    path = os.path.join(data_dir, "skull")
+    if not os.path.isdir(path):
+        pytest.skip("skull not found")
+    d = lgs_jax.load_dataset(path, downscale=32)
+    orbit = video.orbit_path(list(d.cameras), 12)
+    centres = np.stack([poses.pose(c)[0] for c in orbit])
+    forward = np.stack([poses.pose(c)[1][2] for c in orbit])
+    off = np.eye(3) - forward[:, :, None] * forward[:, None, :]
+    point = np.linalg.solve(off.sum(0), np.einsum("nij,nj->i", off, centres))
+    radius = np.linalg.norm(centres - point, axis=1).mean()
+    assert np.linalg.norm(point - np.median(d.points, 0)) < 0.1 * radius
