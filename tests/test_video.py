@@ -2,6 +2,7 @@
 through them, the frames' encoding (decoded again with imageio-ffmpeg), and the command line's
 checks."""
 
+import os
 import warnings
 
 import imageio_ffmpeg
