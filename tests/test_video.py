@@ -143,7 +143,6 @@ def test_video_command_line_errors(tmp_path, capsys, args, match):
 def test_orbit_of_a_real_capture_circles_its_points(data_dir):
     """Skull (COLMAP, 66 cameras of a hand-held capture): the fitted orbit's centre, where its
     frames' optical axes meet, lies at the SfM points' median (within 10% of the radius)."""
-    import os
     path = os.path.join(data_dir, "skull")
     if not os.path.isdir(path):
         pytest.skip("skull not found")
