@@ -79,12 +79,11 @@ def _over_views(one, devices: int):
     batched = jax.vmap(one, in_axes=(None, 0, 0, 0))
     if devices == 1:
         return batched
-    views = jax.sharding.PartitionSpec("views")
+    whole, views = jax.sharding.PartitionSpec(), jax.sharding.PartitionSpec("views")
     # check_vma off: the renderer's loops start from replicated carries that become per-device
     # values, which the check would have us cast by hand; nothing in `one` communicates
-    return jax.shard_map(batched, mesh=mesh(devices), in_specs=(jax.sharding.PartitionSpec(), views,
-                                                        views, views), out_specs=views,
-                         check_vma=False)
+    return jax.shard_map(batched, mesh=mesh(devices), in_specs=(whole, views, views, views),
+                         out_specs=views, check_vma=False)
 
 
 def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
