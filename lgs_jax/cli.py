@@ -72,7 +72,7 @@ def _render(args) -> int:
             check_input(path, what)
     check_out(args.out)
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
-    cam = chosen_camera(args, "render")
+    cam = chosen_camera(args, "to render")
     out, seconds, compiling = _timed_render(
         scene, cam, background=np.asarray(args.background, np.float32), backend=args.backend,
         config=lgs_jax.RasterConfig(convention=args.convention))

@@ -98,27 +98,39 @@ def view_options(p, sizes: bool = True) -> None:
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
 
 
-def chosen_camera(args, verb: str):
-    """The camera to `verb` ("render", "view"): --view of --cameras (0 by default), or of the
-    default scene (its framing camera by default), at --width/--height where the command has
-    them (`Camera.resized` rules)."""
+def capture_cameras(args, purpose: str):
+    """--cameras at --width/--height where the command has them (`Camera.resized` rules), or
+    None for the default scene; a usage error for a file without cameras, or a scene file
+    without --cameras (`purpose`: "to render", "to view", "for a video of")."""
+    import lgs_jax
+
+    if args.cameras:
+        cams = lgs_jax.load_cameras(args.cameras, width=getattr(args, "width", None),
+                                    height=getattr(args, "height", None))
+        if not cams:
+            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
+        return cams
+    if args.scene:
+        raise UsageError(f"--cameras: needed {purpose} a scene file (the default scene has its "
+                         f"own)")
+    return None
+
+
+def chosen_camera(args, purpose: str):
+    """The camera `purpose` ("to render", "to view"): --view of `capture_cameras` (0 by
+    default), or of the default scene (its framing camera by default)."""
     import lgs_jax
     from lgs_jax import data
 
-    width, height = getattr(args, "width", None), getattr(args, "height", None)
-    if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras, width=width, height=height)
-        if not cams:
-            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
+    cams = capture_cameras(args, purpose)
+    if cams is not None:
         view = args.view or 0
         if view >= len(cams):
             raise UsageError(f"--view: {view} is out of range: {args.cameras} has {len(cams)} "
                              f"cameras (0..{len(cams) - 1})")
         return cams[view]
-    if args.scene:
-        raise UsageError(f"--cameras: needed to {verb} a scene file (the default scene has its "
-                         f"own)")
     if args.view is not None and args.view >= data.ORBIT_VIEWS:
         raise UsageError(f"--view: {args.view} is out of range: the default scene has "
                          f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
-    return lgs_jax.default_camera(args.view, width, height)
+    return lgs_jax.default_camera(args.view, getattr(args, "width", None),
+                                  getattr(args, "height", None))

@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
-from .cli_args import (VIDEO_EXTENSIONS, UsageError, check_input, check_out, finite_float,
-                       int_at_least, number_at_least, view_options)
+from .cli_args import (VIDEO_EXTENSIONS, UsageError, capture_cameras, check_input, check_out,
+                       finite_float, int_at_least, number_at_least, view_options)
 
 
 def parser(sub, common) -> None:
@@ -38,14 +38,8 @@ def _cameras(args):
     import lgs_jax
     from lgs_jax import data
 
-    if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras, width=args.width, height=args.height)
-        if not cams:
-            raise UsageError(f"--cameras: {args.cameras} holds no cameras")
-    elif args.scene:
-        raise UsageError("--cameras: needed for a video of a scene file (the default scene has "
-                         "its own)")
-    else:
+    cams = capture_cameras(args, "for a video of")
+    if cams is None:
         cams = [lgs_jax.default_camera(v, args.width, args.height)
                 for v in range(data.ORBIT_VIEWS)]
     if cams[0].width % 2 or cams[0].height % 2:

@@ -37,7 +37,7 @@ def run(args) -> int:
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
         if path:
             check_input(path, what)
-    cams = [chosen_camera(args, "view")]
+    cams = [chosen_camera(args, "to view")]
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
     viewer.serve(scene, cams, host=args.host, port=args.port, max_size=args.max_size,
                  backend=args.backend, background=np.asarray(args.background, np.float32),

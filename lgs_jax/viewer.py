@@ -27,6 +27,7 @@ import numpy as np
 from . import poses
 from .layout import TILE
 from .scene import Camera
+from .video import render_image
 
 
 def camera_from_pose(position, wxyz, fov_y: float, width: int, height: int) -> Camera:
@@ -68,8 +69,6 @@ class FrameRenderer:
 
     def frame(self, position, wxyz, fov_y: float, aspect: float, max_size: int):
         """(image, seconds) of the view at this camera state and size."""
-        from .video import render_image
-
         width, height = canvas_size(aspect, max_size)
         cam = camera_from_pose(position, wxyz, fov_y, width, height)
         t0 = time.perf_counter()
