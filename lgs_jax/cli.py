@@ -129,18 +129,39 @@ def _fit(args) -> int:
                                    eval_every=args.eval_every, init_points=args.init_points,
                                    convention=args.convention, pair_headroom=args.pair_headroom,
                                    row_headroom=args.row_headroom)
+    data, watch, served = args.data, None, None
+    if args.viewer_port is not None:
+        data = _dataset(args)
+        watch, served = cli_view.training_viewer(args, data)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
     else:
         strategy = train.DefaultStrategy(opacity_reset=args.opacity_reset)
-    result = train.fit(args.data, args.steps, args.out, strategy=strategy, settings=settings,
-                       max_gaussians=args.max_gaussians, downscale=args.downscale,
-                       crop=tuple(args.crop) if args.crop else None, seed=args.seed,
-                       backend=args.backend, pool_size=args.pool_size, resume=args.resume,
-                       overwrite=args.overwrite, compile_ahead=ahead_mode(args),
-                       devices=args.devices)
+    try:
+        result = train.fit(data, args.steps, args.out, strategy=strategy, settings=settings,
+                           max_gaussians=args.max_gaussians, downscale=args.downscale,
+                           crop=tuple(args.crop) if args.crop else None, seed=args.seed,
+                           backend=args.backend, pool_size=args.pool_size,
+                           resume=args.resume, overwrite=args.overwrite,
+                           compile_ahead=ahead_mode(args), devices=args.devices, watch=watch)
+    except BaseException:  # the viewer's threads would keep the process alive
+        if served is not None:
+            served.stop()
+        raise
     print(json.dumps(result, indent=1))
+    if served is not None:
+        from .viewer import wait
+
+        print("training done; the viewer shows the trained scene (Ctrl-C stops)", flush=True)
+        wait(served)
     return 0
+
+
+def _dataset(args):
+    """The dataset `fit` trains on (`--data`, `--downscale`), loaded here for its viewer."""
+    from .io.dataset import load_dataset
+
+    return load_dataset(args.data, downscale=args.downscale)
 
 
 def _render_parser(sub, common) -> None:
@@ -232,6 +253,12 @@ def _fit_parser(sub, common) -> None:
     f.add_argument("--backend", default=None,
                    choices=["reference", "tiles", "pallas", "pallas_vanilla"],
                    help="differentiable backend (default: pallas on GPUs, tiles elsewhere)")
+    f.add_argument("--viewer-port", type=int_at_least(1),
+                   help="show the scene in training in a browser at this port (viser, "
+                        "`pip install \"lgs_jax[viewer]\"`), updated about once a second, "
+                        "and keep serving the trained scene after the run until Ctrl-C")
+    f.add_argument("--viewer-host", default="0.0.0.0",
+                   help="address the viewer listens on (default: all)")
     again = f.add_mutually_exclusive_group()
     again.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
     again.add_argument("--overwrite", action="store_true",

@@ -1,5 +1,5 @@
 """`python -m lgs_jax view`: the scene in a browser (lgs_jax.viewer, viser's server), starting
-at a camera of the capture."""
+at a camera of the capture; and `fit --viewer-port`'s viewer of the scene in training."""
 
 from __future__ import annotations
 
@@ -43,3 +43,25 @@ def run(args) -> int:
                  backend=args.backend, background=np.asarray(args.background, np.float32),
                  config=lgs_jax.RasterConfig(convention=args.convention))
     return 0
+
+
+def training_viewer(args, data):
+    """(watch, served) for `fit --viewer-port`: a viewer starting at the first training camera
+    of `data` (a `Dataset`) and `fit`'s `watch` that shows each scene it is given, with the
+    step, the active Gaussians and the training loss and PSNR above the frames."""
+    import lgs_jax
+    from lgs_jax import viewer
+
+    cams = [data.cameras[i] for i in data.train]
+    served = viewer.serve(None, cams, host=args.viewer_host, port=args.viewer_port,
+                          max_size=1024, block=False, headroom=2.0, backend=args.backend,
+                          background=np.asarray(data.background, np.float32),
+                          config=lgs_jax.RasterConfig(convention=args.convention))
+
+    def watch(step: int, gaussians, metrics: dict) -> None:
+        text = f"step {step} of {args.steps}, {metrics['gaussians']:,} Gaussians"
+        if "loss" in metrics:
+            text += f", loss {metrics['loss']:.4f}, PSNR {metrics['psnr']:.2f} dB"
+        served.show(gaussians, text)
+
+    return watch, served

@@ -28,6 +28,24 @@ def posed(cam: Camera, centre, rot) -> Camera:
     return dataclasses.replace(cam, viewmat=view.astype(np.float32))
 
 
+def axes_centre(cameras) -> np.ndarray:
+    """The point nearest the cameras' optical axes in least squares, Σ (I − d dᵀ) (x − o) = 0
+    over the axes (centre o, direction d). Raises `ValueError` for fewer than two cameras or
+    axes (nearly) parallel, which meet nowhere."""
+    if len(cameras) < 2:
+        raise ValueError(f"cameras: their axes' nearest point needs at least 2 cameras, got "
+                         f"{len(cameras)}")
+    placed = [pose(c) for c in cameras]
+    origins = np.stack([o for o, _ in placed])
+    dirs = np.stack([r[2] for _, r in placed])
+    projectors = np.eye(3) - dirs[:, :, None] * dirs[:, None, :]
+    a, b = projectors.sum(0), np.einsum("nij,nj->i", projectors, origins)
+    if np.linalg.cond(a) > 1e6:
+        raise ValueError("cameras: their optical axes are (nearly) parallel; no centre to "
+                         "orbit about")
+    return np.linalg.solve(a, b)
+
+
 def look_at(position, target, up) -> np.ndarray:
     """World-to-camera rotation (OpenCV axes: rows x right, y down, z forward) of a camera at
     `position` looking at `target`, image up as close to `up` as the view direction allows."""

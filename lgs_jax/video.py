@@ -38,15 +38,9 @@ def orbit_path(cameras, frames: int, turns: float = 1.0) -> list[Camera]:
     _check_frames(frames)
     if len(cameras) < 2:
         raise ValueError(f"cameras: an orbit needs at least 2 cameras, got {len(cameras)}")
+    centre = poses.axes_centre(cameras)
     placed = [poses.pose(c) for c in cameras]
     origins = np.stack([o for o, _ in placed])
-    dirs = np.stack([r[2] for _, r in placed])
-    projectors = np.eye(3) - dirs[:, :, None] * dirs[:, None, :]
-    a, b = projectors.sum(0), np.einsum("nij,nj->i", projectors, origins)
-    if np.linalg.cond(a) > 1e6:
-        raise ValueError("cameras: their optical axes are (nearly) parallel; no centre to "
-                         "orbit about")
-    centre = np.linalg.solve(a, b)
     up = -np.mean([r[1] for _, r in placed], 0)
     up /= np.linalg.norm(up)
     rel = origins - centre
@@ -89,19 +83,21 @@ def camera_path(cameras, frames: int) -> list[Camera]:
     return out
 
 
-def render_image(scene, cam, capacity: int | None = None, **render_kwargs):
+def render_image(scene, cam, capacity: int | None = None, headroom: float = 1.0,
+                 **render_kwargs):
     """(image, capacity): `lgs_jax.render(scene, cam, capacity=capacity, **render_kwargs)`'s
     colour as (height, width, 3) uint8 (clipped to [0, 1], rounded), and the pair buffer it
     used. Pass that capacity to the next call so that views share compiled programs: it is
-    counted and sized anew (one recompile) only when a view needs more pairs."""
-    from .render import CapacityError, render
+    sized anew (one recompile) only when a view needs more pairs, to `pair_capacity(pairs,
+    headroom)` (a headroom above 1 leaves room for a scene that grows, as in training)."""
+    from .render import CapacityError, pair_capacity, render
 
     try:
         out = render(scene, cam, capacity=capacity, **render_kwargs)
-    except CapacityError:
+    except CapacityError as e:
         if capacity is None:  # more pairs than int32 indexes: nothing to grow into
             raise
-        out = render(scene, cam, **render_kwargs)
+        out = render(scene, cam, capacity=pair_capacity(e.required, headroom), **render_kwargs)
     image = np.round(np.clip(np.asarray(out.image), 0.0, 1.0) * 255).astype(np.uint8)
     return image, int(out.stats.capacity)
 

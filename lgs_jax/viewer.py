@@ -61,10 +61,12 @@ def canvas_size(aspect: float, max_size: int) -> tuple[int, int]:
 
 class FrameRenderer:
     """The viewer's rendering without its server: a viser camera state to a uint8 frame, the
-    pair buffer carried per image size (`video.render_image`)."""
+    pair buffer carried per image size (`video.render_image`, grown to `headroom` times a
+    view's pairs). `scene` may be replaced between frames (a scene in training), or None
+    (nothing to show yet)."""
 
-    def __init__(self, scene, **render_kwargs):
-        self.scene, self.render_kwargs = scene, render_kwargs
+    def __init__(self, scene, headroom: float = 1.0, **render_kwargs):
+        self.scene, self.headroom, self.render_kwargs = scene, headroom, render_kwargs
         self.capacity: dict[tuple[int, int], int] = {}
 
     def frame(self, position, wxyz, fov_y: float, aspect: float, max_size: int):
@@ -73,7 +75,8 @@ class FrameRenderer:
         cam = camera_from_pose(position, wxyz, fov_y, width, height)
         t0 = time.perf_counter()
         image, self.capacity[width, height] = render_image(
-            self.scene, cam, self.capacity.get((width, height)), **self.render_kwargs)
+            self.scene, cam, self.capacity.get((width, height)), self.headroom,
+            **self.render_kwargs)
         return image, time.perf_counter() - t0
 
 
@@ -88,14 +91,23 @@ def _initial_view(server, cam: Camera, target) -> None:
     server.scene.set_up_direction(tuple(up))
 
 
-def _target(cam: Camera, scene) -> np.ndarray:
-    """The point a camera orbits: along its axis, as deep as the opacity-weighted centre of
-    the scene's finite means (at least 1e-3 ahead)."""
-    means = np.asarray(scene.means, np.float64)
-    weight = 1 / (1 + np.exp(-np.asarray(scene.logit_opacities, np.float64)))
-    ok = np.all(np.isfinite(means), -1) & np.isfinite(weight)
-    centre, rot = poses.pose(cam)
-    mid = weight[ok] @ means[ok] / max(weight[ok].sum(), 1e-30) if ok.any() else centre + rot[2]
+def _target(cameras, scene) -> np.ndarray:
+    """The point the first camera orbits: along its axis, as deep as the opacity-weighted
+    centre of the scene's finite means, or without a scene the point nearest the cameras'
+    axes (`poses.axes_centre`; one unit ahead where they do not meet), at least 1e-3 ahead."""
+    centre, rot = poses.pose(cameras[0])
+    mid = centre + rot[2]
+    if scene is not None:
+        means = np.asarray(scene.means, np.float64)
+        weight = 1 / (1 + np.exp(-np.asarray(scene.logit_opacities, np.float64)))
+        ok = np.all(np.isfinite(means), -1) & np.isfinite(weight)
+        if ok.any():
+            mid = weight[ok] @ means[ok] / max(weight[ok].sum(), 1e-30)
+    elif len(cameras) > 1:
+        try:
+            mid = poses.axes_centre(cameras)
+        except ValueError:  # parallel axes: keep one unit ahead
+            pass
     return centre + rot[2] * max(float(rot[2] @ (mid - centre)), 1e-3)
 
 
@@ -135,8 +147,8 @@ class FrameLoop:
     def render(self, client) -> None:
         """Render one client's current camera state and send it."""
         camera = client.camera
-        if camera.update_timestamp == 0.0:  # no state from the browser yet
-            return
+        if camera.update_timestamp == 0.0 or self.renderer.scene is None:
+            return  # no state from the browser yet, or no scene (`Served.show` brings one)
         try:
             image, seconds = self.renderer.frame(camera.position, camera.wxyz, camera.fov,
                                                  camera.aspect, int(self.max_size()))
@@ -151,22 +163,44 @@ class FrameLoop:
             self.render(client)
 
 
+class Served:
+    """A viewer serving in threads (`serve(..., block=False)`): `port`, `show(scene, status)`
+    to replace the scene (every browser's view is rendered again; the caller's thread only
+    swaps a reference, so a training loop can call it often) and `stop()`."""
+
+    def __init__(self, port: int, loop: FrameLoop, server, info, stop):
+        self.port, self._loop, self._server, self._info, self.stop = port, loop, server, info, stop
+
+    def show(self, scene, status: str | None = None) -> None:
+        """Render `scene` from now on (Gaussians of any size: a new size compiles once);
+        `status`, when given, is shown in the page above the frame reports."""
+        self._loop.renderer.scene = scene
+        if status is not None:
+            self._info.content = status
+        for client in self._server.get_clients().values():
+            self._loop.request(client)
+
+
 def serve(scene, cameras, *, host: str = "0.0.0.0", port: int = 8080, max_size: int = 1024,
-          block: bool = True, **render_kwargs):
+          block: bool = True, headroom: float = 1.0, **render_kwargs):
     """Serve `scene` to browsers at http://HOST:PORT (the next free port if PORT is taken),
-    new clients starting at `cameras[0]` (module docstring); `render_kwargs` go to
-    `lgs_jax.render`. Prints the address. With `block`, serve until Ctrl-C and return None;
-    else return (port, stop): the server runs in threads until `stop()`."""
+    new clients starting at `cameras[0]` looking at the scene's centre (module docstring);
+    `render_kwargs` go to `lgs_jax.render`, `headroom` sizes the pair buffer when a view
+    outgrows it (`video.render_image`). `scene` None shows nothing until `Served.show` brings
+    one (a scene in training; new clients look at the point nearest the cameras' axes). Prints
+    the address. With `block`, serve until Ctrl-C and return None; else return a `Served`:
+    the server runs in threads until its `stop()`."""
     try:
         import viser
     except ImportError:
         raise RuntimeError('the viewer needs viser: pip install "lgs_jax[viewer]"') from None
     server = viser.ViserServer(host=host, port=port, verbose=False)
-    _initial_view(server, cameras[0], _target(cameras[0], scene))
+    _initial_view(server, cameras[0], _target(cameras, scene))
     size = server.gui.add_slider("max size", min=64, max=4096, step=16,
                                  initial_value=int(max_size))
+    status = server.gui.add_markdown("")
     info = server.gui.add_markdown("waiting for a camera")
-    loop = FrameLoop(FrameRenderer(scene, **render_kwargs), lambda: size.value,
+    loop = FrameLoop(FrameRenderer(scene, headroom, **render_kwargs), lambda: size.value,
                      lambda text: setattr(info, "content", text))
 
     def connect(client) -> None:
@@ -185,11 +219,17 @@ def serve(scene, cameras, *, host: str = "0.0.0.0", port: int = 8080, max_size: 
         server.stop()
 
     print(f"viewer: http://localhost:{server.get_port()} (Ctrl-C stops)", flush=True)
+    served = Served(server.get_port(), loop, server, status, stop)
     if not block:
-        return server.get_port(), stop
+        return served
+    wait(served)
+    return None
+
+
+def wait(served: Served) -> None:
+    """Keep serving until Ctrl-C, then stop."""
     try:
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
-        stop()
-    return None
+        served.stop()

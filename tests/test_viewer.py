@@ -7,6 +7,7 @@ import time
 import types
 import urllib.request
 
+import jax
 import numpy as np
 import pytest
 
@@ -116,13 +117,68 @@ def test_the_server_serves_the_page():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    port, stop = viewer.serve(lgs_jax.default_scene(), [lgs_jax.default_camera()],
-                              host="127.0.0.1", port=port, block=False)
+    served = viewer.serve(lgs_jax.default_scene(), [lgs_jax.default_camera()],
+                          host="127.0.0.1", port=port, block=False)
     try:
-        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=30).read()
+        page = urllib.request.urlopen(f"http://127.0.0.1:{served.port}/", timeout=30).read()
         assert b"<html" in page
     finally:
-        stop()
+        served.stop()
+
+
+def _run_until(loop, done):
+    """Run `loop` in a thread until `done()` (at most two minutes), then stop it."""
+    worker = threading.Thread(target=loop.run)
+    worker.start()
+    deadline = time.time() + 120
+    while not done() and time.time() < deadline:
+        time.sleep(0.05)
+    loop.stop()
+    worker.join()
+
+
+def test_a_shown_scene_is_rendered_for_every_client():
+    """No scene: nothing is rendered or reported. `Served.show` swaps the scene in, sets the
+    status and renders every connected client's view of the new scene."""
+    reports, status = [], types.SimpleNamespace(content="")
+    loop = viewer.FrameLoop(viewer.FrameRenderer(None), lambda: 64, reports.append)
+    a, b = _Client(1, 0), _Client(2, 5)
+    loop.render(a)
+    assert not a.images and not reports
+    server = types.SimpleNamespace(get_clients=lambda: {1: a, 2: b})
+    served = viewer.Served(8080, loop, server, status, loop.stop)
+    scene = lgs_jax.default_scene()
+    served.show(scene, "step 3")
+    _run_until(loop, lambda: a.images and b.images)
+    assert status.content == "step 3" and len(a.images) == len(b.images) == 1
+    want = viewer.FrameRenderer(scene).frame(*viewer.viewer_pose(lgs_jax.default_camera(5)),
+                                             2.0, 64)[0]
+    np.testing.assert_array_equal(b.images[0], want)
+
+
+def test_a_growing_scene_grows_the_pair_buffer_with_headroom():
+    scene = lgs_jax.default_scene()
+    half = jax.tree.map(lambda x: x[: scene.num // 8], scene)
+    renderer = viewer.FrameRenderer(half, headroom=2.0)
+    state = viewer.viewer_pose(lgs_jax.default_camera(0))
+    renderer.frame(*state, 2.0, 128)
+    first = renderer.capacity[128, 64]
+    renderer.scene = scene
+    image, _ = renderer.frame(*state, 2.0, 128)
+    out = lgs_jax.render(scene, viewer.camera_from_pose(*state, 128, 64))
+    pairs = int(out.stats.pairs_required)
+    assert pairs > first and renderer.capacity[128, 64] == lgs_jax.pair_capacity(pairs, 2.0)
+    np.testing.assert_array_equal(image, render_image(scene, viewer.camera_from_pose(
+        *state, 128, 64))[0])
+
+
+def test_a_viewer_without_a_scene_looks_where_the_cameras_look():
+    cams = [lgs_jax.default_camera(v) for v in range(4)]
+    target = viewer._target(cams, None)
+    centre, rot = viewer.poses.pose(cams[0])
+    np.testing.assert_allclose(target, centre + rot[2] * (rot[2] @ (
+        viewer.poses.axes_centre(cams) - centre)), atol=1e-9)
+    np.testing.assert_allclose(viewer._target(cams[:1], None), centre + rot[2])
 
 
 @pytest.mark.parametrize("args,match", [

@@ -210,16 +210,39 @@ def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
     return count
 
 
+_shown = jax.jit(render_gaussians)
+
+
+class _Watch:
+    """Calls `fn(step, gaussians, metrics)` with the pool as `render` sees it (inactive slots
+    as culled placeholders, every SH band; on one device) when `every` seconds have passed
+    since the last call, or when forced."""
+
+    def __init__(self, fn, every: float, devices: int):
+        self.fn, self.every, self.devices, self.last = fn, every, devices, -float("inf")
+
+    def __call__(self, st: _State, metrics: dict, force: bool = False) -> None:
+        now = time.perf_counter()
+        if self.fn is None or not (force or now - self.last >= self.every):
+            return
+        g = _shown(st.pool.params, st.pool.active)
+        if self.devices > 1:  # replicated: one device's copy, no transfer
+            g = jax.tree.map(lambda x: x.addressable_data(0), g)
+        self.fn(st.step, g, metrics)
+        self.last = now
+
+
 def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, clock,
-          ahead_mode: str | None):
+          ahead_mode: str | None, watch: _Watch):
     """Steps st.step .. setup.steps (module docstring); returns the seconds spent in steps
-    (their compilation, timed by `clock`, included)."""
+    (their compilation, timed by `clock`, included; `watch`'s calls not)."""
     progress, s = report.Progress(st.step, setup.steps), setup.settings
     key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
     stepper = _stepper(setup, ahead_mode)
     busy = 0.0
     _place(setup, st)
+    watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
     try:
         with open(os.path.join(out, "metrics.jsonl"), "a", buffering=1) as f:
             record = lambda **row: f.write(json.dumps(row) + "\n")
@@ -237,6 +260,8 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
                 record(step=st.step, loss=m["loss"], psnr=m["psnr"], gaussians=m["count"],
                        seconds=busy, **({} if m["ok"] else dict(skipped=True)))
                 progress.step(m["loss"], m["psnr"], m["count"])
+                watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]),
+                      force=st.step == setup.steps)
                 if st.step % s.eval_every == 0 and st.step < setup.steps:
                     psnr, ssim = _evaluate(st, rd, setup)
                     record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
@@ -305,8 +330,8 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         settings: Settings = Settings(), max_gaussians: int = 1_000_000, downscale: int = 1,
         crop=None, seed: int = 0, backend: str | None = None, pool_size: int | None = None,
         resume: bool = False, overwrite: bool = False,
-        compile_ahead: bool | str | None = None, devices: int = 1,
-        log=print) -> dict:
+        compile_ahead: bool | str | None = None, devices: int = 1, watch=None,
+        watch_every: float = 1.0, log=print) -> dict:
     """Train on `data` (a dataset folder or a `Dataset`) for `steps` steps into run directory
     `out`; returns the final metrics (also in OUT/result.json).
 
@@ -328,6 +353,12 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     renders its share of the batch with the whole scene, the gradients summed across them;
     `settings.batch` a multiple of it); results equal one device's up to the order of that
     sum (float rounding).
+    watch: None, or `watch(step, gaussians, metrics)` called on the training thread with the
+    Gaussians as rendered (a `Gaussians` of the pool's size, inactive slots transparent) at
+    the start, after a step when `watch_every` seconds have passed since its last call, and
+    after the last step; metrics: loss, psnr (the step's training views), gaussians (active).
+    Its time is not the steps'. `lgs_jax.viewer.Served.show` shows them in a browser while
+    training (`fit --viewer-port`).
     Progress is a tqdm bar on stderr; `log` gets the other lines. The result: held-out PSNR
     and SSIM, Gaussians, pool size, skipped steps, seconds (the whole call), ms_per_step (wall
     time of the steps and refinements, their compilation included, evaluations and checkpoints
@@ -336,6 +367,11 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
     """
     _check_args(steps, max_gaussians, settings)
     _check_devices(devices, settings.batch)
+    if watch is not None and not callable(watch):
+        raise ValueError(f"watch: expected None or a callable, got {type(watch).__name__}")
+    if not (isinstance(watch_every, (int, float, np.integer, np.floating))
+            and not isinstance(watch_every, bool) and watch_every >= 0):
+        raise ValueError(f"watch_every: expected seconds >= 0, got {watch_every!r}")
     ahead_mode = mode_of(compile_ahead)
     rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
     backend = backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
@@ -347,7 +383,8 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         st = _fresh(setup, rd, seed, max_gaussians, pool_size, log)
     start, t0, clock = st.step, time.perf_counter(), report.CompileClock()
     with clock.listening():
-        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock, ahead_mode)
+        busy = _loop(out, setup, st, rd, seed, max_gaussians, log, clock, ahead_mode,
+                     _Watch(watch, float(watch_every), devices))
     return _finish(out, setup, st, rd, start, busy, time.perf_counter() - t0, log,
                    clock.seconds)
 

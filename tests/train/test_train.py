@@ -124,10 +124,23 @@ def _fit(data, out, **kwargs):
 
 
 def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
-    result = _fit(skull, tmp_path, eval_every=2)
+    seen = []
+    result = _fit(skull, tmp_path, eval_every=2, watch=lambda *a: seen.append(a), watch_every=0)
     rows = report.read_metrics(str(tmp_path / "metrics.jsonl"))
     steps = [r for r in rows if "loss" in r]
     assert [r["step"] for r in steps] == list(range(1, STEPS + 1))
+    # watched at the start and after every step: the Gaussians as rendered, the step's metrics
+    assert [step for step, _, _ in seen] == list(range(STEPS + 1))
+    assert seen[0][2] == dict(gaussians=300)
+    assert [(m["gaussians"], m["loss"]) for _, _, m in seen[1:]] == [
+        (r["gaussians"], r["loss"]) for r in steps]
+    last = seen[-1][1]
+    shown = np.isfinite(np.asarray(last.logit_opacities))
+    assert last.num == 1024 and shown.sum() == result["gaussians"]
+    ply = lgs_jax.load_ply(str(tmp_path / "scene.ply"))
+    for name in ("means", "quats", "log_scales", "logit_opacities", "sh"):
+        np.testing.assert_array_equal(np.asarray(getattr(last, name))[shown],
+                                      getattr(ply, name), err_msg=name)
     refines = [r for r in rows if "refine_step" in r]
     assert [r["refine_step"] for r in refines] == [4, 8, 12]
     assert sum(r["cloned"] + r["split"] + r["pruned"] for r in refines) > 0
@@ -152,8 +165,12 @@ class _Stop(Exception):
 
 def test_resume_is_bit_identical(skull, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
-    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state."""
-    _fit(skull, tmp_path / "a")
+    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state. The
+    uninterrupted run is watched (`fit`'s `watch`, at its start and end only), which changes
+    nothing."""
+    seen = []
+    _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9)
+    assert seen == [0, STEPS]
 
     def die(message):
         if message.startswith("step 7:"):
@@ -293,6 +310,34 @@ def test_fit_cli_writes_outputs_and_refuses_mixing(data_dir, tmp_path, capsys):
     assert [r["step"] for r in rows] == [0] and "heldout_psnr" in rows[0]
 
 
+def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch, capsys):
+    """--viewer-port: the dataset is loaded once, a viewer serves it while `fit` watches,
+    the page answers, and after the run the viewer keeps serving (`viewer.wait`, stubbed)."""
+    pytest.importorskip("viser")
+    import socket
+    import urllib.request
+
+    from lgs_jax import viewer
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    served = []
+
+    def wait(s):
+        page = urllib.request.urlopen(f"http://127.0.0.1:{s.port}/", timeout=30).read()
+        served.append((b"<html" in page, s._info.content, s._loop.renderer.scene.num))
+        s.stop()
+
+    monkeypatch.setattr(viewer, "wait", wait)
+    args = ["fit", "--data", _lego(data_dir), "--steps", "0", "--out", str(tmp_path / "run"),
+            "--init-points", "200", "--crop", "80", "80", "32", "32", "--backend",
+            "reference", "--viewer-port", str(port), "--viewer-host", "127.0.0.1"]
+    assert cli.main(args) == 0
+    assert served == [(True, "step 0 of 0, 200 Gaussians", 256)]
+    assert "the viewer shows the trained scene" in capsys.readouterr().out
+
+
 def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     seen = {}
     monkeypatch.setattr(train, "fit", lambda *a, **k: seen.update(k) or {})
@@ -352,7 +397,9 @@ def test_training_renders_follow_the_convention():
     (dict(settings=train.Settings(pair_headroom=float("nan"))), "settings.pair_headroom"),
     (dict(settings=train.Settings(row_headroom=0.5)), "settings.row_headroom: expected None "
                                                       "or a number >= 1"),
-    (dict(settings=train.Settings(row_headroom=float("nan"))), "settings.row_headroom")])
+    (dict(settings=train.Settings(row_headroom=float("nan"))), "settings.row_headroom"),
+    (dict(watch=3), "watch: expected None or a callable, got int"),
+    (dict(watch_every=float("nan")), "watch_every: expected seconds >= 0, got nan")])
 def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
         train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
