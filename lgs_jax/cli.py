@@ -24,7 +24,7 @@ import numpy as np
 from . import cli_video, cli_view
 from .cli_args import (EXIT_FAILURE, EXIT_USAGE, IMAGE_EXTENSIONS, Parser, UsageError,
                        check_input, check_out, chosen_camera, int_at_least, number_at_least,
-                       view_options)
+                       raster_config, view_options)
 from .config import CONVENTIONS
 
 
@@ -75,7 +75,7 @@ def _render(args) -> int:
     cam = chosen_camera(args, "to render")
     out, seconds, compiling = _timed_render(
         scene, cam, background=np.asarray(args.background, np.float32), backend=args.backend,
-        config=lgs_jax.RasterConfig(convention=args.convention))
+        config=raster_config(args))
     s = out.stats
     print(f"scene: {scene.num} Gaussians (SH degree {scene.sh_degree}); image {cam.width}x"
           f"{cam.height}; backend {s.backend}; device {jax.devices()[0].platform}")
@@ -127,7 +127,8 @@ def _fit(args) -> int:
         raise UsageError(f"--out: {problem}")
     settings = dataclasses.replace(train.Settings(), batch=args.batch,
                                    eval_every=args.eval_every, init_points=args.init_points,
-                                   convention=args.convention, pair_headroom=args.pair_headroom,
+                                   convention=args.convention, antialiased=args.antialiased,
+                                   pair_headroom=args.pair_headroom,
                                    row_headroom=args.row_headroom)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None:
@@ -226,6 +227,10 @@ def _fit_parser(sub, common) -> None:
     f.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
                    help="compositing rule of training and evaluation renders (alpha cap 0.99 "
                         "or gsplat's 0.999)")
+    f.add_argument("--antialiased", action="store_true",
+                   help="train and evaluate with antialiased renders (gsplat's "
+                        "--antialiased: opacities scaled so that the 0.3-pixel dilation keeps "
+                        "each Gaussian's integral); render the result with --antialiased too")
     f.add_argument("--eval-every", type=int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
     f.add_argument("--pair-headroom", type=number_at_least(1.0, float),

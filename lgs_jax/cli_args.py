@@ -94,6 +94,9 @@ def view_options(p, sizes: bool = True) -> None:
                         "without a GPU)")
     p.add_argument("--convention", default="3dgs", choices=CONVENTIONS,
                    help="compositing rule (default: 3dgs)")
+    p.add_argument("--antialiased", action="store_true",
+                   help="scale opacities so that the 0.3-pixel dilation keeps each Gaussian's "
+                        "integral (gsplat's antialiased mode; for scenes trained with it)")
     p.add_argument("--background", type=finite_float, nargs=3, default=[0.0, 0.0, 0.0],
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
 
@@ -134,3 +137,10 @@ def chosen_camera(args, purpose: str):
                          f"{data.ORBIT_VIEWS} orbit views (0..{data.ORBIT_VIEWS - 1})")
     return lgs_jax.default_camera(args.view, getattr(args, "width", None),
                                   getattr(args, "height", None))
+
+
+def raster_config(args):
+    """The `RasterConfig` of --convention and --antialiased."""
+    from .config import RasterConfig
+
+    return RasterConfig(args.convention, antialiased=args.antialiased)

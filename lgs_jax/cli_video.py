@@ -8,7 +8,8 @@ import time
 import numpy as np
 
 from .cli_args import (VIDEO_EXTENSIONS, UsageError, capture_cameras, check_input, check_out,
-                       finite_float, int_at_least, number_at_least, view_options)
+                       finite_float, int_at_least, number_at_least, raster_config,
+                       view_options)
 
 
 def parser(sub, common) -> None:
@@ -70,7 +71,7 @@ def run(args) -> int:
     frames = video.render_frames(
         scene, tqdm(path, desc="frames", unit="frame"), backend=args.backend,
         background=np.asarray(args.background, np.float32),
-        config=lgs_jax.RasterConfig(convention=args.convention))
+        config=raster_config(args))
     t0 = time.time()
     count = video.write_video(args.out, frames, fps=args.fps)
     seconds = time.time() - t0

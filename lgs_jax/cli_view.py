@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cli_args import check_input, chosen_camera, int_at_least, view_options
+from .cli_args import check_input, chosen_camera, int_at_least, raster_config, view_options
 
 
 def parser(sub, common) -> None:
@@ -41,7 +41,7 @@ def run(args) -> int:
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
     viewer.serve(scene, cams, host=args.host, port=args.port, max_size=args.max_size,
                  backend=args.backend, background=np.asarray(args.background, np.float32),
-                 config=lgs_jax.RasterConfig(convention=args.convention))
+                 config=raster_config(args))
     return 0
 
 
@@ -49,14 +49,13 @@ def training_viewer(args, data):
     """(watch, served) for `fit --viewer-port`: a viewer starting at the first training camera
     of `data` (a `Dataset`) and `fit`'s `watch` that shows each scene it is given, with the
     step, the active Gaussians and the training loss and PSNR above the frames."""
-    import lgs_jax
     from lgs_jax import viewer
 
     cams = [data.cameras[i] for i in data.train]
     served = viewer.serve(None, cams, host=args.viewer_host, port=args.viewer_port,
                           max_size=1024, block=False, headroom=2.0, backend=args.backend,
                           background=np.asarray(data.background, np.float32),
-                          config=lgs_jax.RasterConfig(convention=args.convention))
+                          config=raster_config(args))
 
     def watch(step: int, gaussians, metrics: dict) -> None:
         text = f"step {step} of {args.steps}, {metrics['gaussians']:,} Gaussians"

@@ -208,6 +208,11 @@ class RasterConfig:
     Attributes:
       convention: "3dgs" (alpha cap 0.99; a pixel stops when T·(1−α) < 1e-4) or "gsplat"
         (gsplat 1.5.3: alpha cap 0.999; stops when T·(1−α) <= 1e-4).
+      antialiased: scale each Gaussian's opacity by sqrt(det(J Σc Jᵀ) / det(J Σc Jᵀ + 0.3 I)),
+        so that the 0.3-pixel dilation keeps its integral (gsplat's
+        rasterize_mode="antialiased", Mip-Splatting's 2D filter; lgs_jax.projection); False
+        (default): the original 3DGS dilation, which brightens and thickens Gaussians smaller
+        than a pixel. Every backend; scenes trained with it should be rendered with it.
 
     Local-GS switches (the `tiles` and `pallas` backends; `brute`, `reference` and
     `pallas_vanilla` compute the contract's difference form and honour only `convention` and,
@@ -232,6 +237,7 @@ class RasterConfig:
     """
 
     convention: Literal["3dgs", "gsplat"] = "3dgs"
+    antialiased: bool = False
     blend: Literal["exact", "fast"] = "exact"
     hoist: bool = True
     warp_cull: bool = True
@@ -245,7 +251,7 @@ class RasterConfig:
         _check("config.blend", self.blend, ("exact", "fast"))
         _check("config.origin", self.origin, ("corner", "center"))
         _check("config.kernel", self.kernel, ("auto",) + IMPLEMENTATIONS)
-        for name in ("hoist", "warp_cull", "local_coords"):
+        for name in ("antialiased", "hoist", "warp_cull", "local_coords"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"config.{name}: expected a bool, got {getattr(self, name)!r}")
         if not isinstance(self.tuning, KernelConfig):

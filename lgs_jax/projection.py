@@ -9,6 +9,10 @@ Implements conventions.md, "Camera and projection":
   Σ2 = J Σc Jᵀ + 0.3·I;  det = Σ2xx·Σ2yy − Σ2xy², invalid if det <= 0;
   conic (a, b, c) = (Σ2yy, −Σ2xy, Σ2xx)/det;  mean2d = (fx·tx/tz + cx, fy·ty/tz + cy);
   rgb = max(SH(dir) + 0.5, 0), dir = normalise(μ − camera centre).
+Antialiased (`RasterConfig(antialiased=True)`, gsplat's rasterize_mode="antialiased", the
+Mip-Splatting 2D filter): the dilation keeps each Gaussian's integral, the opacity scaled by
+  ρ = sqrt(max(det(J Σc Jᵀ) / det(Σ2), 0))  (≤ 1; 0 where J Σc Jᵀ is singular in rounding),
+and the validity test (opacity ≥ 1/255) applies to the scaled opacity.
 All products are written as explicit multiply-adds on per-Gaussian columns (no matmul), so TF32
 never applies on GPUs and XLA fuses the whole projection.
 """
@@ -82,8 +86,9 @@ def _camera_covariance(rot, scales, w):
     return dot(0, 0), dot(0, 1), dot(0, 2), dot(1, 1), dot(1, 2), dot(2, 2)
 
 
-def project(g: Gaussians, cam: Camera) -> Projected:
-    """Project Gaussians `g` through camera `cam` (all arithmetic in g's dtype).
+def project(g: Gaussians, cam: Camera, antialiased: bool = False) -> Projected:
+    """Project Gaussians `g` through camera `cam` (all arithmetic in g's dtype); `antialiased`
+    scales each opacity by ρ (module docstring).
 
     Written on per-Gaussian (N,) columns, every step elementwise (no stacked 3x3 matrices, no
     reductions over small axes), so that XLA fuses the projection and its autodiff backward
@@ -110,13 +115,13 @@ def project(g: Gaussians, cam: Camera) -> Projected:
     needs one whole. Behind the barrier the stacks were three XLA concatenates written and read
     back (about 0.2 ms of a 10M-Gaussian 4K forward on an H200, BENCHMARKS.md §7 "Dec 3, third
     session"), and in the backward the cotangents arrived stacked too."""
-    return _stacked(lax.optimization_barrier(_project(g, cam)))
+    return _stacked(lax.optimization_barrier(_project(g, cam, bool(antialiased))))
 
 
-@jax.checkpoint
-def _project(g: Gaussians, cam: Camera) -> dict:
+@functools.partial(jax.checkpoint, static_argnums=(2,))
+def _project(g: Gaussians, cam: Camera, antialiased: bool) -> dict:
     columns = gaussian_columns(g.means, g.quats, g.log_scales, g.logit_opacities)
-    return _projected_columns(*columns, g.sh, cam)
+    return _projected_columns(*columns, g.sh, cam, antialiased)
 
 
 def _stacked(cols: dict) -> Projected:
@@ -160,7 +165,8 @@ def _columns_bwd(_, cts):
 gaussian_columns.defvjp(_columns_fwd, _columns_bwd)
 
 
-def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) -> dict:
+def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
+                       antialiased: bool = False) -> dict:
     """`project` on `gaussian_columns` and the SH coefficients `sh` (N, K, 3): `Projected`'s
     fields as (N,) columns, a tuple of them for each vector field."""
     dt = mean[0].dtype
@@ -198,9 +204,10 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) 
     j00, j11 = fx / tz_safe, fy / tz_safe
     j02, j12 = -fx * tx_c / (tz_safe * tz_safe), -fy * ty_c / (tz_safe * tz_safe)
     # Σ2 = J Σc Jᵀ with J = [[j00, 0, j02], [0, j11, j12]].
-    sxx = j00 * (j00 * cxx + j02 * cxz) + j02 * (j00 * cxz + j02 * czz) + EPS2D
+    axx = j00 * (j00 * cxx + j02 * cxz) + j02 * (j00 * cxz + j02 * czz)
     sxy = j00 * (j11 * cxy + j12 * cxz) + j02 * (j11 * cyz + j12 * czz)
-    syy = j11 * (j11 * cyy + j12 * cyz) + j12 * (j11 * cyz + j12 * czz) + EPS2D
+    ayy = j11 * (j11 * cyy + j12 * cyz) + j12 * (j11 * cyz + j12 * czz)
+    sxx, syy = axx + EPS2D, ayy + EPS2D
     det = sxx * syy - sxy * sxy
     det_ok = det > 0
     det_safe = jnp.where(det_ok, det, 1.0)
@@ -208,6 +215,8 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) 
     mean2d = (fx * tx / tz_safe + cx, fy * ty / tz_safe + cy)
 
     opacity = jax.nn.sigmoid(jnp.where(input_ok, logit_opacities, 0.0))
+    if antialiased:
+        opacity = opacity * _compensation(axx * ayy - sxy * sxy, det_safe)
     centre = camera_center(viewmat)
     d = [mean[i] - centre[i] for i in range(3)]
     dnorm = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
@@ -230,6 +239,14 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera) 
         valid=valid,
         invalid=invalid,
     )
+
+
+def _compensation(det_raw, det):
+    """ρ = sqrt(max(det_raw / det, 0)) with a zero gradient where the ratio is <= 0 (the
+    square root's derivative at 0 would be inf·0 = NaN)."""
+    ratio = det_raw / det
+    positive = ratio > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, ratio, 1.0)), 0.0)
 
 
 def float_sort_key(x):

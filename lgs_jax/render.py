@@ -157,9 +157,9 @@ def _is_traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
 
 
-@functools.partial(jax.jit, static_argnames=("width", "height"))
-def _count(g: Gaussians, cam: Camera, width: int, height: int):
-    return binning.count_pairs(project(g, cam), width, height)
+@functools.partial(jax.jit, static_argnames=("width", "height", "antialiased"))
+def _count(g: Gaussians, cam: Camera, width: int, height: int, antialiased: bool):
+    return binning.count_pairs(project(g, cam, antialiased), width, height)
 
 
 def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
@@ -185,7 +185,7 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
 def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
             capacity: int, row_capacity: int | None, screen_offsets=None) -> RenderOutput:
     width, height = cam.width, cam.height
-    p = project(g, cam)
+    p = project(g, cam, config.antialiased)
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
@@ -291,7 +291,8 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
             raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an "
                              "eager render's stats.capacity), then check stats.overflow and "
                              "stats.pairs_required, or use lgs_jax.render_growing")
-        required = int(_count(gaussians, camera, camera.width, camera.height))
+        required = int(_count(gaussians, camera, camera.width, camera.height,
+                              config.antialiased))
         if required >= binning.MAX_PAIRS:
             raise CapacityError(required, 0)
         capacity = pair_capacity(required)

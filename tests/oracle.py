@@ -31,8 +31,11 @@ def sh_rgb(sh, d):
     return np.maximum(np.asarray(b) @ sh + 0.5, 0.0)
 
 
-def project_one(mean, quat, log_scale, logit, sh, view, fx, fy, cx, cy, w, h, near, far):
-    """Returns None for an invalid / culled Gaussian, else dict(mean2d, conic, cov2d, depth, o, rgb)."""
+def project_one(mean, quat, log_scale, logit, sh, view, fx, fy, cx, cy, w, h, near, far,
+                antialiased=False):
+    """Returns None for an invalid / culled Gaussian, else dict(mean2d, conic, cov2d, depth, o, rgb).
+    antialiased: o scaled by sqrt(max(det(J Σc Jᵀ) / det(J Σc Jᵀ + 0.3 I), 0)) (gsplat's
+    add_blur compensation)."""
     vals = [mean, quat, log_scale, [logit], sh.ravel()]
     if any(np.isnan(np.asarray(v, float)).any() for v in vals):
         return None
@@ -59,23 +62,27 @@ def project_one(mean, quat, log_scale, logit, sh, view, fx, fy, cx, cy, w, h, ne
     tx = tz * min(limxp, max(-limxn, tc[0] / tz))
     ty = tz * min(limyp, max(-limyn, tc[1] / tz))
     jac = np.array([[fx / tz, 0, -fx * tx / tz**2], [0, fy / tz, -fy * ty / tz**2]])
-    cov2 = jac @ covc @ jac.T + 0.3 * np.eye(2)
+    raw = jac @ covc @ jac.T
+    cov2 = raw + 0.3 * np.eye(2)
     det = cov2[0, 0] * cov2[1, 1] - cov2[0, 1] ** 2
     if not det > 0:
         return None
     conic = np.array([cov2[1, 1], -cov2[0, 1], cov2[0, 0]]) / det
     o = 1.0 / (1.0 + np.exp(-logit)) if logit != np.inf else 1.0
+    rho = np.sqrt(max(np.linalg.det(raw) / np.linalg.det(cov2), 0.0)) if antialiased else 1.0
+    o *= rho
     if o < 1 / 255:
         return None
     campos = -r.T @ t
     d = mean - campos
     d = d / np.linalg.norm(d)
     return dict(mean2d=np.array([fx * tc[0] / tz + cx, fy * tc[1] / tz + cy]), conic=conic,
-                cov2d=np.array([cov2[0, 0], cov2[0, 1], cov2[1, 1]]), depth=tz, o=o,
+                cov2d=np.array([cov2[0, 0], cov2[0, 1], cov2[1, 1]]), depth=tz, o=o, rho=rho,
+                terms=np.abs(jac) @ np.abs(covc) @ np.abs(jac).T,
                 rgb=sh_rgb(np.asarray(sh, float), d))
 
 
-def project_all(g, cam):
+def project_all(g, cam, antialiased=False):
     """Oracle projection of every Gaussian: list of dicts or None."""
     args = [np.asarray(cam.viewmat, float)] + [float(np.asarray(v)) for v in
                                                (cam.fx, cam.fy, cam.cx, cam.cy)]
@@ -84,13 +91,14 @@ def project_all(g, cam):
         out.append(project_one(np.asarray(g.means[i], float), np.asarray(g.quats[i], float),
                                np.asarray(g.log_scales[i], float), float(g.logit_opacities[i]),
                                np.asarray(g.sh[i], float), *args, cam.width, cam.height,
-                               float(np.asarray(cam.near)), float(np.asarray(cam.far))))
+                               float(np.asarray(cam.near)), float(np.asarray(cam.far)),
+                               antialiased))
     return out
 
 
-def composite(g, cam, background=(0, 0, 0), cap=0.99, inclusive=False):
+def composite(g, cam, background=(0, 0, 0), cap=0.99, inclusive=False, antialiased=False):
     """Brute-force float64 compositing: (image (H,W,3), alpha (H,W), depth (H,W))."""
-    proj = project_all(g, cam)
+    proj = project_all(g, cam, antialiased)
     order = sorted((p["depth"], i) for i, p in enumerate(proj) if p is not None)
     w, h = cam.width, cam.height
     px, py = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)

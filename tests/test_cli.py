@@ -144,6 +144,17 @@ def test_render_runs_once_reports_compile_time_and_interpret_mode(tmp_path, caps
     assert matplotlib.image.imread(out).shape[:2] == (54, 96)
 
 
+def test_render_passes_the_convention_and_antialiasing(tmp_path, monkeypatch):
+    configs, real = [], lgs_jax.render
+    monkeypatch.setattr(lgs_jax, "render",
+                        lambda *a, **k: configs.append(k["config"]) or real(*a, **k))
+    out = str(tmp_path / "x.png")
+    for flags in ([], ["--convention", "gsplat", "--antialiased"]):
+        assert main(["render", "--width", "32", "--out", out, "--backend", "brute"] + flags) == 0
+    assert configs == [lgs_jax.RasterConfig(),
+                       lgs_jax.RasterConfig("gsplat", antialiased=True)]
+
+
 def test_one_size_keeps_the_aspect_ratio(tmp_path):
     out = tmp_path / "x.png"
     assert main(["render", "--view", "0", "--width", "96", "--out", str(out)]) == 0

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import binning
-from ..config import CONVENTIONS, RasterConfig
+from ..config import CONVENTIONS
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2, pair_capacity, render
@@ -74,7 +74,8 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
     pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
-    capacity = pair_capacity(int(_pairs(pool, first)), setup.settings.pair_headroom)
+    capacity = pair_capacity(int(_pairs(pool, first, setup.settings.antialiased)),
+                             setup.settings.pair_headroom)
     rows = None
     if setup.settings.row_headroom is not None:
         rows = pair_capacity(_walked(setup, pool, first, jnp.asarray(rd.background), capacity),
@@ -84,18 +85,18 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
     return _State(pool, opt_state, sstate, 0, capacity, capacity, rows=rows)
 
 
-@jax.jit
-def _pairs(pool: Pool, cam):
+@functools.partial(jax.jit, static_argnames="antialiased")
+def _pairs(pool: Pool, cam, antialiased: bool = False):
     """Tile-Gaussian pairs of the pool in one view."""
-    return binning.count_pairs(project(render_gaussians(pool.params, pool.active), cam),
-                               cam.width, cam.height)
+    return binning.count_pairs(project(render_gaussians(pool.params, pool.active), cam,
+                                       antialiased), cam.width, cam.height)
 
 
 def _walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
     """Pairs some pixel reached in one view (`RenderStats.pairs_walked`): a forward render."""
     out = render(render_gaussians(pool.params, pool.active), cam, background=background,
                  backend=setup.backend, capacity=capacity,
-                 config=RasterConfig(setup.settings.convention))
+                 config=setup.settings.raster)
     return int(out.stats.pairs_walked)
 
 
@@ -136,7 +137,7 @@ def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
     """Held-out (PSNR, SSIM); renders beside the ground truth written to `out` when given."""
     images, st.eval_capacity = render_views(st.pool, rd.test_cams, jnp.asarray(rd.background),
                                             setup.backend, st.eval_capacity,
-                                            setup.settings.convention)
+                                            setup.settings.raster)
     if out:
         report.save_renders(out, images, rd.test_images, rd.test_names)
     return report.heldout_metrics(images, rd.test_images)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from ..config import RasterConfig
 from .strategy import DefaultStrategy, Strategy
 
 
@@ -16,7 +17,8 @@ class Settings:
     the loss; ssim_padding: "same" (3DGS, the default) or "valid" (gsplat's simple_trainer),
     `losses.ssim`. convention: the compositing rule of training and evaluation renders
     (`RasterConfig.convention`: "3dgs", alpha cap 0.99, or "gsplat", 0.999 as gsplat's trainer
-    renders). sh_every: one more SH band every sh_every steps up to sh_degree. batch: views per
+    renders). antialiased: train and evaluate with `RasterConfig.antialiased` (gsplat's
+    rasterize_mode="antialiased"; a scene trained so should be rendered so). sh_every: one more SH band every sh_every steps up to sh_degree. batch: views per
     step. eval_every / checkpoint_every: steps between held-out evaluations / checkpoints.
     init_points, init_extent: the random start of datasets without SfM points (`init.py`):
     that many points in a cube of half-width init_extent · scene_scale; None: 3.0 (gsplat) for
@@ -51,6 +53,7 @@ class Settings:
     ssim_lambda: float = 0.2
     ssim_padding: str = "same"
     convention: str = "3dgs"
+    antialiased: bool = False
     sh_every: int = 1000
     sh_degree: int = 3
     batch: int = 1
@@ -60,6 +63,11 @@ class Settings:
     init_extent: float | None = None
     pair_headroom: float = 3.0
     row_headroom: float | None = None
+
+    @property
+    def raster(self) -> RasterConfig:
+        """The `RasterConfig` of training and evaluation renders."""
+        return RasterConfig(self.convention, antialiased=self.antialiased)
 
 
 @dataclasses.dataclass(frozen=True)

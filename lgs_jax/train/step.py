@@ -99,7 +99,7 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
 
         def one(g, cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
-                       config=RasterConfig(s.settings.convention), screen_offsets=off,
+                       config=s.settings.raster, screen_offsets=off,
                        row_capacity=rows)
             return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
@@ -183,20 +183,21 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap:
         pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)
 
 
-@functools.partial(jax.jit, static_argnames=("backend", "capacity", "convention"),
+@functools.partial(jax.jit, static_argnames=("backend", "capacity", "config"),
                    compiler_options=COMPILER_OPTIONS)
-def _render_pool(pool: Pool, cam, background, *, backend: str, capacity: int, convention: str):
+def _render_pool(pool: Pool, cam, background, *, backend: str, capacity: int,
+                 config: RasterConfig):
     return render(render_gaussians(pool.params, pool.active), cam, background=background,
-                  backend=backend, capacity=capacity, config=RasterConfig(convention))
+                  backend=backend, capacity=capacity, config=config)
 
 
 def render_views(pool: Pool, cams, background, backend: str, capacity: int,
-                 convention: str = "3dgs"):
+                 config: RasterConfig = RasterConfig()):
     """([image (H, W, 3) numpy, clipped to [0, 1]] per camera, capacity): every active
-    Gaussian with all its SH bands (gsplat evaluates at full degree) under `convention`,
-    capacity grown as needed."""
+    Gaussian with all its SH bands (gsplat evaluates at full degree) under `config`, capacity
+    grown as needed."""
     images = []
-    fn = functools.partial(_render_pool, backend=backend, convention=convention)
+    fn = functools.partial(_render_pool, backend=backend, config=config)
     for cam in cams:
         out, capacity = render_growing(fn, pool, cam, background, capacity=capacity)
         images.append(np.clip(np.asarray(out.image), 0.0, 1.0))

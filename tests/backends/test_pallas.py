@@ -39,10 +39,12 @@ LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
     "local_center": C(origin="center"),
     "global": C(local_coords=False),
     "gsplat": C("gsplat"),
+    "antialiased": C(antialiased=True),
 }
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in ("no_cull", "difference")
+@pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in ("no_cull", "difference",
+                                                                        "antialiased")
                                   else n for n in LOCALGS])  # "baseline": both off
 @settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
@@ -50,7 +52,8 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
     config = LOCALGS[name]
-    ref = scenes.render(g, cam, "reference", C(config.convention))
+    ref = scenes.render(g, cam, "reference", C(config.convention,
+                                                antialiased=config.antialiased))
     out = scenes.render(g, cam, "pallas", config)
     assert out.stats.kernel == f"localgs-{AUTO}"
     assert out.stats.interpreted == (not ON_GPU)

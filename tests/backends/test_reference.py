@@ -29,14 +29,15 @@ def test_reference_equals_brute_float64(config, seed):
     assert ref.image.dtype == np.float64
 
 
-@given(seed=st.integers(0, 2**32 - 1))
-def test_reference_equals_oracle_float64(seed):
+@given(seed=st.integers(0, 2**32 - 1), antialiased=st.booleans())
+def test_reference_equals_oracle_float64(seed, antialiased):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    config = CONVENTIONS[seed % 2]
+    config = lgs_jax.RasterConfig(CONVENTIONS[seed % 2].convention, antialiased=antialiased)
     ref = scenes.render(g, cam, "reference", config)
     img, alpha, depth = oracle.composite(g, cam, BG, cap=ALPHA_CAP[config.convention],
-                                         inclusive=STOP_INCLUSIVE[config.convention])
+                                         inclusive=STOP_INCLUSIVE[config.convention],
+                                         antialiased=antialiased)
     assert_render_close(ref.image, img, atol=F64_ATOL, what="image")
     assert_render_close(ref.alpha, alpha, atol=F64_ATOL, what="alpha")
     assert_render_close(ref.depth, depth, atol=1e-8, what="depth")

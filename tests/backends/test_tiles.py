@@ -28,7 +28,7 @@ PRECISION = {  # Table V: local vs global coordinates; corner vs centre origin
     "local_corner": C(), "local_center": C(origin="center"), "global": C(local_coords=False),
 }
 EXACT = {**{k: v for k, v in ABLATION.items() if v.blend == "exact"}, **PRECISION,
-         "difference_culled": C(hoist=False)}
+         "difference_culled": C(hoist=False), "antialiased": C(antialiased=True)}
 
 
 def all_exact_configs():
@@ -50,7 +50,9 @@ def all_exact_configs():
 def test_tiles_exact_equals_reference_float64(name, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    ref, out = scenes.render(g, cam, "reference", C()), scenes.render(g, cam, "tiles", EXACT[name])
+    config = EXACT[name]
+    ref = scenes.render(g, cam, "reference", C(antialiased=config.antialiased))
+    out = scenes.render(g, cam, "tiles", config)
     for field in ("image", "alpha", "depth"):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=F64_ATOL, what=field)
 
@@ -62,7 +64,9 @@ def test_tiles_exact_local_equals_reference_float32(name, seed):
     g64 = scenes.scene(seed)
     g = scenes.cast(g64, np.float32)
     cam = scenes.camera()
-    ref, out = scenes.render(g, cam, "reference", C()), scenes.render(g, cam, "tiles", EXACT[name])
+    config = EXACT[name]
+    ref = scenes.render(g, cam, "reference", C(antialiased=config.antialiased))
+    out = scenes.render(g, cam, "tiles", config)
     assert out.image.dtype == np.float32
     assert_float32_close(out, ref)
     truth = np.asarray(scenes.render(g64, scenes.camera(dtype=np.float64), "reference", C()).image)

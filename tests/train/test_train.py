@@ -349,8 +349,10 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
-    assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead"]) == 0
+    assert not seen["settings"].antialiased
+    assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead", "--antialiased"]) == 0
     assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
+    assert seen["settings"].raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
 
 
 def test_run_dir_rules(tmp_path):
@@ -366,26 +368,35 @@ def test_run_dir_rules(tmp_path):
         train.fit("unused", 1, str(tmp_path))
 
 
-def test_training_renders_follow_the_convention():
-    """Settings.convention reaches the renders: an opaque Gaussian over a white background
-    leaves 1 − 0.99 of it under "3dgs" and 1 − 0.999 under "gsplat"."""
+def test_training_renders_follow_the_settings():
+    """Settings.convention and .antialiased reach the renders: an opaque Gaussian over a white
+    background leaves 1 − 0.99 of it under "3dgs" and 1 − 0.999 under "gsplat"; a Gaussian
+    smaller than a pixel in front of it is fainter antialiased."""
     from lgs_jax.train import pool as P, step as S
 
-    g = lgs_jax.Gaussians(means=jnp.array([[0.0, 0.0, 4.0]]), quats=jnp.array([[1.0, 0, 0, 0]]),
-                          log_scales=jnp.full((1, 3), 2.0), logit_opacities=jnp.array([30.0]),
-                          sh=jnp.zeros((1, 1, 3)))
+    g = lgs_jax.Gaussians(means=jnp.array([[0.0, 0.0, 4.0], [-0.825, -0.825, 3.0]]),
+                          quats=jnp.array([[1.0, 0, 0, 0]] * 2),
+                          log_scales=jnp.array([[2.0] * 3, [-3.0] * 3]),
+                          logit_opacities=jnp.array([30.0, 0.0]),
+                          sh=jnp.array([[[0.0] * 3], [[1.0] * 3]]))
     cam = lgs_jax.Camera(viewmat=np.eye(4, dtype=np.float32), fx=20.0, fy=20.0, cx=8.0, cy=8.0,
                          width=16, height=16)
     pool = P.from_gaussians(g)
-    centre = {}
-    for convention in ("3dgs", "gsplat"):
-        (image,), _ = S.render_views(pool, [cam], jnp.ones(3), "tiles", 64, convention)
+    images = {}
+    for name, settings in (("3dgs", train.Settings()),
+                           ("gsplat", train.Settings(convention="gsplat")),
+                           ("antialiased", train.Settings(antialiased=True))):
+        (image,), _ = S.render_views(pool, [cam], jnp.ones(3), "tiles", 64, settings.raster)
         want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64,
-                              config=lgs_jax.RasterConfig(convention)).image
-        np.testing.assert_array_equal(image, np.clip(np.asarray(want), 0, 1))
-        centre[convention] = image[8, 8, 0]
+                              config=lgs_jax.RasterConfig(settings.convention,
+                                                          antialiased=settings.antialiased))
+        np.testing.assert_array_equal(image, np.clip(np.asarray(want.image), 0, 1))
+        images[name] = image
     # SH DC 0 is grey 0.5: 0.5·cap + 1·(1 − cap)
-    np.testing.assert_allclose([centre["3dgs"], centre["gsplat"]], [0.505, 0.5005], atol=1e-5)
+    np.testing.assert_allclose([images["3dgs"][8, 8, 0], images["gsplat"][8, 8, 0]],
+                               [0.505, 0.5005], atol=1e-5)
+    small = lambda image: image[2, 2, 0] - images["3dgs"][8, 8, 0]  # above the grey
+    assert 0 < small(images["antialiased"]) < 0.5 * small(images["3dgs"])
 
 
 @pytest.mark.parametrize("kwargs,match", [
