@@ -6,7 +6,7 @@
 Scene SPECs: benchmarks.common. Rows (`common.PALLAS_ROWS`, `--rows`) per scene and camera:
 `pallas` (Local-GS, exact and fast blending), `pallas_vanilla`, `tiles` (XLA; fewer rounds: it
 is slow on GPUs) and `gsplat` (`rasterization(..., packed=False, rasterize_mode="classic")`,
-when gsplat imports). Per row: the rasterization stage
+when gsplat imports; `--antialiased`: both in antialiased mode). Per row: the rasterization stage
 (`raster_ms`: our kernel call with its mask and row packing, from projected and binned inputs;
 gsplat's `rasterize_to_pixels` from its own intersections), the end-to-end forward
 (`e2e_ms`: one jitted `render` from device-resident parameters / one `rasterization` call), the
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import sys
 import types
 
@@ -58,7 +59,7 @@ def _median_ms(fns, repeat, sync):
     return median_ms({name: lambda f=f: sync(f()) for name, f in fns.items()}, repeat)
 
 
-def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
+def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS), antialiased=False):
     g = jax.device_put(case.scene)
     cam = jax.device_put(case.camera)
     w, h = cam.width, cam.height
@@ -69,6 +70,7 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     images, memory, fns, slow_fns = {}, {}, {}, {}
     for name in names:
         backend, config, stage = OURS[name]
+        config = dataclasses.replace(config, antialiased=antialiased)
         f = jax.jit(lambda g, c, b=backend, cf=config: render(g, c, backend=b, config=cf,
                                                                capacity=cap).image)
         r = jax.jit(lambda p, b, st=stage: st(p, b, w, h).color)
@@ -90,7 +92,8 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     truth = None
     if w * h <= f64_max_pixels:
         g64 = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), g)
-        truth = np.asarray(render(g64, cam, backend="reference", capacity=cap).image)
+        truth = np.asarray(render(g64, cam, backend="reference", capacity=cap,
+                                  config=C(antialiased=antialiased)).image)
     rows = []
     for name in images:
         row = dict(scene=case.name, width=w, height=h, gaussians=case.scene.num, row=name,
@@ -105,11 +108,11 @@ def _ours(case, repeat, slow_repeat, f64_max_pixels, names=tuple(OURS)):
     return rows, images
 
 
-def _gsplat_peer(case):
+def _gsplat_peer(case, antialiased=False):
     """gsplat's view of a case: to_torch(x) (a float32 CUDA tensor), the camera as gsplat takes
     it (viewmat (1, 4, 4), K (1, 3, 3), near, far) and the SH degree, and render(means, quats,
     scales, opacities, sh): `gsplat.rasterization`'s image (1, H, W, 3) through that camera
-    (packed=False, classic)."""
+    (packed=False, classic or antialiased)."""
     import gsplat
     import torch
 
@@ -120,18 +123,20 @@ def _gsplat_peer(case):
     K = to_torch([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
     deg = int(round(np.sqrt(case.scene.sh.shape[1]))) - 1
     near, far = float(cam.near), float(cam.far)
+    mode = "antialiased" if antialiased else "classic"
 
     def render(means, quats, scales, opacities, sh):
         return gsplat.rasterization(means, quats, scales, opacities, sh, viewmat, K, cam.width,
                                     cam.height, near_plane=near, far_plane=far, sh_degree=deg,
-                                    packed=False, rasterize_mode="classic")[0]
+                                    packed=False, rasterize_mode=mode)[0]
 
     return types.SimpleNamespace(to_torch=to_torch, viewmat=viewmat, K=K, near=near, far=far,
                                  deg=deg, render=render)
 
 
-def _gsplat(case, repeat):
-    """gsplat 1.5.3's forward on the same scene and camera: (row, image) or None."""
+def _gsplat(case, repeat, antialiased=False):
+    """gsplat 1.5.3's forward on the same scene and camera: (row, image) or None (its stages'
+    timings are the classic mode's)."""
     try:
         import torch
         from gsplat.cuda._wrapper import (fully_fused_projection, isect_offset_encode,
@@ -140,7 +145,7 @@ def _gsplat(case, repeat):
         print(f"gsplat unavailable: {e}", file=sys.stderr)
         return None
     g, cam = case.scene, case.camera
-    peer = _gsplat_peer(case)
+    peer = _gsplat_peer(case, antialiased)
     t, viewmat, K, deg = peer.to_torch, peer.viewmat, peer.K, peer.deg
     near, far = peer.near, peer.far
     means, quats = t(g.means), t(g.quats)
@@ -278,6 +283,8 @@ def main(argv=None) -> int:
                     help=f"comma-separated forward rows, of {','.join(OURS)}")
     ap.add_argument("--grad-rows", default=",".join(GRAD_ROWS),
                     help=f"comma-separated rows for --grad, of {','.join(GRAD_ROWS)}")
+    ap.add_argument("--antialiased", action="store_true",
+                    help="forward rows in antialiased mode, ours and gsplat's (images, e2e)")
     ap.add_argument("--csv")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # the float64 reference; renders stay float32
@@ -295,8 +302,8 @@ def main(argv=None) -> int:
             rows += grad
             continue
         ours, images = _ours(case, args.repeat, args.slow_repeat, args.f64_max_pixels,
-                             args.rows.split(","))
-        peer = None if args.no_gsplat else _gsplat(case, args.repeat)
+                             args.rows.split(","), args.antialiased)
+        peer = None if args.no_gsplat else _gsplat(case, args.repeat, args.antialiased)
         if peer:
             row, image = peer
             for r in ours:
