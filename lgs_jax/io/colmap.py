@@ -1,5 +1,10 @@
 """COLMAP sparse models (cameras, images, points3D), binary or text, read without pycolmap.
 
+Why not pycolmap: a trainer needs three record files' poses, intrinsics and points, which this
+module reads in pure Python with errors naming the file and record; pycolmap is a 38 MB compiled
+wheel (4.2.1, Python 3.12) the GPU machine lacks. pycolmap 4.2.1 read the skull model exactly as
+this reader does (a one-off check, tests/io/colmap_format.py).
+
 Binary layout (little-endian; COLMAP's `reconstruction_io`, unchanged from 3.x to 4.x):
   cameras.bin   uint64 count; per camera: uint32 camera_id, int32 model_id, uint64 width,
                 uint64 height, float64 params[n(model)]

@@ -1,8 +1,9 @@
 """Data-parallel training (`fit(..., devices=N)`, `step._over_views`): on two CPU devices
 (`--xla_force_host_platform_device_count`, set before JAX starts, so in a child process) a run
 with refinements follows the one-device run to float rounding (the gradients' sum is taken in
-another order), compiles its step no more often, and repeats itself to the bit; bad device
-counts are refused by name."""
+another order), compiles its step no more often, and repeats itself to the bit, watched or
+not (`fit`'s `watch` gets one device's copy of the pool); bad device counts are refused by
+name."""
 
 import json
 import os
@@ -30,17 +31,22 @@ CHILD = textwrap.dedent("""
     strategy = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=1e-4,
                                      prune_opa=0.02)
     settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100)
-    out = {}
+    out, watched = {}, []
+    watch = lambda step, g, m: watched.append(
+        (step, len(g.means.devices()), int(np.isfinite(np.asarray(g.logit_opacities)).sum()),
+         m["gaussians"]))
     for run, devices in (("one", 1), ("two", 2), ("again", 2)):
         before = len(compiles)
         result = train.fit(d, 6, os.path.join(sys.argv[2], run), strategy=strategy,
                            settings=settings, max_gaussians=512, pool_size=512,
-                           backend="reference", devices=devices, log=lambda m: None)
+                           backend="reference", devices=devices, log=lambda m: None,
+                           watch=watch if run == "again" else None, watch_every=0)
         rows = [json.loads(line) for line in open(os.path.join(sys.argv[2], run,
                                                                "metrics.jsonl"))]
         steps = [name for name in compiles[before:] if name == "jit(train_step)"]
         out[run] = dict(rows=[r for r in rows if "loss" in r], compiles=len(steps),
                         devices=result["devices"], psnr=result["heldout_psnr"])
+    out["watched"] = watched
     print(json.dumps(out))
 """)
 
@@ -68,6 +74,10 @@ def test_two_devices_follow_one_and_repeat_themselves(data_dir, tmp_path):
     assert one["compiles"] == two["compiles"] == 1 and again["compiles"] == 0
     strip = lambda rows: [{k: v for k, v in r.items() if k != "seconds"} for r in rows]
     assert strip(again["rows"]) == strip(two["rows"]) and again["psnr"] == two["psnr"]
+    # the repeat was watched (which changed no bit): every step, one device's copy of the pool
+    assert [w[0] for w in out["watched"]] == list(range(7))
+    assert all(w[1] == 1 and w[2] == w[3] for w in out["watched"])
+    assert [w[3] for w in out["watched"][1:]] == [r["gaussians"] for r in again["rows"]]
 
 
 @pytest.mark.parametrize("kwargs,match", [
