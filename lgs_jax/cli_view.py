@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cli_args import check_input, chosen_camera, int_at_least, raster_config, view_options
+from .cli_args import (capture_cameras, check_input, chosen_camera, int_at_least, raster_config,
+                       view_options)
 
 
 def parser(sub, common) -> None:
@@ -15,7 +16,8 @@ def parser(sub, common) -> None:
         description="Serve the scene to a browser (http://localhost:PORT): the mouse orbits, "
                     "pans and zooms, and every camera change renders the view at the canvas's "
                     "aspect ratio, its longer side --max-size pixels (a slider in the page "
-                    "changes it; a new size compiles once). Needs viser: pip install "
+                    "changes it; a new size compiles once). The cameras are drawn; a click on "
+                    "one moves the view there. Needs viser: pip install "
                     "\"lgs_jax[viewer]\". Ctrl-C stops.")
     view_options(v, sizes=False)
     v.add_argument("--view", type=int_at_least(0),
@@ -37,12 +39,26 @@ def run(args) -> int:
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
         if path:
             check_input(path, what)
-    cams = [chosen_camera(args, "to view")]
+    cams, start = _cameras(args)
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
-    viewer.serve(scene, cams, host=args.host, port=args.port, max_size=args.max_size,
-                 backend=args.backend, background=np.asarray(args.background, np.float32),
-                 config=raster_config(args))
+    viewer.serve(scene, cams, start=start, host=args.host, port=args.port,
+                 max_size=args.max_size, backend=args.backend,
+                 background=np.asarray(args.background, np.float32), config=raster_config(args))
     return 0
+
+
+def _cameras(args):
+    """(cameras drawn in the viewer, the one to start at): those of --cameras, or the default
+    scene's orbit views (its framing camera first unless --view picks one)."""
+    import lgs_jax
+    from lgs_jax import data
+
+    chosen = chosen_camera(args, "to view")  # checks --view
+    cams = capture_cameras(args, "to view")
+    if cams is not None:
+        return cams, args.view or 0
+    orbit = [lgs_jax.default_camera(v) for v in range(data.ORBIT_VIEWS)]
+    return ([chosen] + orbit, 0) if args.view is None else (orbit, args.view)
 
 
 def training_viewer(args, data):

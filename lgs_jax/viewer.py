@@ -111,6 +111,35 @@ def _target(cameras, scene) -> np.ndarray:
     return centre + rot[2] * max(float(rot[2] @ (mid - centre)), 1e-3)
 
 
+def frustum_scale(cameras) -> float:
+    """A drawn camera's depth: 5% of the cameras' spread (their largest distance from their
+    mean centre), or 0.1 for one camera or cameras in one place."""
+    centres = np.stack([poses.pose(c)[0] for c in cameras])
+    spread = float(np.linalg.norm(centres - centres.mean(0), axis=1).max())
+    return 0.05 * spread if spread > 0 else 0.1
+
+
+def add_cameras(scene_api, cameras, scale: float):
+    """Draw each camera as a frustum (viser's `scene` API); clicking one moves the clicking
+    browser's view to that camera (position, rotation, field of view). Returns the handles."""
+    handles = []
+    for i, cam in enumerate(cameras):
+        position, wxyz, fov = viewer_pose(cam)
+        handle = scene_api.add_camera_frustum(
+            f"/cameras/{i}", fov=fov, aspect=cam.width / cam.height, scale=scale,
+            wxyz=tuple(wxyz), position=tuple(position), color=(80, 120, 255))
+
+        def go(event, position=position, wxyz=wxyz, fov=fov) -> None:
+            with event.client.atomic():
+                event.client.camera.wxyz = tuple(wxyz)
+                event.client.camera.position = tuple(position)
+                event.client.camera.fov = fov
+
+        handle.on_click(go)
+        handles.append(handle)
+    return handles
+
+
 class FrameLoop:
     """The viewer's render thread: `request(client)` marks a client's view as changed; `run()`
     renders each marked client's *latest* camera state in turn (a client marked again before
@@ -181,10 +210,11 @@ class Served:
             self._loop.request(client)
 
 
-def serve(scene, cameras, *, host: str = "0.0.0.0", port: int = 8080, max_size: int = 1024,
-          block: bool = True, headroom: float = 1.0, **render_kwargs):
+def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 8080,
+          max_size: int = 1024, block: bool = True, headroom: float = 1.0, **render_kwargs):
     """Serve `scene` to browsers at http://HOST:PORT (the next free port if PORT is taken),
-    new clients starting at `cameras[0]` looking at the scene's centre (module docstring);
+    new clients starting at `cameras[start]` looking at the scene's centre (module docstring),
+    the cameras drawn as frusta (a click on one moves the view there; a checkbox hides them);
     `render_kwargs` go to `lgs_jax.render`, `headroom` sizes the pair buffer when a view
     outgrows it (`video.render_image`). `scene` None shows nothing until `Served.show` brings
     one (a scene in training; new clients look at the point nearest the cameras' axes). Prints
@@ -195,9 +225,13 @@ def serve(scene, cameras, *, host: str = "0.0.0.0", port: int = 8080, max_size: 
     except ImportError:
         raise RuntimeError('the viewer needs viser: pip install "lgs_jax[viewer]"') from None
     server = viser.ViserServer(host=host, port=port, verbose=False)
-    _initial_view(server, cameras[0], _target(cameras, scene))
+    first = [cameras[start]] + [c for i, c in enumerate(cameras) if i != start]
+    _initial_view(server, first[0], _target(first, scene))
     size = server.gui.add_slider("max size", min=64, max=4096, step=16,
                                  initial_value=int(max_size))
+    frusta = add_cameras(server.scene, cameras, frustum_scale(cameras))
+    shown = server.gui.add_checkbox("show cameras", initial_value=True)
+    shown.on_update(lambda _: [setattr(f, "visible", shown.value) for f in frusta])
     status = server.gui.add_markdown("")
     info = server.gui.add_markdown("waiting for a camera")
     loop = FrameLoop(FrameRenderer(scene, headroom, **render_kwargs), lambda: size.value,

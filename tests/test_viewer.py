@@ -1,6 +1,7 @@
 """lgs_jax.viewer: viser's camera states as our cameras (and back), the frame sizes, the frames
 themselves, the render loop's coalescing with stand-in clients, and the server answering."""
 
+import contextlib
 import socket
 import threading
 import time
@@ -195,3 +196,44 @@ def test_view_command_line_errors(tmp_path, capsys, args, match):
         code = e.code
     assert code == 2
     assert match in capsys.readouterr().err
+
+
+class _Frustum:
+    def __init__(self, **kwargs):
+        self.kwargs, self.clicks = kwargs, []
+
+    def on_click(self, fn):
+        self.clicks.append(fn)
+
+
+def test_cameras_are_drawn_and_a_click_moves_the_view_there():
+    cams = [lgs_jax.default_camera(v) for v in range(3)]
+    drawn = []
+    scene_api = types.SimpleNamespace(
+        add_camera_frustum=lambda name, **kw: drawn.append(_Frustum(name=name, **kw)) or drawn[-1])
+    viewer.add_cameras(scene_api, cams, viewer.frustum_scale(cams))
+    assert [f.kwargs["name"] for f in drawn] == ["/cameras/0", "/cameras/1", "/cameras/2"]
+    centres = np.stack([viewer.poses.pose(c)[0] for c in cams])
+    spread = np.linalg.norm(centres - centres.mean(0), axis=1).max()
+    assert drawn[0].kwargs["scale"] == pytest.approx(0.05 * spread)
+    client = types.SimpleNamespace(camera=types.SimpleNamespace(), atomic=contextlib.nullcontext)
+    drawn[2].clicks[0](types.SimpleNamespace(client=client))
+    position, wxyz, fov = viewer.viewer_pose(cams[2])
+    back = viewer.camera_from_pose(client.camera.position, client.camera.wxyz, client.camera.fov,
+                                   cams[2].width, cams[2].height)
+    np.testing.assert_allclose(np.asarray(back.viewmat), np.asarray(cams[2].viewmat), atol=1e-6)
+    assert drawn[2].kwargs["fov"] == fov and drawn[2].kwargs["aspect"] == 1280 / 720
+
+
+def test_the_view_command_draws_the_capture_or_the_orbit_and_starts_at_view(
+        monkeypatch):
+    served = []
+    monkeypatch.setattr(viewer, "serve", lambda scene, cams, start, **_: served.append(
+        ([np.asarray(c.viewmat) for c in cams], start)))
+    assert main(["view"]) == 0 and main(["view", "--view", "5"]) == 0
+    framing, orbit = lgs_jax.default_camera(), [lgs_jax.default_camera(v) for v in range(8)]
+    (first, start_a), (second, start_b) = served
+    assert len(first) == 9 and start_a == 0
+    np.testing.assert_array_equal(first[0], np.asarray(framing.viewmat))
+    assert len(second) == 8 and start_b == 5
+    np.testing.assert_array_equal(second[5], np.asarray(orbit[5].viewmat))
