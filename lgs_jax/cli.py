@@ -115,8 +115,6 @@ def _info(args) -> int:
 
 def _fit(args) -> int:
     """`fit`: check --data and --out (an existing run needs --resume or --overwrite), train."""
-    import dataclasses
-
     from . import train
 
     if not (os.path.isdir(args.data) or (os.path.isfile(args.data)
@@ -125,11 +123,10 @@ def _fit(args) -> int:
     problem = train.run_dir_problem(args.out, args.resume, args.overwrite)
     if problem:
         raise UsageError(f"--out: {problem}")
-    settings = dataclasses.replace(train.Settings(), batch=args.batch,
-                                   eval_every=args.eval_every, init_points=args.init_points,
-                                   convention=args.convention, antialiased=args.antialiased,
-                                   pair_headroom=args.pair_headroom,
-                                   row_headroom=args.row_headroom)
+    settings = train.Settings(batch=args.batch, eval_every=args.eval_every,
+                              init_points=args.init_points, convention=args.convention,
+                              antialiased=args.antialiased, pair_headroom=args.pair_headroom,
+                              row_headroom=args.row_headroom, stream_images=args.stream_images)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None:
         data = _dataset(args)
@@ -242,6 +239,17 @@ def _fit_parser(sub, common) -> None:
                    help="size the Pallas backward's gradient rows to this multiple of the "
                         "walked pairs, growing them when a view walks more (a recompile each): "
                         "less memory, the same results (default: a row per pair slot)")
+    _fit_run_options(f)
+    f.set_defaults(func=_fit)
+
+
+def _fit_run_options(f) -> None:
+    """`fit`'s options beside the recipe: the images' memory, compiles, the window, seed and
+    backend, the viewer, resuming."""
+    f.add_argument("--stream-images", action=argparse.BooleanOptionalAction, default=None,
+                   help="keep only each step's views on the device (copied while the step "
+                        "before runs) instead of the whole capture; the same results (default: "
+                        "when the images would take more than 1/8 of the device's memory)")
     ahead = f.add_mutually_exclusive_group()
     ahead.add_argument("--compile-ahead-process", action="store_true",
                        help="compile the step for a grown pair buffer ahead in a child process, "
@@ -268,7 +276,6 @@ def _fit_parser(sub, common) -> None:
     again.add_argument("--resume", action="store_true", help="continue from OUT's checkpoint")
     again.add_argument("--overwrite", action="store_true",
                        help="delete OUT's previous run (its checkpoint, metrics and renders)")
-    f.set_defaults(func=_fit)
 
 
 def _parser() -> argparse.ArgumentParser:

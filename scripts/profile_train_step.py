@@ -130,7 +130,8 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     idx = jnp.array([0])
     key = jax.random.key(0)
     step_fn = functools.partial(st.train_step, setup=setup, capacity=capacity)
-    call = lambda: step_fn(pool, opt_state, sstate, rd.train_cams, rd.train_images,
+    targets = jnp.asarray(rd.train_images[:1])  # view 0's image, on the device as fit's
+    call = lambda: step_fn(pool, opt_state, sstate, rd.train_cams, targets,
                            idx, bg, jnp.int32(6000), key)
     fns = {
         "render": lambda: jax.block_until_ready(fwd(pool.params)),

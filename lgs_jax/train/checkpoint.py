@@ -55,10 +55,11 @@ def run_dir_problem(out: str, resume: bool = False, overwrite: bool = False) -> 
 
 def config_of(setup, seed: int) -> dict:
     """The configuration a resumed run must share with the saved one (all but the run length,
-    the backend, the evaluation/checkpoint periods, the pair and row headrooms: none changes a
-    result)."""
+    the backend, the evaluation/checkpoint periods, the pair and row headrooms, the images'
+    streaming: none changes a result)."""
     settings = dataclasses.asdict(setup.settings)
-    for k in ("eval_every", "checkpoint_every", "pair_headroom", "row_headroom"):
+    for k in ("eval_every", "checkpoint_every", "pair_headroom", "row_headroom",
+              "stream_images"):
         settings.pop(k)
     return dict(strategy=type(setup.strategy).__name__,
                 strategy_settings=dataclasses.asdict(setup.strategy), settings=settings,

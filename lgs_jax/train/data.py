@@ -15,13 +15,14 @@ from ..scene import stack_cameras
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RunData:
-    """train_cams: stacked training cameras; train_images (T, H, W, 3) on the device; test_cams,
+    """train_cams: stacked training cameras; train_images (T, H, W, 3) float32 on the host
+    (`TrainViews` puts them on the device, whole or a step's views at a time); test_cams,
     test_images (numpy), test_names (file stems) of the held-out views; background (3,);
     scene_scale: 1.1 x the largest camera distance from the cameras' mean centre (gsplat);
     points, colors: SfM points (may be empty); nerf_synthetic: white background."""
 
     train_cams: object
-    train_images: jax.Array
+    train_images: np.ndarray
     test_cams: list
     test_images: np.ndarray
     test_names: list
@@ -56,7 +57,7 @@ def prepare(data, downscale: int = 1, crop=None) -> RunData:
     cams, images = _cropped(d, crop)
     return RunData(
         train_cams=stack_cameras([cams[i] for i in d.train]),
-        train_images=jnp.asarray(images[d.train]), test_cams=[cams[i] for i in d.test],
+        train_images=np.asarray(images[d.train]), test_cams=[cams[i] for i in d.test],
         test_images=np.asarray(images[d.test]),
         test_names=[os.path.splitext(os.path.basename(d.names[i]))[0] for i in d.test],
         background=np.asarray(d.background, np.float32), scene_scale=1.1 * d.extent,
@@ -75,3 +76,52 @@ def views_for_step(step: int, batch: int, n_train: int, seed: int) -> np.ndarray
         here = pos // n_train == epoch
         out[here] = order[pos[here] % n_train]
     return out
+
+
+HOST_STREAM_BYTES = 2 << 30
+"""`streams`' threshold where the device reports no memory limit (CPUs): 2 GiB."""
+
+
+def streams(nbytes: int, setting: bool | None, device=None) -> bool:
+    """Whether `fit` streams training images of `nbytes` (`Settings.stream_images`): the
+    setting where it is a bool; None: when they would take more than an eighth of the device's
+    memory (`memory_stats()["bytes_limit"]`), or more than `HOST_STREAM_BYTES` where the device
+    reports no limit."""
+    if setting is not None:
+        return bool(setting)
+    stats = (device or jax.devices()[0]).memory_stats() or {}
+    limit = stats.get("bytes_limit")
+    return nbytes > (limit // 8 if limit else HOST_STREAM_BYTES)
+
+
+class TrainViews:
+    """The training views of each step, as `step.train_step`'s (targets, idx) arguments: idx
+    the step's views (`views_for_step`), targets their images (B, H, W, 3) on the device,
+    taken from the whole capture kept on the device, or streamed: copied from the host, the
+    next step's copy started while a step runs (`prefetch`), so that device memory holds two
+    batches instead of the capture. The same values, and the same compiled step, either way:
+    the same results to the bit."""
+
+    def __init__(self, images: np.ndarray, batch: int, seed: int, stream: bool):
+        self.images, self.batch, self.seed, self.stream = images, batch, seed, stream
+        self._whole = None if stream else jnp.asarray(images)
+        self._copies: dict[int, tuple] = {}
+
+    def args(self, step: int):
+        """(targets, idx) of 0-based `step`."""
+        self.prefetch(step)
+        return self._copies[step]
+
+    def prefetch(self, step: int) -> None:
+        """Start putting `step`'s views on the device (the latest two steps' kept)."""
+        if step in self._copies:
+            return
+        self._copies = {k: v for k, v in self._copies.items() if k == step - 1}
+        views = views_for_step(step, self.batch, self.images.shape[0], self.seed)
+        idx = jnp.asarray(views)
+        targets = (jax.device_put(self.images[views]) if self.stream
+                   else _take(self._whole, idx))
+        self._copies[step] = targets, idx
+
+
+_take = jax.jit(lambda images, idx: images[idx])

@@ -32,7 +32,7 @@ from ..projection import project
 from ..render import next_pow2, pair_capacity, render
 from . import checkpoint, report
 from .ahead import Sizes, Stepper, mode_of, signature
-from .data import RunData, prepare, views_for_step
+from .data import RunData, TrainViews, prepare, streams
 from .init import start_gaussians
 from .losses import PADDINGS
 from .optim import optimizer
@@ -157,17 +157,17 @@ def _stepper(setup: Setup, mode: str | None) -> Stepper:
                    Sizes(s.pair_headroom, s.row_headroom), mode)
 
 
-def _one_step(setup: Setup, st: _State, rd: RunData, seed: int, key, background, say,
+def _one_step(setup: Setup, st: _State, rd: RunData, views: TrainViews, key, background, say,
               stepper: Stepper, clock):
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
-    idx = jnp.asarray(views_for_step(st.step, setup.settings.batch, rd.train_images.shape[0],
-                                     seed))
+    images, idx = views.args(st.step)
     while True:
-        args = (st.pool, st.opt_state, st.strategy_state, rd.train_cams, rd.train_images, idx,
+        args = (st.pool, st.opt_state, st.strategy_state, rd.train_cams, images, idx,
                 background, st.step, key)
         sig = signature(args)
         size = (st.capacity, st.rows)
         new = stepper.run(args, size, sig)
+        views.prefetch(st.step + 1)  # while the step runs
         stepper.prepare(args, size, sig)
         m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
         if not (m["overflow"] or m["row_overflow"]):
@@ -241,6 +241,10 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
     key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
     stepper = _stepper(setup, ahead_mode)
+    views = TrainViews(rd.train_images, s.batch, seed,
+                       streams(rd.train_images.nbytes, s.stream_images))
+    if views.stream:
+        say(f"training images streamed ({rd.train_images.nbytes / 2**30:.1f} GiB in all)")
     busy = 0.0
     _place(setup, st)
     watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
@@ -250,7 +254,8 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
             while st.step < setup.steps:
                 t0 = time.perf_counter()
                 with clock:
-                    m = _one_step(setup, st, rd, seed, key, background, say, stepper, clock)
+                    m = _one_step(setup, st, rd, views, key, background, say, stepper,
+                                  clock)
                     if setup.strategy.refine_due(st.step):
                         m["count"] = _refine(setup, st, key, cap, say, record)
                 if not m["ok"]:
@@ -293,6 +298,11 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          f"pairs would drop pairs), got {h!r}")
     if not (r is None or (number(r) and r >= 1)):
         raise ValueError(f"settings.row_headroom: expected None or a number >= 1, got {r!r}")
+    for name in ("antialiased", "stream_images"):
+        v = getattr(settings, name)
+        if not (isinstance(v, bool) or (v is None and name == "stream_images")):
+            raise ValueError(f"settings.{name}: expected a bool"
+                             + (" or None" if name == "stream_images" else "") + f", got {v!r}")
     for name, v, known in (("settings.convention", settings.convention, CONVENTIONS),
                            ("settings.ssim_padding", settings.ssim_padding, PADDINGS)):
         if v not in known:

@@ -41,6 +41,11 @@ class Settings:
     same way whenever a view walks more (the step is redone, a recompile, logged, as for the
     pairs; `ahead.Sizes`): less memory, the same bits, a compile per growth. Not part of the
     checkpointed recipe.
+    stream_images (None or a bool): keep only each step's training views on the device,
+    copying the next step's while a step runs (`data.TrainViews`), instead of the whole
+    capture (float32: 12 bytes a pixel, 7.5 GB for 300 views at 1920x1080). None (the
+    default): stream when the images would take more than an eighth of the device's memory
+    (`data.streams`). The same bits either way; not part of the checkpointed recipe.
     """
 
     lr_means: float = 1.6e-4
@@ -63,6 +68,7 @@ class Settings:
     init_extent: float | None = None
     pair_headroom: float = 3.0
     row_headroom: float | None = None
+    stream_images: bool | None = None
 
     @property
     def raster(self) -> RasterConfig:

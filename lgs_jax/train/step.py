@@ -122,15 +122,16 @@ def step_keys(key, step):
 
 @functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows"),
                    compiler_options=COMPILER_OPTIONS)
-def train_step(pool: Pool, opt_state, strategy_state, all_cams, all_images, idx, background,
+def train_step(pool: Pool, opt_state, strategy_state, all_cams, targets, idx, background,
                step, key, *, setup: Setup, capacity: int, rows: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
-    (stacked) and `all_images` (T, H, W, 3); `key` is the run's; `rows`: the backward's row
+    (stacked), whose images are `targets` (B, H, W, 3) (`data.TrainViews`: the same program
+    whether the capture's images live on the device or are streamed); `key` is the run's;
+    `rows`: the backward's row
     buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, metrics): loss,
     psnr (training views), ok (finite, applied), overflow, pairs (largest per-view pair count),
     row_overflow, walked (largest per-view count of walked pairs), count (active Gaussians)."""
     cams = jax.tree.map(lambda x: x[idx], all_cams)
-    targets = all_images[idx]
     (loss, (mse, stats, visible)), (grads, grads2d) = _loss_and_grads(
         setup, capacity, rows, pool, cams, targets, background, step)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)

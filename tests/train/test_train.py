@@ -87,6 +87,36 @@ def test_initial_gaussians_follow_gsplat():
     assert q.min() >= 0 and q.max() < 1
 
 
+def test_streamed_views_are_the_steps_views_two_batches_at_most():
+    images = np.random.default_rng(0).uniform(size=(5, 4, 6, 3)).astype(np.float32)
+    whole, streamed = (train_data.TrainViews(images, 2, 3, stream) for stream in (False, True))
+    for step in range(4):
+        views = train_data.views_for_step(step, 2, 5, 3)
+        for source in (whole, streamed):
+            targets, idx = source.args(step)
+            source.prefetch(step + 1)
+            np.testing.assert_array_equal(np.asarray(idx), views)
+            np.testing.assert_array_equal(np.asarray(targets), images[views])
+            assert sorted(source._copies) == [step, step + 1]
+
+
+class _Device:
+    def __init__(self, limit):
+        self.limit = limit
+
+    def memory_stats(self):
+        return None if self.limit is None else {"bytes_limit": self.limit}
+
+
+@pytest.mark.parametrize("nbytes,setting,limit,want", [
+    (100, True, None, True), (10**12, False, 8 * 10**9, False),
+    (10**9, None, 8 * 10**9, False), (10**9 + 1, None, 8 * 10**9, True),
+    (2 << 30, None, None, False), ((2 << 30) + 1, None, None, True)])
+def test_images_stream_where_they_would_take_an_eighth_of_the_device(nbytes, setting, limit,
+                                                                     want):
+    assert train_data.streams(nbytes, setting, _Device(limit)) == want
+
+
 def test_views_follow_one_shuffle_per_epoch():
     order = [int(train_data.views_for_step(s, 1, 5, seed=3)[0]) for s in range(10)]
     assert sorted(order[:5]) == list(range(5)) and sorted(order[5:]) == list(range(5))
@@ -117,7 +147,7 @@ def _fit(data, out, **kwargs):
     """One configuration for every fit below, so they share one compiled step; headroom 1.5
     (not the default 3), so that the pairs outgrow the first capacity (at step 10)."""
     settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3,
-                              pair_headroom=1.5)
+                              pair_headroom=1.5, stream_images=kwargs.pop("stream", None))
     return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
                      max_gaussians=1024, pool_size=1024, backend="reference",
                      log=kwargs.pop("log", lambda m: None), **kwargs)
@@ -166,8 +196,8 @@ class _Stop(Exception):
 def test_resume_is_bit_identical(skull, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
     same bits as an uninterrupted run: pool, active mask, Adam state, strategy state. The
-    uninterrupted run is watched (`fit`'s `watch`, at its start and end only), which changes
-    nothing."""
+    uninterrupted run is watched (`fit`'s `watch`, at its start and end only) and the other
+    streams its training images (`Settings.stream_images`), which change nothing."""
     seen = []
     _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9)
     assert seen == [0, STEPS]
@@ -176,10 +206,13 @@ def test_resume_is_bit_identical(skull, tmp_path):
         if message.startswith("step 7:"):
             raise _Stop
 
+    lines = []
     with pytest.raises(_Stop):
-        _fit(skull, tmp_path / "b", eval_every=7, log=die)
+        _fit(skull, tmp_path / "b", eval_every=7, log=lambda m: lines.append(m) or die(m),
+             stream=True)
+    assert any(m.startswith("training images streamed") for m in lines), lines
     assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
-    _fit(skull, tmp_path / "b", resume=True)
+    _fit(skull, tmp_path / "b", resume=True, stream=True)
     a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
     for name in a.files:
@@ -349,7 +382,9 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
-    assert not seen["settings"].antialiased
+    assert not seen["settings"].antialiased and seen["settings"].stream_images is None
+    assert cli.main(base + ["--no-stream-images"]) == 0
+    assert seen["settings"].stream_images is False
     assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead", "--antialiased"]) == 0
     assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
     assert seen["settings"].raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
@@ -410,6 +445,9 @@ def test_training_renders_follow_the_settings():
                                                       "or a number >= 1"),
     (dict(settings=train.Settings(row_headroom=float("nan"))), "settings.row_headroom"),
     (dict(watch=3), "watch: expected None or a callable, got int"),
+    (dict(settings=train.Settings(stream_images=1)), "settings.stream_images: expected a bool "
+                                                     "or None, got 1"),
+    (dict(settings=train.Settings(antialiased=None)), "settings.antialiased: expected a bool"),
     (dict(watch_every=float("nan")), "watch_every: expected seconds >= 0, got nan")])
 def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(ValueError, match=match):
