@@ -83,13 +83,13 @@ def camera_path(cameras, frames: int) -> list[Camera]:
     return out
 
 
-def render_image(scene, cam, capacity: int | None = None, headroom: float = 1.0,
-                 **render_kwargs):
-    """(image, capacity): `lgs_jax.render(scene, cam, capacity=capacity, **render_kwargs)`'s
-    colour as (height, width, 3) uint8 (clipped to [0, 1], rounded), and the pair buffer it
-    used. Pass that capacity to the next call so that views share compiled programs: it is
-    sized anew (one recompile) only when a view needs more pairs, to `pair_capacity(pairs,
-    headroom)` (a headroom above 1 leaves room for a scene that grows, as in training)."""
+def render_output(scene, cam, capacity: int | None = None, headroom: float = 1.0,
+                  **render_kwargs):
+    """(RenderOutput, capacity): `lgs_jax.render(scene, cam, capacity=capacity,
+    **render_kwargs)` and the pair buffer it used. Pass that capacity to the next call so that
+    views share compiled programs: it is sized anew (one recompile) only when a view needs more
+    pairs, to `pair_capacity(pairs, headroom)` (a headroom above 1 leaves room for a scene that
+    grows, as in training)."""
     from .render import CapacityError, pair_capacity, render
 
     try:
@@ -98,8 +98,19 @@ def render_image(scene, cam, capacity: int | None = None, headroom: float = 1.0,
         if capacity is None:  # more pairs than int32 indexes: nothing to grow into
             raise
         out = render(scene, cam, capacity=pair_capacity(e.required, headroom), **render_kwargs)
-    image = np.round(np.clip(np.asarray(out.image), 0.0, 1.0) * 255).astype(np.uint8)
-    return image, int(out.stats.capacity)
+    return out, int(out.stats.capacity)
+
+
+def to_uint8(image) -> np.ndarray:
+    """An image in [0, 1] (clipped) as uint8, rounded."""
+    return np.round(np.clip(np.asarray(image), 0.0, 1.0) * 255).astype(np.uint8)
+
+
+def render_image(scene, cam, capacity: int | None = None, **render_kwargs):
+    """(image, capacity): `render_output`'s colour as (height, width, 3) uint8 (clipped to
+    [0, 1], rounded) and its capacity."""
+    out, capacity = render_output(scene, cam, capacity, **render_kwargs)
+    return to_uint8(out.image), capacity
 
 
 def render_frames(scene, cameras, **render_kwargs):

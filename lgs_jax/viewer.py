@@ -6,8 +6,10 @@ default) in which the mouse orbits, pans and zooms; every camera change renders 
 
 Frames are the client canvas's aspect ratio with the longer side `max_size` pixels (a slider
 sets it), both sides whole 16-pixel tiles (`canvas_size`), so only a new aspect ratio or size
-compiles again; the pair buffer is carried from frame to frame (`video.render_image`). One
+compiles again; the pair buffer is carried from frame to frame (`video.render_output`). One
 thread renders; each client's latest camera wins and older poses are dropped, never queued.
+A dropdown picks what a frame shows: the image, the expected depth (colour-mapped) or the
+alpha (`frame_pixels`). The cameras are drawn as frusta; a click on one moves the view there.
 
 Cameras: viser's follow OpenCV axes as ours do (x right, y down, z forward); its `wxyz` is the
 camera-to-world rotation R and `position` the camera centre c, so viewmat = [Rᵀ | −Rᵀc], and its
@@ -27,7 +29,7 @@ import numpy as np
 from . import poses
 from .layout import TILE
 from .scene import Camera
-from .video import render_image
+from .video import render_output, to_uint8
 
 
 def camera_from_pose(position, wxyz, fov_y: float, width: int, height: int) -> Camera:
@@ -59,25 +61,52 @@ def canvas_size(aspect: float, max_size: int) -> tuple[int, int]:
     return (longer, shorter(1 / aspect)) if aspect >= 1 else (shorter(aspect), longer)
 
 
+OUTPUTS = ("image", "depth", "alpha")
+"""What a frame shows (`frame_pixels`)."""
+
+
+def frame_pixels(out, output: str) -> np.ndarray:
+    """A `RenderOutput` as (H, W, 3) uint8: "image" its colour; "alpha" 1 − T in grey;
+    "depth" the expected depth Σ z·α·T / alpha through matplotlib's turbo colour map, near
+    (blue) to far (red) between the 1st and 99th percentiles of the pixels with alpha >= 0.05
+    (black elsewhere)."""
+    if output == "image":
+        return to_uint8(out.image)
+    alpha = np.asarray(out.alpha, np.float64)
+    if output == "alpha":
+        return np.repeat(to_uint8(alpha)[..., None], 3, -1)
+    if output != "depth":
+        raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
+    import matplotlib
+
+    seen = alpha >= 0.05
+    depth = np.asarray(out.depth, np.float64) / np.where(seen, alpha, 1.0)
+    lo, hi = np.percentile(depth[seen], [1, 99]) if seen.any() else (0.0, 1.0)
+    t = np.clip((depth - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    rgb = matplotlib.colormaps["turbo"](t)[..., :3] * seen[..., None]
+    return to_uint8(rgb)
+
+
 class FrameRenderer:
-    """The viewer's rendering without its server: a viser camera state to a uint8 frame, the
-    pair buffer carried per image size (`video.render_image`, grown to `headroom` times a
-    view's pairs). `scene` may be replaced between frames (a scene in training), or None
-    (nothing to show yet)."""
+    """The viewer's rendering without its server: a viser camera state to a uint8 frame
+    (`frame_pixels`), the pair buffer carried per image size (`video.render_output`, grown to
+    `headroom` times a view's pairs). `scene` may be replaced between frames (a scene in
+    training), or None (nothing to show yet)."""
 
     def __init__(self, scene, headroom: float = 1.0, **render_kwargs):
         self.scene, self.headroom, self.render_kwargs = scene, headroom, render_kwargs
         self.capacity: dict[tuple[int, int], int] = {}
 
-    def frame(self, position, wxyz, fov_y: float, aspect: float, max_size: int):
-        """(image, seconds) of the view at this camera state and size."""
+    def frame(self, position, wxyz, fov_y: float, aspect: float, max_size: int,
+              output: str = "image"):
+        """(frame, seconds) of the view at this camera state and size."""
         width, height = canvas_size(aspect, max_size)
         cam = camera_from_pose(position, wxyz, fov_y, width, height)
         t0 = time.perf_counter()
-        image, self.capacity[width, height] = render_image(
+        out, self.capacity[width, height] = render_output(
             self.scene, cam, self.capacity.get((width, height)), self.headroom,
             **self.render_kwargs)
-        return image, time.perf_counter() - t0
+        return frame_pixels(out, output), time.perf_counter() - t0
 
 
 def _initial_view(server, cam: Camera, target) -> None:
@@ -144,12 +173,14 @@ class FrameLoop:
     """The viewer's render thread: `request(client)` marks a client's view as changed; `run()`
     renders each marked client's *latest* camera state in turn (a client marked again before
     its turn is rendered once) and sends it as the client's background image; `report(text)`
-    gets each frame's size and time, or a failure (the loop goes on). `max_size()` is read
-    per frame. Clients are viser `ClientHandle`s, or anything with `client_id`, `camera`
-    (position, wxyz, fov, aspect, update_timestamp) and `scene.set_background_image`."""
+    gets each frame's size and time, or a failure (the loop goes on). `max_size()` and
+    `output()` (one of `OUTPUTS`) are read per frame. Clients are viser `ClientHandle`s, or
+    anything with `client_id`, `camera` (position, wxyz, fov, aspect, update_timestamp) and
+    `scene.set_background_image`."""
 
-    def __init__(self, renderer: FrameRenderer, max_size, report):
+    def __init__(self, renderer: FrameRenderer, max_size, report, output=lambda: "image"):
         self.renderer, self.max_size, self.report = renderer, max_size, report
+        self.output = output
         self._pending, self._wake, self._running = {}, threading.Condition(), True
 
     def request(self, client) -> None:
@@ -180,7 +211,8 @@ class FrameLoop:
             return  # no state from the browser yet, or no scene (`Served.show` brings one)
         try:
             image, seconds = self.renderer.frame(camera.position, camera.wxyz, camera.fov,
-                                                 camera.aspect, int(self.max_size()))
+                                                 camera.aspect, int(self.max_size()),
+                                                 self.output())
             client.scene.set_background_image(image, format="jpeg", jpeg_quality=90)
             self.report(f"{image.shape[1]}x{image.shape[0]}, {1000 * seconds:.0f} ms "
                         f"(a new size compiles)")
@@ -216,7 +248,7 @@ def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 
     new clients starting at `cameras[start]` looking at the scene's centre (module docstring),
     the cameras drawn as frusta (a click on one moves the view there; a checkbox hides them);
     `render_kwargs` go to `lgs_jax.render`, `headroom` sizes the pair buffer when a view
-    outgrows it (`video.render_image`). `scene` None shows nothing until `Served.show` brings
+    outgrows it (`video.render_output`). `scene` None shows nothing until `Served.show` brings
     one (a scene in training; new clients look at the point nearest the cameras' axes). Prints
     the address. With `block`, serve until Ctrl-C and return None; else return a `Served`:
     the server runs in threads until its `stop()`."""
@@ -229,13 +261,14 @@ def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 
     _initial_view(server, first[0], _target(first, scene))
     size = server.gui.add_slider("max size", min=64, max=4096, step=16,
                                  initial_value=int(max_size))
+    output = server.gui.add_dropdown("output", OUTPUTS, initial_value="image")
     frusta = add_cameras(server.scene, cameras, frustum_scale(cameras))
     shown = server.gui.add_checkbox("show cameras", initial_value=True)
     shown.on_update(lambda _: [setattr(f, "visible", shown.value) for f in frusta])
     status = server.gui.add_markdown("")
     info = server.gui.add_markdown("waiting for a camera")
     loop = FrameLoop(FrameRenderer(scene, headroom, **render_kwargs), lambda: size.value,
-                     lambda text: setattr(info, "content", text))
+                     lambda text: setattr(info, "content", text), lambda: output.value)
 
     def connect(client) -> None:
         client.camera.on_update(lambda _: loop.request(client))
@@ -243,7 +276,9 @@ def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 
 
     server.on_client_connect(connect)
     server.on_client_disconnect(loop.forget)
-    size.on_update(lambda _: [loop.request(c) for c in server.get_clients().values()])
+    again = lambda _: [loop.request(c) for c in server.get_clients().values()]
+    size.on_update(again)
+    output.on_update(again)
     worker = threading.Thread(target=loop.run, name="lgs_jax-viewer", daemon=True)
     worker.start()
 

@@ -237,3 +237,22 @@ def test_the_view_command_draws_the_capture_or_the_orbit_and_starts_at_view(
     np.testing.assert_array_equal(first[0], np.asarray(framing.viewmat))
     assert len(second) == 8 and start_b == 5
     np.testing.assert_array_equal(second[5], np.asarray(orbit[5].viewmat))
+
+
+def test_frames_show_the_image_the_alpha_or_the_expected_depth():
+    out = lgs_jax.render(lgs_jax.default_scene(), lgs_jax.default_camera(0, 128, 72))
+    image, alpha, depth = (viewer.frame_pixels(out, o) for o in ("image", "alpha", "depth"))
+    np.testing.assert_array_equal(image, render_image(lgs_jax.default_scene(),
+                                                      lgs_jax.default_camera(0, 128, 72))[0])
+    a = np.asarray(out.alpha)
+    np.testing.assert_array_equal(alpha[..., 0], np.round(np.clip(a, 0, 1) * 255))
+    assert (alpha[..., 0] == alpha[..., 2]).all()
+    seen = a >= 0.05
+    assert seen.any() and (~seen).any()
+    assert (depth[~seen] == 0).all() and depth[seen].max() > 0
+    z = np.asarray(out.depth) / np.where(seen, a, 1)  # turbo: blue (near) to red (far)
+    near = np.unravel_index(np.argmin(np.where(seen, z, np.inf)), a.shape)
+    far = np.unravel_index(np.argmax(np.where(seen, z, -np.inf)), a.shape)
+    assert depth[near][2] > depth[near][0] and depth[far][0] > depth[far][2]
+    with pytest.raises(ValueError, match="output: expected one of"):
+        viewer.frame_pixels(out, "normals")
