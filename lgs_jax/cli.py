@@ -1,6 +1,6 @@
 """Command line: `python -m lgs_jax render ...`, `video ...` (lgs_jax.video), `view ...`
-(lgs_jax.viewer), `info SCENE.ply` and `fit --data DIR --out DIR [--strategy default|mcmc]
-[--steps N] ...` (lgs_jax.train).
+(lgs_jax.viewer), `info SCENE.ply`, `fit --data DIR --out DIR [--strategy default|mcmc]
+[--steps N] ...` (lgs_jax.train) and `eval SCENE.ply --data DIR` (lgs_jax.train.evaluate).
 
 Compiled programs are kept in JAX's persistent cache (`use_compile_cache`: $LGS_JAX_CACHE,
 default ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off).
@@ -21,10 +21,10 @@ import time
 
 import numpy as np
 
-from . import cli_video, cli_view
+from . import cli_eval, cli_video, cli_view
 from .cli_args import (EXIT_FAILURE, EXIT_USAGE, IMAGE_EXTENSIONS, Parser, UsageError,
-                       check_input, check_out, chosen_camera, int_at_least, number_at_least,
-                       raster_config, view_options)
+                       check_dataset, check_input, check_out, chosen_camera, int_at_least,
+                       number_at_least, raster_config, view_options)
 from .config import CONVENTIONS
 
 
@@ -117,9 +117,7 @@ def _fit(args) -> int:
     """`fit`: check --data and --out (an existing run needs --resume or --overwrite), train."""
     from . import train
 
-    if not (os.path.isdir(args.data) or (os.path.isfile(args.data)
-                                         and args.data.endswith(".json"))):
-        raise UsageError(f"--data: {args.data}: not a dataset folder or .json file")
+    check_dataset(args.data)
     problem = train.run_dir_problem(args.out, args.resume, args.overwrite)
     if problem:
         raise UsageError(f"--out: {problem}")
@@ -279,7 +277,8 @@ def _fit_run_options(f) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    """The command line: `render`, `video`, `view`, `info` and `fit`, each with `--debug`."""
+    """The command line: `render`, `video`, `view`, `info`, `fit` and `eval`, each with
+    `--debug`."""
     common = Parser(add_help=False)
     common.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     ap = Parser(prog="python -m lgs_jax", description=__doc__,
@@ -293,6 +292,7 @@ def _parser() -> argparse.ArgumentParser:
     i.add_argument("scene")
     i.set_defaults(func=_info)
     _fit_parser(sub, common)
+    cli_eval.parser(sub, common)
     return ap
 
 

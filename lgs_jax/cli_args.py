@@ -144,3 +144,9 @@ def raster_config(args):
     from .config import RasterConfig
 
     return RasterConfig(args.convention, antialiased=args.antialiased)
+
+
+def check_dataset(path: str) -> None:
+    """A usage error for a --data that is neither a folder nor a .json file."""
+    if not (os.path.isdir(path) or (os.path.isfile(path) and path.endswith(".json"))):
+        raise UsageError(f"--data: {path}: not a dataset folder or .json file")

@@ -12,9 +12,11 @@ Modules (each usable alone):
   `init`       initial Gaussians from SfM points or random ones (gsplat's simple_trainer).
   `step`       the jitted training step and refinement; renders of the pool.
   `loop`       `fit`: the loop, outputs, checkpoints (`checkpoint`) and reports (`report`).
+  `evaluate`   a scene's PSNR and SSIM on a capture's views (`python -m lgs_jax eval`).
 """
 
 from .checkpoint import run_dir_problem
+from .evaluate import evaluate
 from .loop import fit
 from .losses import loss_fn, psnr, ssim
 from .optim import optimizer
@@ -23,5 +25,5 @@ from .settings import Settings, Setup
 from .strategy import DefaultStrategy, MCMCStrategy, StepInfo, Strategy
 
 __all__ = ["DefaultStrategy", "MCMCStrategy", "Pool", "Settings", "Setup", "StepInfo",
-           "Strategy", "active_gaussians", "fit", "from_gaussians", "loss_fn", "optimizer",
-           "psnr", "render_gaussians", "run_dir_problem", "sh_mask", "ssim"]
+           "Strategy", "active_gaussians", "evaluate", "fit", "from_gaussians", "loss_fn",
+           "optimizer", "psnr", "render_gaussians", "run_dir_problem", "sh_mask", "ssim"]

@@ -101,23 +101,28 @@ class CompileClock:
         return total
 
 
-def heldout_metrics(images, targets) -> tuple[float, float]:
-    """Mean PSNR and SSIM over views with scikit-image's defaults (data range 1; SSIM with its
-    7x7 uniform window, per channel)."""
+def view_metrics(images, targets) -> list[tuple[float, float]]:
+    """(PSNR, SSIM) of each view with scikit-image's defaults (data range 1; SSIM with its 7x7
+    uniform window, per channel)."""
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-    psnrs = [peak_signal_noise_ratio(t, i, data_range=1.0) for i, t in zip(images, targets)]
-    ssims = [structural_similarity(t, i, channel_axis=-1, data_range=1.0)
-             for i, t in zip(images, targets)]
-    return float(np.mean(psnrs)), float(np.mean(ssims))
+    return [(float(peak_signal_noise_ratio(t, i, data_range=1.0)),
+             float(structural_similarity(t, i, channel_axis=-1, data_range=1.0)))
+            for i, t in zip(images, targets)]
 
 
-def save_renders(out: str, images, targets, names) -> None:
-    """heldout_<name>.png: each render (left) beside its ground truth (right)."""
+def heldout_metrics(images, targets) -> tuple[float, float]:
+    """Mean PSNR and SSIM over views (`view_metrics`)."""
+    scores = view_metrics(images, targets)
+    return float(np.mean([p for p, _ in scores])), float(np.mean([s for _, s in scores]))
+
+
+def save_renders(out: str, images, targets, names, prefix: str = "heldout") -> None:
+    """<prefix>_<name>.png: each render (left) beside its ground truth (right)."""
     import matplotlib.image
 
     for image, target, name in zip(images, targets, names):
-        matplotlib.image.imsave(os.path.join(out, f"heldout_{name}.png"),
+        matplotlib.image.imsave(os.path.join(out, f"{prefix}_{name}.png"),
                                 np.concatenate([image, np.clip(target, 0, 1)], 1))
 
 

@@ -171,6 +171,13 @@ def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
     for name in ("means", "quats", "log_scales", "logit_opacities", "sh"):
         np.testing.assert_array_equal(np.asarray(getattr(last, name))[shown],
                                       getattr(ply, name), err_msg=name)
+    # the saved scene scores what fit's last evaluation scored, view by view
+    scores = train.evaluate(ply, skull, backend="reference", out=str(tmp_path / "eval"))
+    assert scores["psnr"] == pytest.approx(result["heldout_psnr"], abs=1e-4)
+    assert scores["ssim"] == pytest.approx(result["heldout_ssim"], abs=1e-5)
+    assert [v["name"] for v in scores["views"]] == ["01", "09"] and scores["split"] == "test"
+    assert json.load(open(tmp_path / "eval" / "metrics.json")) == scores
+    assert (tmp_path / "eval" / "eval_09.png").exists()
     refines = [r for r in rows if "refine_step" in r]
     assert [r["refine_step"] for r in refines] == [4, 8, 12]
     assert sum(r["cloned"] + r["split"] + r["pruned"] for r in refines) > 0
@@ -341,6 +348,16 @@ def test_fit_cli_writes_outputs_and_refuses_mixing(data_dir, tmp_path, capsys):
     assert cli.main(args + ["--overwrite"]) == 0
     rows = report.read_metrics(os.path.join(out, "metrics.jsonl"))
     assert [r["step"] for r in rows] == [0] and "heldout_psnr" in rows[0]
+    capsys.readouterr()
+    scene = os.path.join(out, "scene.ply")
+    assert cli.main(["eval", scene, "--data", _lego(data_dir), "--downscale", "25",
+                     "--backend", "reference", "--split", "all", "--out", out + "/e"]) == 0
+    printed = capsys.readouterr().out
+    assert "all views: 100; mean PSNR" in printed and "r_99  PSNR" in printed
+    assert len(json.load(open(os.path.join(out, "e", "metrics.json")))["views"]) == 100
+    assert cli.main(["eval", scene + "x", "--data", _lego(data_dir)]) == 2
+    assert cli.main(["eval", scene, "--data", scene]) == 2
+    assert "--data" in capsys.readouterr().err
 
 
 def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch, capsys):
