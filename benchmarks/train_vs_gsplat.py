@@ -102,8 +102,6 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--row-headroom", type=float, default=None,
                     help="our trainer's backward rows over the walked pairs (Settings."
                          "row_headroom; default: a row per pair slot)")
-    ap.add_argument("--stream-images", action=argparse.BooleanOptionalAction, default=None,
-                    help="our trainer's Settings.stream_images (default: by the device memory)")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)
@@ -125,8 +123,7 @@ def scene_setup(args, scene: str):
         strategy = dataclasses.replace(strategy, refine_start_iter=args.refine_from)
     settings = train.Settings(eval_every=args.eval_every, checkpoint_every=max(args.steps, 1),
                               ssim_padding=args.ssim_padding, convention=args.convention,
-                              pair_headroom=args.pair_headroom, row_headroom=args.row_headroom,
-                              stream_images=args.stream_images)
+                              pair_headroom=args.pair_headroom, row_headroom=args.row_headroom)
     return d, cap, strategy, settings
 
 

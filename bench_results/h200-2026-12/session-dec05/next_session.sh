@@ -51,7 +51,9 @@ tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 #   TRAIN_SCENES=skull bash scripts/scale_gpu_check.sh train
 # (Dec 5: train_step now takes the step's images gathered before it, `data.TrainViews`: compare
 # its ms per step with 10.6-12.0 before; then the cost of streaming them from the host:)
-#   TRAIN_SCENES=skull STEPS=3000 TRAIN_ARGS=--stream-images bash scripts/scale_gpu_check.sh train
+#   for m in no-stream-images stream-images; do timeout 200 python3 -m lgs_jax fit \
+#     --data carry/data/skull --steps 3000 --eval-every 3000 --$m --out /tmp/s_$m \
+#     2>/dev/null | grep -E "ms_per_step|heldout_psnr"; done
 #
 # Call 4, on kind "nvidia-h200-x2" (two GPUs; ask only if the budget has 10 min left): the
 # data-parallel step (fit --devices, built this session on two CPU devices only). The same
