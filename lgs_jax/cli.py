@@ -124,7 +124,8 @@ def _fit(args) -> int:
     settings = train.Settings(batch=args.batch, eval_every=args.eval_every,
                               init_points=args.init_points, convention=args.convention,
                               antialiased=args.antialiased, pair_headroom=args.pair_headroom,
-                              row_headroom=args.row_headroom, stream_images=args.stream_images)
+                              row_headroom=args.row_headroom, stream_images=args.stream_images,
+                              pose_opt=args.pose_opt)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None:
         data = _dataset(args)
@@ -226,6 +227,10 @@ def _fit_parser(sub, common) -> None:
                    help="train and evaluate with antialiased renders (gsplat's "
                         "--antialiased: opacities scaled so that the 0.3-pixel dilation keeps "
                         "each Gaussian's integral); render the result with --antialiased too")
+    f.add_argument("--pose-opt", action="store_true",
+                   help="also optimize each training view's camera pose (gsplat's --pose_opt: "
+                        "a 9-D delta per view, Adam at 1e-5, weight decay 1e-6); held-out "
+                        "views keep their poses")
     f.add_argument("--eval-every", type=int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
     f.add_argument("--pair-headroom", type=number_at_least(1.0, float),

@@ -61,10 +61,10 @@ def densified_pool(rd, setup, n: int, size: int, seed: int = 0):
                   log_scales=jnp.asarray(ls - np.log(k) / 3, jnp.float32),
                   logit_opacities=jnp.asarray(np.asarray(g0.logit_opacities)[idx]),
                   sh=jnp.asarray(sh, jnp.float32))
-    return g, _templates(setup, size, rd.scene_scale, g)
+    return g, _templates(setup, size, rd, g)[:3]
 
 
-def trained_pool(setup, path: str, size: int, scene_scale: float):
+def trained_pool(setup, path: str, size: int, rd):
     """(Gaussians, (pool, opt_state, strategy_state)): a saved scene in max(size, its count)
     slots, SH bands padded with zeros (or cut) to the setup's degree."""
     import jax.numpy as jnp
@@ -78,7 +78,7 @@ def trained_pool(setup, path: str, size: int, scene_scale: float):
     sh = jnp.zeros((g.num, bases, 3), jnp.float32).at[:, :min(bases, g.sh.shape[1])].set(
         g.sh[:, :bases])
     g = Gaussians(g.means, g.quats, g.log_scales, g.logit_opacities, sh)
-    return g, _templates(setup, max(size, g.num), scene_scale, g)
+    return g, _templates(setup, max(size, g.num), rd, g)[:3]
 
 
 def tile_load(pool, cam, capacity: int) -> str:
@@ -131,7 +131,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     key = jax.random.key(0)
     step_fn = functools.partial(st.train_step, setup=setup, capacity=capacity)
     targets = jnp.asarray(rd.train_images[:1])  # view 0's image, on the device as fit's
-    call = lambda: step_fn(pool, opt_state, sstate, rd.train_cams, targets,
+    call = lambda: step_fn(pool, opt_state, sstate, None, rd.train_cams, targets,
                            idx, bg, jnp.int32(6000), key)
     fns = {
         "render": lambda: jax.block_until_ready(fwd(pool.params)),
@@ -141,7 +141,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
         "adam": lambda: jax.block_until_ready(adam(grads, opt_state, pool.params)),
         "noise": lambda: jax.block_until_ready(noise(pool, key)),
         "train_step": lambda: jax.block_until_ready(call()),
-        "train_loop": lambda: {k: v.item() for k, v in jax.device_get(call()[3]).items()},
+        "train_loop": lambda: {k: v.item() for k, v in jax.device_get(call()[4]).items()},
         "refine": lambda: jax.block_until_ready(st._refine(
             sstate, pool, opt_state, 6100, key, strategy=setup.strategy, cap=pool.size)),
     }
@@ -184,7 +184,7 @@ def main(argv=None) -> int:
     backend = args.backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
     setup = Setup(Settings(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, backend)
     if args.ply:
-        g, (pool, opt_state, sstate) = trained_pool(setup, args.ply, args.pool, rd.scene_scale)
+        g, (pool, opt_state, sstate) = trained_pool(setup, args.ply, args.pool, rd)
     else:
         g, (pool, opt_state, sstate) = densified_pool(rd, setup, args.gaussians, args.pool)
     cam = jax.tree.map(lambda x: x[0], rd.train_cams)

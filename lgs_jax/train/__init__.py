@@ -13,6 +13,7 @@ Modules (each usable alone):
   `step`       the jitted training step and refinement; renders of the pool.
   `loop`       `fit`: the loop, outputs, checkpoints (`checkpoint`) and reports (`report`).
   `evaluate`   a scene's PSNR and SSIM on a capture's views (`python -m lgs_jax eval`).
+  `camera_opt` the training views' pose deltas (`Settings.pose_opt`, gsplat's --pose_opt).
 """
 
 from .checkpoint import run_dir_problem

@@ -23,7 +23,7 @@ import numpy as np
 
 RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
              "curves.png", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
-PARTS = ("pool", "opt", "strategy")
+PARTS = ("pool", "opt", "strategy", "poses")  # poses: None without pose optimization
 
 
 def run_files(out: str) -> list[str]:
@@ -67,7 +67,8 @@ def config_of(setup, seed: int) -> dict:
 
 
 def save(out: str, state: tuple, meta: dict) -> None:
-    """Write (pool, opt_state, strategy_state) and `meta` (json-able) as the checkpoint."""
+    """Write (pool, opt_state, strategy_state, poses) and `meta` (json-able) as the
+    checkpoint."""
     arrays = {f"{name}_{i}": np.asarray(x) for name, part in zip(PARTS, state)
               for i, x in enumerate(jax.tree.leaves(part))}
     tmp = os.path.join(out, "checkpoint.tmp.npz")
@@ -89,8 +90,8 @@ def read_meta(out: str) -> dict:
 
 
 def restore(out: str, templates: tuple) -> tuple:
-    """(pool, opt_state, strategy_state) from the checkpoint, shaped like `templates` (the
-    same structures at the saved pool size)."""
+    """(pool, opt_state, strategy_state, poses) from the checkpoint, shaped like `templates`
+    (the same structures at the saved pool size)."""
     saved = np.load(os.path.join(out, "checkpoint.npz"))
     parts = []
     for name, template in zip(PARTS, templates):

@@ -30,7 +30,7 @@ from ..config import CONVENTIONS
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2, pair_capacity, render
-from . import checkpoint, report
+from . import camera_opt, checkpoint, report
 from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, TrainViews, prepare, streams
 from .init import start_gaussians
@@ -53,10 +53,17 @@ class _State:
     eval_capacity: int
     skipped: int = 0
     rows: int | None = None  # the backward's rows per training view (None: one per pair slot)
+    poses: object = None  # the training views' pose deltas and their optimizer (`camera_opt`)
+
+    @property
+    def saved(self) -> tuple:
+        """What `checkpoint.save` writes, in `checkpoint.PARTS` order."""
+        return self.pool, self.opt_state, self.strategy_state, self.poses
 
 
-def _templates(setup: Setup, size: int, scene_scale: float, g=None):
-    """(pool, opt_state, strategy_state) at `size` slots: from Gaussians g, or zeros."""
+def _templates(setup: Setup, size: int, rd: RunData, g=None):
+    """(pool, opt_state, strategy_state, poses) at `size` slots: from Gaussians g, or
+    zeros."""
     bases = (setup.settings.sh_degree + 1) ** 2
     if g is None:
         z = lambda *shape: jnp.zeros((size,) + shape, jnp.float32)
@@ -66,13 +73,14 @@ def _templates(setup: Setup, size: int, scene_scale: float, g=None):
     else:
         pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
-    return pool, opt.init(pool.params), setup.strategy.init(pool, scene_scale)
+    return (pool, opt.init(pool.params), setup.strategy.init(pool, rd.scene_scale),
+            camera_opt.init(setup.settings, rd.train_images.shape[0]))
 
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
     g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
-    pool, opt_state, sstate = _templates(setup, size, rd.scene_scale, g)
+    pool, opt_state, sstate, poses = _templates(setup, size, rd, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
     capacity = pair_capacity(int(_pairs(pool, first, setup.settings.antialiased)),
                              setup.settings.pair_headroom)
@@ -82,7 +90,7 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
                              setup.settings.row_headroom)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
         f"{rd.scene_scale:.3f}")
-    return _State(pool, opt_state, sstate, 0, capacity, capacity, rows=rows)
+    return _State(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, poses=poses)
 
 
 @functools.partial(jax.jit, static_argnames="antialiased")
@@ -105,13 +113,13 @@ def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
     problem = checkpoint.config_mismatch(meta["config"], checkpoint.config_of(setup, seed))
     if problem:
         raise ValueError(f"resume: {problem}")
-    templates = _templates(setup, meta["pool_size"], rd.scene_scale)
-    pool, opt_state, sstate = checkpoint.restore(out, templates)
+    templates = _templates(setup, meta["pool_size"], rd)
+    pool, opt_state, sstate, poses = checkpoint.restore(out, templates)
     _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
     log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
     rows = meta.get("rows") if setup.settings.row_headroom is not None else None
     return _State(pool, opt_state, sstate, meta["step"], meta["capacity"],
-                  meta["eval_capacity"], meta["skipped"], rows)
+                  meta["eval_capacity"], meta["skipped"], rows, poses)
 
 
 def _forget_after(path: str, step: int) -> None:
@@ -129,7 +137,7 @@ def _save(out: str, setup: Setup, st: _State, seed: int) -> None:
     meta = dict(step=st.step, capacity=st.capacity, rows=st.rows, eval_capacity=st.eval_capacity,
                 pool_size=st.pool.size, skipped=st.skipped,
                 config=checkpoint.config_of(setup, seed))
-    checkpoint.save(out, (st.pool, st.opt_state, st.strategy_state), meta)
+    checkpoint.save(out, st.saved, meta)
     save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
 
 
@@ -162,16 +170,16 @@ def _one_step(setup: Setup, st: _State, rd: RunData, views: TrainViews, key, bac
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
     images, idx = views.args(st.step)
     while True:
-        args = (st.pool, st.opt_state, st.strategy_state, rd.train_cams, images, idx,
+        args = (st.pool, st.opt_state, st.strategy_state, st.poses, rd.train_cams, images, idx,
                 background, st.step, key)
         sig = signature(args)
         size = (st.capacity, st.rows)
         new = stepper.run(args, size, sig)
         views.prefetch(st.step + 1)  # while the step runs
         stepper.prepare(args, size, sig)
-        m = {k: v.item() for k, v in jax.device_get(new[3]).items()}
+        m = {k: v.item() for k, v in jax.device_get(new[4]).items()}
         if not (m["overflow"] or m["row_overflow"]):
-            st.pool, st.opt_state, st.strategy_state = new[:3]
+            st.pool, st.opt_state, st.strategy_state, st.poses = new[:4]
             return m
         need = (m["pairs"], m["walked"])
         (st.capacity, st.rows), waited, ahead = stepper.grow(size, need, sig)
@@ -192,8 +200,7 @@ def _place(setup: Setup, st: _State) -> None:
     where it is already, and for one device)."""
     where = replicated(setup.devices)
     if where is not None:
-        st.pool, st.opt_state, st.strategy_state = jax.device_put(
-            (st.pool, st.opt_state, st.strategy_state), where)
+        st.pool, st.opt_state, st.strategy_state, st.poses = jax.device_put(st.saved, where)
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
@@ -298,7 +305,7 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          f"pairs would drop pairs), got {h!r}")
     if not (r is None or (number(r) and r >= 1)):
         raise ValueError(f"settings.row_headroom: expected None or a number >= 1, got {r!r}")
-    for name in ("antialiased", "stream_images"):
+    for name in ("antialiased", "pose_opt", "stream_images"):
         v = getattr(settings, name)
         if not (isinstance(v, bool) or (v is None and name == "stream_images")):
             raise ValueError(f"settings.{name}: expected a bool"

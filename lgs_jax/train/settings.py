@@ -46,6 +46,8 @@ class Settings:
     capture (float32: 12 bytes a pixel, 7.5 GB for 300 views at 1920x1080). None (the
     default): stream when the images would take more than an eighth of the device's memory
     (`data.streams`). The same bits either way; not part of the checkpointed recipe.
+    pose_opt: also optimize each training view's pose (`camera_opt`: gsplat's --pose_opt),
+    at rate lr_pose · sqrt(batch) with L2 weight decay pose_reg (gsplat's defaults).
     """
 
     lr_means: float = 1.6e-4
@@ -69,6 +71,9 @@ class Settings:
     pair_headroom: float = 3.0
     row_headroom: float | None = None
     stream_images: bool | None = None
+    pose_opt: bool = False
+    lr_pose: float = 1e-5
+    pose_reg: float = 1e-6
 
     @property
     def raster(self) -> RasterConfig:

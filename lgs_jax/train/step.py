@@ -30,6 +30,7 @@ import optax
 
 from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
+from . import camera_opt
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
@@ -87,15 +88,17 @@ def _over_views(one, devices: int):
 
 
 def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
-                    background, step):
-    """((loss, (mse, stats, visible)), (param grads, screen grads or None))."""
+                    background, step, deltas=None):
+    """((loss, (mse, stats, visible)), (param grads, screen grads or None, pose grads or
+    None)); `deltas` (B, 9) move the views' poses (`camera_opt.adjusted`), or None."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
     bands = sh_mask(step, num_bases, s.settings.sh_every)
     need2d = s.strategy.needs_screen_grads
 
-    def loss_of(params, offsets):
+    def loss_of(params, offsets, deltas):
         g = render_gaussians(params, pool.active, bands)
+        views = cams if deltas is None else camera_opt.adjusted(cams, deltas)
 
         def one(g, cam, target, off):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
@@ -104,14 +107,13 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
             return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((o.image - target) ** 2), o.stats, o.visible)
 
-        losses, mse, stats, visible = _over_views(one, s.devices)(g, cams, targets, offsets)
+        losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets)
         total = jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
         return total, (jnp.mean(mse), stats, visible)
 
     offsets = jnp.zeros((targets.shape[0], pool.size, 2), jnp.float32) if need2d else None
-    value, grads = jax.value_and_grad(loss_of, argnums=(0, 1) if need2d else 0,
-                                      has_aux=True)(pool.params, offsets)
-    return value, grads if need2d else (grads, None)
+    return jax.value_and_grad(loss_of, argnums=(0, 1, 2), has_aux=True)(pool.params, offsets,
+                                                                         deltas)
 
 
 def step_keys(key, step):
@@ -122,18 +124,20 @@ def step_keys(key, step):
 
 @functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows"),
                    compiler_options=COMPILER_OPTIONS)
-def train_step(pool: Pool, opt_state, strategy_state, all_cams, targets, idx, background,
-               step, key, *, setup: Setup, capacity: int, rows: int | None = None):
+def train_step(pool: Pool, opt_state, strategy_state, poses, all_cams, targets, idx,
+               background, step, key, *, setup: Setup, capacity: int, rows: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
     (stacked), whose images are `targets` (B, H, W, 3) (`data.TrainViews`: the same program
-    whether the capture's images live on the device or are streamed); `key` is the run's;
-    `rows`: the backward's row
-    buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, metrics): loss,
-    psnr (training views), ok (finite, applied), overflow, pairs (largest per-view pair count),
-    row_overflow, walked (largest per-view count of walked pairs), count (active Gaussians)."""
+    whether the capture's images live on the device or are streamed); `poses`: the training
+    views' pose deltas and their optimizer state (`camera_opt`), or None; `key` is the run's;
+    `rows`: the backward's row buffer (`render`'s row_capacity). Returns (pool, opt_state,
+    strategy_state, poses, metrics): loss, psnr (training views), ok (finite, applied),
+    overflow, pairs (largest per-view pair count), row_overflow, walked (largest per-view count
+    of walked pairs), count (active Gaussians)."""
     cams = jax.tree.map(lambda x: x[idx], all_cams)
-    (loss, (mse, stats, visible)), (grads, grads2d) = _loss_and_grads(
-        setup, capacity, rows, pool, cams, targets, background, step)
+    deltas = None if poses is None else poses[0][idx]
+    (loss, (mse, stats, visible)), (grads, grads2d, grads_pose) = _loss_and_grads(
+        setup, capacity, rows, pool, cams, targets, background, step, deltas)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     updates, new_opt = opt.update(grads, opt_state, pool.params)
     new_pool = Pool(optax.apply_updates(pool.params, updates), pool.active)
@@ -145,16 +149,23 @@ def train_step(pool: Pool, opt_state, strategy_state, all_cams, targets, idx, ba
           & _finite(new_pool.params, new_pool.active))
     if grads2d is not None:
         ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
-    pool, opt_state, strategy_state = _select(ok, (new_pool, new_opt, new_state),
-                                              (pool, opt_state, strategy_state))
+    new_poses = poses
+    if poses is not None:  # each view's gradient to its row of the deltas (others: zero),
+        # summed in batch order where a view comes twice (a sum, not a scatter-add: no atomics)
+        hits = jnp.arange(poses[0].shape[0])[:, None] == idx[None, :]
+        full = jnp.sum(jnp.where(hits[:, :, None], grads_pose[None], 0.0), axis=1)
+        new_poses = camera_opt.update(setup.settings, poses, full)
+        ok = ok & jnp.all(jnp.isfinite(new_poses[0]))
+    pool, opt_state, strategy_state, poses = _select(
+        ok, (new_pool, new_opt, new_state, new_poses), (pool, opt_state, strategy_state, poses))
     if setup.devices > 1:
-        pool, opt_state, strategy_state = jax.lax.with_sharding_constraint(
-            (pool, opt_state, strategy_state), replicated(setup.devices))
+        pool, opt_state, strategy_state, poses = jax.lax.with_sharding_constraint(
+            (pool, opt_state, strategy_state, poses), replicated(setup.devices))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
                    pairs=jnp.max(stats.pairs_required),
                    row_overflow=jnp.any(stats.row_overflow), walked=jnp.max(stats.pairs_walked),
                    count=jnp.sum(pool.active, dtype=jnp.int32))
-    return pool, opt_state, strategy_state, metrics
+    return pool, opt_state, strategy_state, poses, metrics
 
 
 @functools.partial(jax.jit, static_argnames=("strategy", "cap"),

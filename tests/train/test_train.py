@@ -147,7 +147,8 @@ def _fit(data, out, **kwargs):
     """One configuration for every fit below, so they share one compiled step; headroom 1.5
     (not the default 3), so that the pairs outgrow the first capacity (at step 10)."""
     settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3,
-                              pair_headroom=1.5, stream_images=kwargs.pop("stream", None))
+                              pair_headroom=1.5, stream_images=kwargs.pop("stream", None),
+                              pose_opt=kwargs.pop("pose_opt", False))
     return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
                      max_gaussians=1024, pool_size=1024, backend="reference",
                      log=kwargs.pop("log", lambda m: None), **kwargs)
@@ -202,11 +203,13 @@ class _Stop(Exception):
 
 def test_resume_is_bit_identical(skull, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
-    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state. The
-    uninterrupted run is watched (`fit`'s `watch`, at its start and end only) and the other
-    streams its training images (`Settings.stream_images`), which change nothing."""
+    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state, and the
+    views' pose deltas and their Adam state (both runs optimize the poses). The uninterrupted
+    run is watched (`fit`'s `watch`, at its start and end only) and the other streams its
+    training images (`Settings.stream_images`), which change nothing."""
     seen = []
-    _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9)
+    _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9,
+         pose_opt=True)
     assert seen == [0, STEPS]
 
     def die(message):
@@ -216,12 +219,14 @@ def test_resume_is_bit_identical(skull, tmp_path):
     lines = []
     with pytest.raises(_Stop):
         _fit(skull, tmp_path / "b", eval_every=7, log=lambda m: lines.append(m) or die(m),
-             stream=True)
+             stream=True, pose_opt=True)
     assert any(m.startswith("training images streamed") for m in lines), lines
     assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
-    _fit(skull, tmp_path / "b", resume=True, stream=True)
+    _fit(skull, tmp_path / "b", resume=True, stream=True, pose_opt=True)
     a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
+    deltas = a["poses_0"]  # two training views, moved from zero
+    assert deltas.shape == (2, 9) and np.all(np.abs(deltas).max(1) > 0)
     for name in a.files:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     ply = [(tmp_path / r / "scene.ply").read_bytes() for r in "ab"]
@@ -400,8 +405,8 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
     assert not seen["settings"].antialiased and seen["settings"].stream_images is None
-    assert cli.main(base + ["--no-stream-images"]) == 0
-    assert seen["settings"].stream_images is False
+    assert cli.main(base + ["--no-stream-images", "--pose-opt"]) == 0
+    assert seen["settings"].stream_images is False and seen["settings"].pose_opt
     assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead", "--antialiased"]) == 0
     assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
     assert seen["settings"].raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
