@@ -125,7 +125,7 @@ def _fit(args) -> int:
                               init_points=args.init_points, convention=args.convention,
                               antialiased=args.antialiased, pair_headroom=args.pair_headroom,
                               row_headroom=args.row_headroom, stream_images=args.stream_images,
-                              pose_opt=args.pose_opt)
+                              pose_opt=args.pose_opt, train_on_all=args.train_on_all)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None:
         data = _dataset(args)
@@ -231,6 +231,9 @@ def _fit_parser(sub, common) -> None:
                    help="also optimize each training view's camera pose (gsplat's --pose_opt: "
                         "a 9-D delta per view, Adam at 1e-5, weight decay 1e-6); held-out "
                         "views keep their poses")
+    f.add_argument("--train-on-all", action="store_true",
+                   help="train on every view, the held-out ones too (a final scene; nothing "
+                        "is evaluated)")
     f.add_argument("--eval-every", type=int_at_least(1), default=500,
                    help="steps between held-out evaluations (default: 500)")
     f.add_argument("--pair-headroom", type=number_at_least(1.0, float),

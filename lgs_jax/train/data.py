@@ -47,13 +47,18 @@ def _cropped(d: Dataset, crop):
     return [c.cropped(x0, y0, w, h) for c in cams], images[:, y0:y0 + h, x0:x0 + w]
 
 
-def prepare(data, downscale: int = 1, crop=None) -> RunData:
+def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> RunData:
     """`data` (a folder `load_dataset` reads, or a `Dataset`) ready for training; `crop` =
-    (x0, y0, w, h) trains and evaluates on a window of every image (quick tests)."""
+    (x0, y0, w, h) trains and evaluates on a window of every image (quick tests);
+    `train_on_all` trains on every view, the split's held-out ones included, and holds out
+    none."""
     d = data if isinstance(data, Dataset) else load_dataset(data, downscale=downscale)
-    if len(d.train) == 0 or len(d.test) == 0:
+    if train_on_all:
+        d = dataclasses.replace(d, train=np.arange(len(d.names)), test=np.arange(0))
+    elif len(d.train) == 0 or len(d.test) == 0:
         raise ValueError(f"data: {d.path} needs training views and held-out views; it has "
-                         f"{len(d.test)} held-out of {len(d.names)}")
+                         f"{len(d.test)} held-out of {len(d.names)} (train_on_all trains on "
+                         f"every view and holds out none)")
     cams, images = _cropped(d, crop)
     return RunData(
         train_cams=stack_cameras([cams[i] for i in d.train]),

@@ -142,7 +142,10 @@ def _save(out: str, setup: Setup, st: _State, seed: int) -> None:
 
 
 def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
-    """Held-out (PSNR, SSIM); renders beside the ground truth written to `out` when given."""
+    """Held-out (PSNR, SSIM), (None, None) without held-out views; renders beside the ground
+    truth written to `out` when given."""
+    if not rd.test_cams:
+        return None, None
     images, st.eval_capacity = render_views(st.pool, rd.test_cams, jnp.asarray(rd.background),
                                             setup.backend, st.eval_capacity,
                                             setup.settings.raster)
@@ -275,7 +278,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
                 progress.step(m["loss"], m["psnr"], m["count"])
                 watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]),
                       force=st.step == setup.steps)
-                if st.step % s.eval_every == 0 and st.step < setup.steps:
+                if st.step % s.eval_every == 0 and st.step < setup.steps and rd.test_cams:
                     psnr, ssim = _evaluate(st, rd, setup)
                     record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
                     say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
@@ -305,7 +308,7 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          f"pairs would drop pairs), got {h!r}")
     if not (r is None or (number(r) and r >= 1)):
         raise ValueError(f"settings.row_headroom: expected None or a number >= 1, got {r!r}")
-    for name in ("antialiased", "pose_opt", "stream_images"):
+    for name in ("antialiased", "pose_opt", "train_on_all", "stream_images"):
         v = getattr(settings, name)
         if not (isinstance(v, bool) or (v is None and name == "stream_images")):
             raise ValueError(f"settings.{name}: expected a bool"
@@ -333,7 +336,7 @@ def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -
     problem = checkpoint.run_dir_problem(out, resume, overwrite)
     if problem:
         raise ValueError(f"out: {problem}")
-    rd = prepare(data, downscale, crop)
+    rd = prepare(data, downscale, crop, settings.train_on_all)
     if settings.batch > rd.train_images.shape[0]:
         raise ValueError(f"settings.batch: {settings.batch} views per step, but the data has "
                          f"{rd.train_images.shape[0]} training views")
@@ -411,9 +414,12 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
             compile_seconds) -> dict:
     """Final evaluation and outputs (module docstring); returns the result."""
     psnr, ssim = _evaluate(st, rd, setup, out)
-    with open(os.path.join(out, "metrics.jsonl"), "a") as f:
-        f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
-    log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
+    if psnr is None:
+        log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
+    else:
+        with open(os.path.join(out, "metrics.jsonl"), "a") as f:
+            f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
+        log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
     save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
     report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")),
                        os.path.join(out, "curves.png"))

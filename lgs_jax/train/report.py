@@ -142,8 +142,10 @@ def plot_curves(rows: list[dict], path: str) -> None:
 
     fig = Figure(figsize=(10, 7))
     ax = fig.subplots(2, 2)
-    ax[0, 0].plot(*series("loss"), lw=0.5)
-    ax[0, 0].set(title="loss", xlabel="step", yscale="log")
+    steps, losses = series("loss")
+    ax[0, 0].plot(steps, losses, lw=0.5)
+    ax[0, 0].set(title="loss", xlabel="step",
+                 yscale="log" if any(v > 0 for v in losses) else "linear")
     ax[0, 1].plot(*series("psnr"), lw=0.5, alpha=0.5, label="training view")
     ax[0, 1].plot(*series("heldout_psnr"), "o-", label="held-out")
     ax[0, 1].set(title="PSNR (dB)", xlabel="step")

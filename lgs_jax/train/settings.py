@@ -48,6 +48,8 @@ class Settings:
     (`data.streams`). The same bits either way; not part of the checkpointed recipe.
     pose_opt: also optimize each training view's pose (`camera_opt`: gsplat's --pose_opt),
     at rate lr_pose · sqrt(batch) with L2 weight decay pose_reg (gsplat's defaults).
+    train_on_all: train on every view of the dataset, its held-out ones included (for a final
+    scene); nothing is evaluated (held-out PSNR and SSIM are None).
     """
 
     lr_means: float = 1.6e-4
@@ -72,6 +74,7 @@ class Settings:
     row_headroom: float | None = None
     stream_images: bool | None = None
     pose_opt: bool = False
+    train_on_all: bool = False
     lr_pose: float = 1e-5
     pose_reg: float = 1e-6
 

@@ -405,8 +405,10 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
     assert not seen["settings"].antialiased and seen["settings"].stream_images is None
-    assert cli.main(base + ["--no-stream-images", "--pose-opt"]) == 0
+    assert not seen["settings"].train_on_all
+    assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all"]) == 0
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
+    assert seen["settings"].train_on_all
     assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead", "--antialiased"]) == 0
     assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
     assert seen["settings"].raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
@@ -548,6 +550,16 @@ def test_fit_needs_held_out_views(tmp_path):
                                                                 frames=frames)))
     with pytest.raises(ValueError, match="needs training views and held-out views"):
         train.fit(str(data), 1, str(tmp_path / "out"))
+    # ... unless it trains on every view: then nothing is evaluated
+    lines = []
+    result = train.fit(str(data), 2, str(tmp_path / "all"), backend="reference",
+                       settings=train.Settings(train_on_all=True, eval_every=1,
+                                               init_points=50), log=lines.append)
+    assert result["heldout_psnr"] is None and result["heldout_ssim"] is None
+    assert any("no held-out views to evaluate" in m for m in lines), lines
+    rows = report.read_metrics(str(tmp_path / "all" / "metrics.jsonl"))
+    assert [r["step"] for r in rows] == [1, 2] and all("heldout_psnr" not in r for r in rows)
+    assert not [n for n in os.listdir(tmp_path / "all") if n.startswith("heldout_")]
 
 
 def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
