@@ -1,4 +1,4 @@
-"""Camera files: INRIA cameras.json and NeRF-synthetic transforms.json.
+"""Camera files: INRIA cameras.json (read and written) and NeRF-synthetic transforms.json.
 
 Every field is checked as it is read: a missing or malformed one raises `ValueError` naming the
 file, the camera (or frame) and the field.
@@ -157,3 +157,21 @@ def load_cameras(path, *, width: int | None = None, height: int | None = None) -
     if isinstance(meta, dict) and "frames" in meta:
         return _nerf_cameras(meta, os.path.dirname(path), width, height, path)
     raise ValueError(f"{path}: neither an INRIA cameras.json list nor a transforms.json")
+
+
+def save_cameras(path, cameras, names=None) -> None:
+    """Write `cameras` as an INRIA cameras.json (what 3DGS writes beside its scene, and
+    `load_cameras` reads back): per camera id, img_name (`names[i]`, else its index), width,
+    height, position (the camera centre), rotation (camera-to-world, rows), fx, fy, cx, cy, in
+    float64 from the cameras' float32."""
+    out = []
+    for i, cam in enumerate(cameras):
+        view = np.asarray(cam.viewmat, np.float64)
+        rot = view[:3, :3].T
+        out.append(dict(id=i, img_name=str(names[i]) if names is not None else str(i),
+                        width=int(cam.width), height=int(cam.height),
+                        position=(-rot @ view[:3, 3]).tolist(), rotation=rot.tolist(),
+                        fx=float(cam.fx), fy=float(cam.fy), cx=float(cam.cx),
+                        cy=float(cam.cy)))
+    with open(os.fspath(path), "w") as f:
+        json.dump(out, f, indent=1)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
-             "curves.png", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
+             "curves.png", "cameras.json", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
 PARTS = ("pool", "opt", "strategy", "poses")  # poses: None without pose optimization
 
 

@@ -16,13 +16,15 @@ from ..scene import stack_cameras
 @dataclasses.dataclass(frozen=True, eq=False)
 class RunData:
     """train_cams: stacked training cameras; train_images (T, H, W, 3) float32 on the host
-    (`TrainViews` puts them on the device, whole or a step's views at a time); test_cams,
-    test_images (numpy), test_names (file stems) of the held-out views; background (3,);
+    (`TrainViews` puts them on the device, whole or a step's views at a time), train_names
+    (file stems); test_cams, test_images (numpy), test_names of the held-out views;
+    background (3,);
     scene_scale: 1.1 x the largest camera distance from the cameras' mean centre (gsplat);
     points, colors: SfM points (may be empty); nerf_synthetic: white background."""
 
     train_cams: object
     train_images: np.ndarray
+    train_names: list
     test_cams: list
     test_images: np.ndarray
     test_names: list
@@ -47,6 +49,10 @@ def _cropped(d: Dataset, crop):
     return [c.cropped(x0, y0, w, h) for c in cams], images[:, y0:y0 + h, x0:x0 + w]
 
 
+def _stem(name: str) -> str:
+    return os.path.splitext(os.path.basename(name))[0]
+
+
 def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> RunData:
     """`data` (a folder `load_dataset` reads, or a `Dataset`) ready for training; `crop` =
     (x0, y0, w, h) trains and evaluates on a window of every image (quick tests);
@@ -64,7 +70,8 @@ def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> 
         train_cams=stack_cameras([cams[i] for i in d.train]),
         train_images=np.asarray(images[d.train]), test_cams=[cams[i] for i in d.test],
         test_images=np.asarray(images[d.test]),
-        test_names=[os.path.splitext(os.path.basename(d.names[i]))[0] for i in d.test],
+        train_names=[_stem(d.names[i]) for i in d.train],
+        test_names=[_stem(d.names[i]) for i in d.test],
         background=np.asarray(d.background, np.float32), scene_scale=1.1 * d.extent,
         points=np.asarray(d.points), colors=np.asarray(d.colors),
         nerf_synthetic=bool(np.all(d.background == 1)))

@@ -10,7 +10,8 @@ A step whose loss, gradients or parameters would not be finite is skipped (nothi
 logged and recorded. Outputs in OUT: metrics.jsonl (per step: loss, training-view PSNR, active
 Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SSIM), checkpoints
 (`checkpoint.py`; bit-identical resume), and at the end scene.ply (the active Gaussians, INRIA
-PLY), heldout_<name>.png (render beside ground truth), curves.png, result.json.
+PLY), cameras.json (INRIA: the training cameras, at their optimized poses with pose_opt, then
+the held-out ones), heldout_<name>.png (render beside ground truth), curves.png, result.json.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import numpy as np
 
 from .. import binning
 from ..config import CONVENTIONS
+from ..io.cameras import save_cameras
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import next_pow2, pair_capacity, render
@@ -410,6 +412,16 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
                    clock.seconds)
 
 
+def _cameras(st: _State, rd: RunData) -> list:
+    """The training cameras (at their optimized poses with `Settings.pose_opt`), then the
+    held-out ones."""
+    cams = rd.train_cams
+    if st.poses is not None:
+        cams = camera_opt.adjusted(cams, jax.device_get(st.poses[0]))
+    train = [jax.tree.map(lambda x, i=i: x[i], cams) for i in range(len(rd.train_names))]
+    return train + list(rd.test_cams)
+
+
 def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log,
             compile_seconds) -> dict:
     """Final evaluation and outputs (module docstring); returns the result."""
@@ -421,6 +433,8 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
             f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
         log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
     save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
+    save_cameras(os.path.join(out, "cameras.json"), _cameras(st, rd),
+                 rd.train_names + rd.test_names)
     report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")),
                        os.path.join(out, "curves.png"))
     ran = max(setup.steps - start, 0)

@@ -123,3 +123,17 @@ def test_bad_nerf_transform_is_named(tmp_path, matrix, match):
     path = _transforms(tmp_path, [dict(file_path="r_0", transform_matrix=matrix)])
     with pytest.raises(ValueError, match=match):
         lgs_jax.load_cameras(path, width=8, height=8)
+
+
+def test_saved_cameras_load_back(tmp_path):
+    """save_cameras writes INRIA cameras.json that load_cameras reads back (to float32)."""
+    cams = [lgs_jax.default_camera(v) for v in range(8)] + [lgs_jax.default_camera(None, 64, 48)]
+    path = tmp_path / "cameras.json"
+    lgs_jax.save_cameras(path, cams, [f"v{i}" for i in range(9)])
+    back = lgs_jax.load_cameras(path)
+    assert [c["img_name"] for c in json.load(open(path))] == [f"v{i}" for i in range(9)]
+    for a, b in zip(cams, back):
+        np.testing.assert_allclose(np.asarray(b.viewmat), np.asarray(a.viewmat), atol=1e-6)
+        assert (a.width, a.height) == (b.width, b.height)
+        for name in ("fx", "fy", "cx", "cy"):
+            assert float(getattr(b, name)) == float(getattr(a, name))

@@ -172,6 +172,12 @@ def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
     for name in ("means", "quats", "log_scales", "logit_opacities", "sh"):
         np.testing.assert_array_equal(np.asarray(getattr(last, name))[shown],
                                       getattr(ply, name), err_msg=name)
+    cams = lgs_jax.load_cameras(str(tmp_path / "cameras.json"))  # training, then held-out
+    assert [c["img_name"] for c in json.load(open(tmp_path / "cameras.json"))] == [
+        "02", "03", "01", "09"]
+    for cam, i in zip(cams, list(skull.train) + list(skull.test)):
+        np.testing.assert_allclose(np.asarray(cam.viewmat), np.asarray(skull.cameras[i].viewmat),
+                                   atol=1e-6)
     # the saved scene scores what fit's last evaluation scored, view by view
     scores = train.evaluate(ply, skull, backend="reference", out=str(tmp_path / "eval"))
     assert scores["psnr"] == pytest.approx(result["heldout_psnr"], abs=1e-4)
@@ -227,6 +233,10 @@ def test_resume_is_bit_identical(skull, tmp_path):
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
     deltas = a["poses_0"]  # two training views, moved from zero
     assert deltas.shape == (2, 9) and np.all(np.abs(deltas).max(1) > 0)
+    cams = lgs_jax.load_cameras(str(tmp_path / "a" / "cameras.json"))  # at the moved poses
+    moved = [np.abs(np.asarray(c.viewmat) - np.asarray(skull.cameras[i].viewmat)).max()
+             for c, i in zip(cams, list(skull.train) + list(skull.test))]
+    assert all(0 < m < 1e-2 for m in moved[:2]) and max(moved[2:]) < 1e-6, moved
     for name in a.files:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     ply = [(tmp_path / r / "scene.ply").read_bytes() for r in "ab"]
