@@ -4,9 +4,10 @@
 of views from the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean
 over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's regulariser; gradients w.r.t. the
 parameters (and, for strategies that ask, w.r.t. zero screen offsets of the projected means:
-∂loss/∂mean2d); one Adam update; then the strategy's per-step update. A step whose loss,
-gradients or new parameters (active slots) are not finite changes nothing: it returns its inputs
-with ok False (`fit` reports it). A view whose tile pairs overflow the capacity, or whose
+∂loss/∂mean2d); one Adam update (and, with `Settings.pose_opt`, one of the views' pose
+deltas, `camera_opt`); then the strategy's per-step update. A step whose loss, gradients or new
+parameters (active slots) are not finite changes nothing: it returns its inputs with ok False
+(`fit` reports it). A view whose tile pairs overflow the capacity, or whose
 walked pairs overflow the backward's rows (`render`'s row_capacity), is reported (overflow,
 pairs, row_overflow, walked): `fit` grows what overflowed and runs the same step again, so no
 pair is ever dropped.
