@@ -88,7 +88,9 @@ def _render(args) -> int:
           f"{int(s.pairs_required)} (capacity {int(s.capacity)})")
     import matplotlib.image
 
-    matplotlib.image.imsave(args.out, np.clip(np.asarray(out.image), 0.0, 1.0))
+    from .video import frame_pixels
+
+    matplotlib.image.imsave(args.out, frame_pixels(out, args.output))
     print(f"wrote {args.out}")
     return 0
 

@@ -97,6 +97,9 @@ def view_options(p, sizes: bool = True) -> None:
     p.add_argument("--antialiased", action="store_true",
                    help="scale opacities so that the 0.3-pixel dilation keeps each Gaussian's "
                         "integral (gsplat's antialiased mode; for scenes trained with it)")
+    p.add_argument("--output", choices=("image", "depth", "alpha"), default="image",
+                   help="what to show: the image (default), the expected depth (colour-mapped "
+                        "near to far) or the alpha")
     p.add_argument("--background", type=finite_float, nargs=3, default=[0.0, 0.0, 0.0],
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
 

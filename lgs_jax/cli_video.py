@@ -69,7 +69,7 @@ def run(args) -> int:
         raise UsageError(f"--path {args.path}: {e}") from None
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
     frames = video.render_frames(
-        scene, tqdm(path, desc="frames", unit="frame"), backend=args.backend,
+        scene, tqdm(path, desc="frames", unit="frame"), args.output, backend=args.backend,
         background=np.asarray(args.background, np.float32),
         config=raster_config(args))
     t0 = time.time()

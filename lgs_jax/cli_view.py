@@ -42,7 +42,7 @@ def run(args) -> int:
     cams, start = _cameras(args)
     scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
     viewer.serve(scene, cams, start=start, host=args.host, port=args.port,
-                 max_size=args.max_size, backend=args.backend,
+                 max_size=args.max_size, output=args.output, backend=args.backend,
                  background=np.asarray(args.background, np.float32), config=raster_config(args))
     return 0
 

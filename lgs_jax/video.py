@@ -106,20 +106,52 @@ def to_uint8(image) -> np.ndarray:
     return np.round(np.clip(np.asarray(image), 0.0, 1.0) * 255).astype(np.uint8)
 
 
-def render_image(scene, cam, capacity: int | None = None, **render_kwargs):
-    """(image, capacity): `render_output`'s colour as (height, width, 3) uint8 (clipped to
-    [0, 1], rounded) and its capacity."""
-    out, capacity = render_output(scene, cam, capacity, **render_kwargs)
-    return to_uint8(out.image), capacity
+OUTPUTS = ("image", "depth", "alpha")
+"""What a frame shows (`frame_pixels`)."""
 
 
-def render_frames(scene, cameras, **render_kwargs):
-    """Each camera's image (`render_image`, the capacity carried from frame to frame); a
-    generator."""
-    capacity = None
+def depth_range(out) -> tuple[float, float]:
+    """The 1st and 99th percentiles of a render's expected depth Σ z·α·T / alpha over its
+    pixels with alpha >= 0.05 ((0, 1) where there are none): `frame_pixels`' colour range."""
+    alpha = np.asarray(out.alpha, np.float64)
+    seen = alpha >= 0.05
+    if not seen.any():
+        return 0.0, 1.0
+    lo, hi = np.percentile(np.asarray(out.depth, np.float64)[seen] / alpha[seen], [1, 99])
+    return float(lo), float(hi)
+
+
+def frame_pixels(out, output: str, span=None) -> np.ndarray:
+    """A `RenderOutput` as (H, W, 3) uint8: "image" its colour; "alpha" 1 − T in grey;
+    "depth" the expected depth Σ z·α·T / alpha through matplotlib's turbo colour map, near
+    (blue) to far (red) over `span` = (lo, hi), by default this render's `depth_range`
+    (black where alpha < 0.05)."""
+    if output == "image":
+        return to_uint8(out.image)
+    alpha = np.asarray(out.alpha, np.float64)
+    if output == "alpha":
+        return np.repeat(to_uint8(alpha)[..., None], 3, -1)
+    if output != "depth":
+        raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
+    import matplotlib
+
+    seen = alpha >= 0.05
+    lo, hi = span or depth_range(out)
+    depth = np.asarray(out.depth, np.float64) / np.where(seen, alpha, 1.0)
+    t = np.clip((depth - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    return to_uint8(matplotlib.colormaps["turbo"](t)[..., :3] * seen[..., None])
+
+
+def render_frames(scene, cameras, output: str = "image", **render_kwargs):
+    """Each camera's frame (`frame_pixels` of `output`; the depth's colour range the first
+    frame's `depth_range`, so that colours mean the same depth in every frame), the pair
+    buffer carried from frame to frame; a generator."""
+    capacity, span = None, None
     for cam in cameras:
-        image, capacity = render_image(scene, cam, capacity, **render_kwargs)
-        yield image
+        out, capacity = render_output(scene, cam, capacity, **render_kwargs)
+        if output == "depth" and span is None:
+            span = depth_range(out)
+        yield frame_pixels(out, output, span)
 
 
 def write_video(path: str, frames, fps: float = 30.0, quality: float = 8.0) -> int:

@@ -29,7 +29,7 @@ import numpy as np
 from . import poses
 from .layout import TILE
 from .scene import Camera
-from .video import render_output, to_uint8
+from .video import OUTPUTS, frame_pixels, render_output
 
 
 def camera_from_pose(position, wxyz, fov_y: float, width: int, height: int) -> Camera:
@@ -59,32 +59,6 @@ def canvas_size(aspect: float, max_size: int) -> tuple[int, int]:
     longer = max(TILE, round(max_size / TILE) * TILE)
     shorter = lambda r: max(TILE, round(longer * r / TILE) * TILE)
     return (longer, shorter(1 / aspect)) if aspect >= 1 else (shorter(aspect), longer)
-
-
-OUTPUTS = ("image", "depth", "alpha")
-"""What a frame shows (`frame_pixels`)."""
-
-
-def frame_pixels(out, output: str) -> np.ndarray:
-    """A `RenderOutput` as (H, W, 3) uint8: "image" its colour; "alpha" 1 − T in grey;
-    "depth" the expected depth Σ z·α·T / alpha through matplotlib's turbo colour map, near
-    (blue) to far (red) between the 1st and 99th percentiles of the pixels with alpha >= 0.05
-    (black elsewhere)."""
-    if output == "image":
-        return to_uint8(out.image)
-    alpha = np.asarray(out.alpha, np.float64)
-    if output == "alpha":
-        return np.repeat(to_uint8(alpha)[..., None], 3, -1)
-    if output != "depth":
-        raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
-    import matplotlib
-
-    seen = alpha >= 0.05
-    depth = np.asarray(out.depth, np.float64) / np.where(seen, alpha, 1.0)
-    lo, hi = np.percentile(depth[seen], [1, 99]) if seen.any() else (0.0, 1.0)
-    t = np.clip((depth - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
-    rgb = matplotlib.colormaps["turbo"](t)[..., :3] * seen[..., None]
-    return to_uint8(rgb)
 
 
 class FrameRenderer:
@@ -243,15 +217,19 @@ class Served:
 
 
 def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 8080,
-          max_size: int = 1024, block: bool = True, headroom: float = 1.0, **render_kwargs):
+          max_size: int = 1024, output: str = "image", block: bool = True,
+          headroom: float = 1.0, **render_kwargs):
     """Serve `scene` to browsers at http://HOST:PORT (the next free port if PORT is taken),
     new clients starting at `cameras[start]` looking at the scene's centre (module docstring),
-    the cameras drawn as frusta (a click on one moves the view there; a checkbox hides them);
+    the cameras drawn as frusta (a click on one moves the view there; a checkbox hides them),
+    showing `output` at first (one of `OUTPUTS`; a dropdown changes it);
     `render_kwargs` go to `lgs_jax.render`, `headroom` sizes the pair buffer when a view
     outgrows it (`video.render_output`). `scene` None shows nothing until `Served.show` brings
     one (a scene in training; new clients look at the point nearest the cameras' axes). Prints
     the address. With `block`, serve until Ctrl-C and return None; else return a `Served`:
     the server runs in threads until its `stop()`."""
+    if output not in OUTPUTS:
+        raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
     try:
         import viser
     except ImportError:
@@ -261,7 +239,7 @@ def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 
     _initial_view(server, first[0], _target(first, scene))
     size = server.gui.add_slider("max size", min=64, max=4096, step=16,
                                  initial_value=int(max_size))
-    output = server.gui.add_dropdown("output", OUTPUTS, initial_value="image")
+    output = server.gui.add_dropdown("output", OUTPUTS, initial_value=output)
     frusta = add_cameras(server.scene, cameras, frustum_scale(cameras))
     shown = server.gui.add_checkbox("show cameras", initial_value=True)
     shown.on_update(lambda _: [setattr(f, "visible", shown.value) for f in frusta])

@@ -3,10 +3,11 @@ import os
 import re
 
 import matplotlib.image
+import numpy as np
 import pytest
 
 import lgs_jax
-from lgs_jax import cli
+from lgs_jax import cli, video
 from lgs_jax.cli import main
 
 
@@ -153,6 +154,15 @@ def test_render_passes_the_convention_and_antialiasing(tmp_path, monkeypatch):
         assert main(["render", "--width", "32", "--out", out, "--backend", "brute"] + flags) == 0
     assert configs == [lgs_jax.RasterConfig(),
                        lgs_jax.RasterConfig("gsplat", antialiased=True)]
+
+
+def test_render_writes_the_depth_or_the_alpha(tmp_path):
+    out = lgs_jax.render(lgs_jax.default_scene(), lgs_jax.default_camera(None, 64, 36))
+    for output in ("depth", "alpha"):
+        path = tmp_path / f"{output}.png"
+        assert main(["render", "--width", "64", "--output", output, "--out", str(path)]) == 0
+        written = np.round(matplotlib.image.imread(path)[..., :3] * 255).astype(np.uint8)
+        np.testing.assert_array_equal(written, video.frame_pixels(out, output))
 
 
 def test_one_size_keeps_the_aspect_ratio(tmp_path):

@@ -118,6 +118,11 @@ def test_video_command_writes_an_orbit_of_the_default_scene(tmp_path, capsys):
     frames = _decode(out)
     assert len(frames) == 3 and frames[0].shape == (54, 96, 3)
     assert frames[0].max() > 50  # the label is in view, not an empty frame
+    depth = tmp_path / "depth.mp4"  # the depth's turbo colours: blue and red, not grey
+    assert main(["video", "--frames", "2", "--width", "96", "--output", "depth", "--out",
+                 str(depth)]) == 0
+    first = _decode(depth)[0].astype(int)
+    assert np.abs(first[..., 2] - first[..., 0]).max() > 100
 
 
 @pytest.mark.parametrize("args,match", [
@@ -154,3 +159,32 @@ def test_orbit_of_a_real_capture_circles_its_points(data_dir):
     point = np.linalg.solve(off.sum(0), np.einsum("nij,nj->i", off, centres))
     radius = np.linalg.norm(centres - point, axis=1).mean()
     assert np.linalg.norm(point - np.median(d.points, 0)) < 0.1 * radius
+
+
+def test_frames_show_the_image_the_alpha_or_the_expected_depth():
+    out = lgs_jax.render(lgs_jax.default_scene(), lgs_jax.default_camera(0, 128, 72))
+    image, alpha, depth = (video.frame_pixels(out, o) for o in ("image", "alpha", "depth"))
+    np.testing.assert_array_equal(image, video.to_uint8(out.image))
+    a = np.asarray(out.alpha)
+    np.testing.assert_array_equal(alpha[..., 0], np.round(np.clip(a, 0, 1) * 255))
+    assert (alpha[..., 0] == alpha[..., 2]).all()
+    seen = a >= 0.05
+    assert seen.any() and (~seen).any()
+    assert (depth[~seen] == 0).all() and depth[seen].max() > 0
+    z = np.asarray(out.depth) / np.where(seen, a, 1)  # turbo: blue (near) to red (far)
+    near = np.unravel_index(np.argmin(np.where(seen, z, np.inf)), a.shape)
+    far = np.unravel_index(np.argmax(np.where(seen, z, -np.inf)), a.shape)
+    assert depth[near][2] > depth[near][0] and depth[far][0] > depth[far][2]
+    with pytest.raises(ValueError, match="output: expected one of"):
+        video.frame_pixels(out, "normals")
+
+
+def test_depth_videos_keep_the_first_frames_colour_range():
+    scene = lgs_jax.default_scene()
+    cams = [lgs_jax.default_camera(v, 64, 36) for v in (0, 4)]
+    frames = list(video.render_frames(scene, cams, "depth"))
+    outs = [video.render_output(scene, c)[0] for c in cams]
+    span = video.depth_range(outs[0])
+    assert span != video.depth_range(outs[1])
+    for frame, out in zip(frames, outs):
+        np.testing.assert_array_equal(frame, video.frame_pixels(out, "depth", span))

@@ -13,9 +13,14 @@ import numpy as np
 import pytest
 
 import lgs_jax
-from lgs_jax import data, viewer
+from lgs_jax import data, video, viewer
 from lgs_jax.cli import main
-from lgs_jax.video import render_image
+from lgs_jax.video import render_output, to_uint8
+
+
+def render_image(scene, cam):
+    """The uint8 image of one eager render."""
+    return to_uint8(render_output(scene, cam)[0].image)
 
 
 def test_viewer_pose_and_camera_from_pose_are_inverse():
@@ -60,7 +65,7 @@ def test_frames_are_the_render_of_the_pose_and_share_their_program():
     position, wxyz, fov = viewer.viewer_pose(lgs_jax.default_camera(0))
     image, _ = renderer.frame(position, wxyz, fov, 2.0, 128)
     cam = viewer.camera_from_pose(position, wxyz, fov, 128, 64)
-    np.testing.assert_array_equal(image, render_image(scene, cam)[0])
+    np.testing.assert_array_equal(image, render_image(scene, cam))
     assert image.shape == (64, 128, 3) and image.max() > 50
     capacity = dict(renderer.capacity)
     renderer.frame(*viewer.viewer_pose(lgs_jax.default_camera(3)), 2.0, 128)
@@ -170,7 +175,7 @@ def test_a_growing_scene_grows_the_pair_buffer_with_headroom():
     pairs = int(out.stats.pairs_required)
     assert pairs > first and renderer.capacity[128, 64] == lgs_jax.pair_capacity(pairs, 2.0)
     np.testing.assert_array_equal(image, render_image(scene, viewer.camera_from_pose(
-        *state, 128, 64))[0])
+        *state, 128, 64)))
 
 
 def test_a_viewer_without_a_scene_looks_where_the_cameras_look():
@@ -237,22 +242,3 @@ def test_the_view_command_draws_the_capture_or_the_orbit_and_starts_at_view(
     np.testing.assert_array_equal(first[0], np.asarray(framing.viewmat))
     assert len(second) == 8 and start_b == 5
     np.testing.assert_array_equal(second[5], np.asarray(orbit[5].viewmat))
-
-
-def test_frames_show_the_image_the_alpha_or_the_expected_depth():
-    out = lgs_jax.render(lgs_jax.default_scene(), lgs_jax.default_camera(0, 128, 72))
-    image, alpha, depth = (viewer.frame_pixels(out, o) for o in ("image", "alpha", "depth"))
-    np.testing.assert_array_equal(image, render_image(lgs_jax.default_scene(),
-                                                      lgs_jax.default_camera(0, 128, 72))[0])
-    a = np.asarray(out.alpha)
-    np.testing.assert_array_equal(alpha[..., 0], np.round(np.clip(a, 0, 1) * 255))
-    assert (alpha[..., 0] == alpha[..., 2]).all()
-    seen = a >= 0.05
-    assert seen.any() and (~seen).any()
-    assert (depth[~seen] == 0).all() and depth[seen].max() > 0
-    z = np.asarray(out.depth) / np.where(seen, a, 1)  # turbo: blue (near) to red (far)
-    near = np.unravel_index(np.argmin(np.where(seen, z, np.inf)), a.shape)
-    far = np.unravel_index(np.argmax(np.where(seen, z, -np.inf)), a.shape)
-    assert depth[near][2] > depth[near][0] and depth[far][0] > depth[far][2]
-    with pytest.raises(ValueError, match="output: expected one of"):
-        viewer.frame_pixels(out, "normals")
