@@ -54,6 +54,9 @@ tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 #   for m in no-stream-images stream-images; do timeout 200 python3 -m lgs_jax fit \
 #     --data carry/data/skull --steps 3000 --eval-every 3000 --$m --out /tmp/s_$m \
 #     2>/dev/null | grep -E "ms_per_step|heldout_psnr"; done
+# (and, if the call has time, pose optimization's held-out PSNR and step cost on the skull:)
+#   timeout 200 python3 -m lgs_jax fit --data carry/data/skull --steps 3000 --eval-every 3000 \
+#     --pose-opt --out /tmp/s_pose 2>/dev/null | grep -E "ms_per_step|heldout_psnr"
 #
 # Call 4, on kind "nvidia-h200-x2" (two GPUs; ask only if the budget has 10 min left): the
 # data-parallel step (fit --devices, built this session on two CPU devices only). The same
