@@ -79,6 +79,7 @@ def view_options(p, sizes: bool = True) -> None:
     """The options `render`, `video` and `view` share: the scene, its cameras, the image size
     (with `sizes`), the backend (lgs_jax.BACKENDS), the compositing rule and the background."""
     from .render import BACKENDS
+    from .video import OUTPUTS
 
     p.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
                                             "scene, a label reading MIXED DROPS)")
@@ -97,7 +98,7 @@ def view_options(p, sizes: bool = True) -> None:
     p.add_argument("--antialiased", action="store_true",
                    help="scale opacities so that the 0.3-pixel dilation keeps each Gaussian's "
                         "integral (gsplat's antialiased mode; for scenes trained with it)")
-    p.add_argument("--output", choices=("image", "depth", "alpha"), default="image",
+    p.add_argument("--output", choices=OUTPUTS, default="image",
                    help="what to show: the image (default), the expected depth (colour-mapped "
                         "near to far) or the alpha")
     p.add_argument("--background", type=finite_float, nargs=3, default=[0.0, 0.0, 0.0],

@@ -110,14 +110,23 @@ OUTPUTS = ("image", "depth", "alpha")
 """What a frame shows (`frame_pixels`)."""
 
 
+def _expected_depth(out):
+    """(Σ z·α·T / alpha, the mask alpha >= 0.05 where that is shown) of a render."""
+    alpha = np.asarray(out.alpha, np.float64)
+    seen = alpha >= 0.05
+    return np.asarray(out.depth, np.float64) / np.where(seen, alpha, 1.0), seen
+
+
 def depth_range(out) -> tuple[float, float]:
     """The 1st and 99th percentiles of a render's expected depth Σ z·α·T / alpha over its
     pixels with alpha >= 0.05 ((0, 1) where there are none): `frame_pixels`' colour range."""
-    alpha = np.asarray(out.alpha, np.float64)
-    seen = alpha >= 0.05
+    return _percentiles(*_expected_depth(out))
+
+
+def _percentiles(depth, seen) -> tuple[float, float]:
     if not seen.any():
         return 0.0, 1.0
-    lo, hi = np.percentile(np.asarray(out.depth, np.float64)[seen] / alpha[seen], [1, 99])
+    lo, hi = np.percentile(depth[seen], [1, 99])
     return float(lo), float(hi)
 
 
@@ -128,16 +137,14 @@ def frame_pixels(out, output: str, span=None) -> np.ndarray:
     (black where alpha < 0.05)."""
     if output == "image":
         return to_uint8(out.image)
-    alpha = np.asarray(out.alpha, np.float64)
     if output == "alpha":
-        return np.repeat(to_uint8(alpha)[..., None], 3, -1)
+        return np.repeat(to_uint8(out.alpha)[..., None], 3, -1)
     if output != "depth":
         raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
     import matplotlib
 
-    seen = alpha >= 0.05
-    lo, hi = span or depth_range(out)
-    depth = np.asarray(out.depth, np.float64) / np.where(seen, alpha, 1.0)
+    depth, seen = _expected_depth(out)
+    lo, hi = span or _percentiles(depth, seen)
     t = np.clip((depth - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
     return to_uint8(matplotlib.colormaps["turbo"](t)[..., :3] * seen[..., None])
 
