@@ -129,8 +129,9 @@ def _fit(args) -> int:
                               row_headroom=args.row_headroom, stream_images=args.stream_images,
                               pose_opt=args.pose_opt, train_on_all=args.train_on_all)
     data, watch, served = args.data, None, None
-    if args.viewer_port is not None:
+    if args.viewer_port is not None or args.uint8_images:
         data = _dataset(args)
+    if args.viewer_port is not None:
         watch, served = cli_view.training_viewer(args, data)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
@@ -157,10 +158,12 @@ def _fit(args) -> int:
 
 
 def _dataset(args):
-    """The dataset `fit` trains on (`--data`, `--downscale`), loaded here for its viewer."""
+    """The dataset `fit` trains on (`--data`, `--downscale`, `--uint8-images`), loaded here
+    for its viewer or its image type."""
     from .io.dataset import load_dataset
 
-    return load_dataset(args.data, downscale=args.downscale)
+    return load_dataset(args.data, downscale=args.downscale,
+                        dtype=np.uint8 if args.uint8_images else np.float32)
 
 
 def _render_parser(sub, common) -> None:
@@ -254,6 +257,10 @@ def _fit_parser(sub, common) -> None:
 def _fit_run_options(f) -> None:
     """`fit`'s options beside the recipe: the images' memory, compiles, the window, seed and
     backend, the viewer, resuming."""
+    f.add_argument("--uint8-images", action="store_true",
+                   help="hold the images as 8-bit values (a quarter of the memory, host and "
+                        "device), rounded after compositing, undistortion and --downscale; "
+                        "without those, the same results")
     f.add_argument("--stream-images", action=argparse.BooleanOptionalAction, default=None,
                    help="keep only each step's views on the device (copied while the step "
                         "before runs) instead of the whole capture; the same results (default: "

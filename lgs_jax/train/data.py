@@ -9,16 +9,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..io.dataset import Dataset, load_dataset
+from ..io.dataset import Dataset, as_float, load_dataset
 from ..scene import stack_cameras
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RunData:
-    """train_cams: stacked training cameras; train_images (T, H, W, 3) float32 on the host
-    (`TrainViews` puts them on the device, whole or a step's views at a time), train_names
-    (file stems); test_cams, test_images (numpy), test_names of the held-out views;
-    background (3,);
+    """train_cams: stacked training cameras; train_images (T, H, W, 3) on the host, float32 or
+    uint8 as the dataset holds them (`TrainViews` puts them on the device, whole or a step's
+    views at a time), train_names (file stems); test_cams, test_images (float32 numpy),
+    test_names of the held-out views; background (3,);
     scene_scale: 1.1 x the largest camera distance from the cameras' mean centre (gsplat);
     points, colors: SfM points (may be empty); nerf_synthetic: white background."""
 
@@ -69,7 +69,7 @@ def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> 
     return RunData(
         train_cams=stack_cameras([cams[i] for i in d.train]),
         train_images=np.asarray(images[d.train]), test_cams=[cams[i] for i in d.test],
-        test_images=np.asarray(images[d.test]),
+        test_images=as_float(images[d.test]),
         train_names=[_stem(d.names[i]) for i in d.train],
         test_names=[_stem(d.names[i]) for i in d.test],
         background=np.asarray(d.background, np.float32), scene_scale=1.1 * d.extent,
@@ -108,8 +108,9 @@ def streams(nbytes: int, setting: bool | None, device=None) -> bool:
 
 class TrainViews:
     """The training views of each step, as `step.train_step`'s (targets, idx) arguments: idx
-    the step's views (`views_for_step`), targets their images (B, H, W, 3) on the device,
-    taken from the whole capture kept on the device, or streamed: copied from the host, the
+    the step's views (`views_for_step`), targets their images (B, H, W, 3) float32 on the
+    device (uint8 images divided by 255 there, `as_float`), taken from the whole capture kept
+    on the device, or streamed: copied from the host, the
     next step's copy started while a step runs (`prefetch`), so that device memory holds two
     batches instead of the capture. The same values, and the same compiled step, either way:
     the same results to the bit."""
@@ -131,9 +132,23 @@ class TrainViews:
         self._copies = {k: v for k, v in self._copies.items() if k == step - 1}
         views = views_for_step(step, self.batch, self.images.shape[0], self.seed)
         idx = jnp.asarray(views)
-        targets = (jax.device_put(self.images[views]) if self.stream
+        targets = (_to_float(jax.device_put(self.images[views])) if self.stream
                    else _take(self._whole, idx))
         self._copies[step] = targets, idx
 
 
-_take = jax.jit(lambda images, idx: images[idx])
+LEVELS = np.arange(256, dtype=np.float32) / np.float32(255)
+"""x / 255 in float32 for every 8-bit value x, divided on the host (numpy's IEEE division, as
+`io.dataset.as_float` and the image reader divide): XLA rewrites a division by a constant
+into a multiplication by its reciprocal, which rounds some values differently."""
+
+
+def _float(images):
+    """`io.dataset.as_float` on the device (a lookup of `LEVELS`: the same bits)."""
+    if images.dtype == jnp.uint8:
+        return jnp.asarray(LEVELS)[images]
+    return images
+
+
+_take = jax.jit(lambda images, idx: _float(images[idx]))
+_to_float = jax.jit(_float)

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import RasterConfig
-from ..io.dataset import Dataset, load_dataset
+from ..io.dataset import Dataset, as_float, load_dataset
 from ..render import default_backend
 from ..scene import Gaussians
 from . import report
@@ -41,7 +41,7 @@ def evaluate(gaussians: Gaussians, data, *, split: str = "test", downscale: int 
     backend = backend or default_backend()
     renders, _ = render_views(from_gaussians(gaussians), [d.cameras[i] for i in idx],
                               jnp.asarray(d.background), backend, 1 << 16, config)
-    targets = [d.images[i] for i in idx]
+    targets = [as_float(d.images[i]) for i in idx]
     names = [os.path.splitext(os.path.basename(d.names[i]))[0] for i in idx]
     scores = report.view_metrics(renders, targets)
     result = dict(split=split, psnr=float(np.mean([p for p, _ in scores])),

@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 
 import lgs_jax
 from lgs_jax.io import colmap, undistort
+from lgs_jax.io.dataset import as_float
 from lgs_jax.io.views import Lens
 from tests.io import colmap_format as cf
 
@@ -294,6 +295,16 @@ def test_downscale_averages_blocks_and_divides_intrinsics(tmp_path):
     for bad in (0, 1.5, True):
         with pytest.raises(ValueError, match="downscale"):
             lgs_jax.load_dataset(tmp_path, downscale=bad)
+    # 8-bit images: exactly the file's values at full size, the nearest x/255 after downscaling
+    full, u8 = (lgs_jax.load_dataset(tmp_path, dtype=t) for t in (np.float32, np.uint8))
+    assert u8.images.dtype == np.uint8 and full.images.dtype == np.float32
+    np.testing.assert_array_equal(u8.images[0], pixels)
+    np.testing.assert_array_equal(as_float(u8.images), full.images)  # the same bits
+    small = lgs_jax.load_dataset(tmp_path, downscale=3, dtype=np.uint8)
+    np.testing.assert_array_equal(small.images[0], np.round(want * 255))
+    for bad in (np.float64, "int8", 3):
+        with pytest.raises(ValueError, match="dtype: expected np.float32 or np.uint8"):
+            lgs_jax.load_dataset(tmp_path, dtype=bad)
 
 
 # --- bad datasets --------------------------------------------------------------------------------

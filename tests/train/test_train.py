@@ -419,6 +419,10 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all"]) == 0
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
     assert seen["settings"].train_on_all
+    with pytest.raises(lgs_jax.DatasetError):  # --uint8-images loads here: an empty folder
+        cli.main(base + ["--uint8-images", "--debug"])
+    assert seen["settings"].stream_images is False and seen["settings"].pose_opt
+    assert seen["settings"].train_on_all
     assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead", "--antialiased"]) == 0
     assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
     assert seen["settings"].raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
@@ -545,6 +549,40 @@ def test_progress_bar_redraws_while_a_step_runs():
     last = stream.getvalue().split("\r")[-1]
     assert "2/10" in last and "loss=0.1250" in last and "<" in last and "step/s" in last
     assert "psnr=21.50" in last and "gaussians=120" in last
+
+
+def test_8_bit_images_train_to_the_same_bits(tmp_path):
+    """A capture at full size without alpha or distortion: its images held as uint8
+    (`load_dataset(dtype=np.uint8)`, `fit --uint8-images`) train to the float32 run's bits,
+    streamed or not; the held-out score is the same."""
+    from PIL import Image
+
+    data = tmp_path / "data"
+    (data / "train").mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(4):
+        Image.fromarray(rng.integers(0, 256, (16, 16, 3), np.uint8)).save(
+            data / "train" / f"r_{i}.png")
+        pose = np.eye(4)
+        pose[:3, 3] = [0.1 * i, 0.0, 3.0]  # Blender axes: the camera looks down -z at 0
+        frames.append(dict(file_path=f"./train/r_{i}", transform_matrix=pose.tolist()))
+    (data / "transforms_train.json").write_text(json.dumps(dict(camera_angle_x=0.7,
+                                                                frames=frames)))
+    settings = train.Settings(eval_every=100, init_points=64, checkpoint_every=100)
+    results = {}
+    for name, dtype, stream in (("f32", np.float32, None), ("u8", np.uint8, None),
+                                ("u8s", np.uint8, True)):
+        d = lgs_jax.load_dataset(str(data), dtype=dtype)
+        results[name] = train.fit(d, 4, str(tmp_path / name), backend="reference",
+                                  settings=dataclasses.replace(settings, stream_images=stream),
+                                  log=lambda m: None)
+    a = np.load(tmp_path / "f32" / "checkpoint.npz")
+    for name in ("u8", "u8s"):
+        b = np.load(tmp_path / name / "checkpoint.npz")
+        for key in a.files:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
+        assert results[name]["heldout_psnr"] == results["f32"]["heldout_psnr"]
 
 
 def test_fit_needs_held_out_views(tmp_path):
