@@ -51,7 +51,7 @@ tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 #   TRAIN_SCENES=skull bash scripts/scale_gpu_check.sh train
 # (Dec 5: train_step now takes the step's images gathered before it, `data.TrainViews`: compare
 # its ms per step with 10.6-12.0 before; then the cost of streaming them from the host:)
-#   for m in no-stream-images stream-images; do timeout 200 python3 -m lgs_jax fit \
+#   for m in no-stream-images stream-images uint8-images; do timeout 200 python3 -m lgs_jax fit \
 #     --data carry/data/skull --steps 3000 --eval-every 3000 --$m --out /tmp/s_$m \
 #     2>/dev/null | grep -E "ms_per_step|heldout_psnr"; done
 # (and, if the call has time, pose optimization's held-out PSNR and step cost on the skull:)
