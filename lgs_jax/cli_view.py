@@ -62,12 +62,13 @@ def _cameras(args):
 
 
 def training_viewer(args, data):
-    """(watch, served) for `fit --viewer-port`: a viewer starting at the first training camera
-    of `data` (a `Dataset`) and `fit`'s `watch` that shows each scene it is given, with the
-    step, the active Gaussians and the training loss and PSNR above the frames."""
+    """(watch, served) for `fit --viewer-port`: a viewer of the training cameras of `data` (a
+    `Dataset`; all of them with --train-on-all), starting at the first, and `fit`'s `watch`
+    that shows each scene it is given, with the step, the active Gaussians and the training
+    loss and PSNR above the frames."""
     from lgs_jax import viewer
 
-    cams = [data.cameras[i] for i in data.train]
+    cams = list(data.cameras) if args.train_on_all else [data.cameras[i] for i in data.train]
     served = viewer.serve(None, cams, host=args.viewer_host, port=args.viewer_port,
                           max_size=1024, block=False, headroom=2.0, backend=args.backend,
                           background=np.asarray(data.background, np.float32),

@@ -391,7 +391,9 @@ def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch,
 
     def wait(s):
         page = urllib.request.urlopen(f"http://127.0.0.1:{s.port}/", timeout=30).read()
-        served.append((b"<html" in page, s._info.content, s._loop.renderer.scene.num))
+        drawn = [s._server.scene.get_handle_by_name(f"/cameras/{i}") for i in (89, 90)]
+        served.append((b"<html" in page, s._info.content, s._loop.renderer.scene.num,
+                       [d is not None for d in drawn]))  # the 90 training cameras
         s.stop()
 
     monkeypatch.setattr(viewer, "wait", wait)
@@ -399,7 +401,7 @@ def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch,
             "--init-points", "200", "--crop", "80", "80", "32", "32", "--backend",
             "reference", "--viewer-port", str(port), "--viewer-host", "127.0.0.1"]
     assert cli.main(args) == 0
-    assert served == [(True, "step 0 of 0, 200 Gaussians", 256)]
+    assert served == [(True, "step 0 of 0, 200 Gaussians", 256, [True, False])]
     assert "the viewer shows the trained scene" in capsys.readouterr().out
 
 
