@@ -130,6 +130,7 @@ def add_cameras(scene_api, cameras, scale: float):
         position, wxyz, fov = viewer_pose(cam)
         handle = scene_api.add_camera_frustum(
             f"/cameras/{i}", fov=fov, aspect=cam.width / cam.height, scale=scale,
+            thickness=1.5, thickness_units="screen",  # not a wall across a view through it
             wxyz=tuple(wxyz), position=tuple(position), color=(80, 120, 255))
 
         def go(event, position=position, wxyz=wxyz, fov=fov) -> None:
