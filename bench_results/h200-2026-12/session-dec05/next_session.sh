@@ -1,4 +1,4 @@
-# Next GPU session (the Dec 4 seventh and Dec 5 sessions had no GPU lent: fdfa05f, 93a8194 and
+# Next GPU session (the Dec 4 seventh and Dec 5 sessions got no GPU machine: fdfa05f, 93a8194 and
 # 4e2830a are built and compiled for the H200 offline only; BENCHMARKS.md §7 "Dec 4, seventh
 # session"; Dec 5 added the antialiased mode, checked against gsplat's below). From the
 # repository root, each call one `run` with carry ["carry"] (carry/old holds lgs_06294ad, the
@@ -33,7 +33,9 @@ timeout 120 python3 -m benchmarks.render_vs_gsplat --data carry/data --scene gui
 echo "antialiased rc=$? $(( $(date +%s) - t0 )) s" >> $out/times.log; tail -n 2 $out/antialiased.log
 tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 #
-# Call 2 (about 8 min): issue 17's table where it is closest to its targets, 20 rounds, gsplat
+# Call 2 (about 8 min): issue 17's table where it is closest to its targets, 20 rounds (the
+# scenes of >= 5M Gaussians too: `--big-repeat 20`; the Dec 4 sixth session's "20 rounds"
+# table ran those at benchmarks.scale's default of 7), gsplat
 # in the process; the vanilla kernel's row gives the Local-GS lead (both kernels changed);
 # `localgs:buckets` the blocks' order without the CUB sort of 32,400 tiles at 4K
 # (KernelConfig.block_order, built this session: one CUB launch fewer, host time per call):
@@ -41,7 +43,7 @@ tar czf /tmp/all.tgz -C $out . && rm -rf $out/* && mv /tmp/all.tgz $out/
 # (`--grad --rows localgs@walked,localgs:buckets@walked`: the split backward's segments too).
 #   . scripts/gpu_env.sh; for s in synthetic10M_4k guitar_x110_4k synthetic4M_1080p; do
 #     timeout 160 python3 -m benchmarks.scale --data carry/data --scenes $s \
-#       --rows localgs,localgs:buckets,vanilla --repeat 20 --csv $out/fwd_$s.csv \
+#       --rows localgs,localgs:buckets,vanilla --repeat 20 --big-repeat 20 --csv $out/fwd_$s.csv \
 #       > $out/fwd_$s.log 2>&1; done
 #
 # Call 3 (about 8 min): the forward's host share at synthetic 10M, then skull's 7k steps with
