@@ -44,8 +44,8 @@ BACKENDS = tuple(REGISTRY)
 def default_backend() -> str:
     """The backend `render` uses when none is given: the fastest exact one for JAX's default
     platform, as measured (BENCHMARKS.md §2 and §7): `pallas` on a GPU, `tiles` elsewhere.
-    Gradients take the render's backend; `lgs_jax.train` picks its own default for training
-    steps."""
+    Gradients take the render's backend; `lgs_jax.train`'s `fit` and `evaluate` take it as
+    theirs."""
     return "pallas" if jax.default_backend() == "gpu" else "tiles"
 
 

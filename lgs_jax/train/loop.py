@@ -31,7 +31,7 @@ from ..config import CONVENTIONS
 from ..io.cameras import save_cameras
 from ..io.ply import save_ply
 from ..projection import project
-from ..render import next_pow2, pair_capacity, render
+from ..render import default_backend, next_pow2, pair_capacity, render
 from . import camera_opt, checkpoint, report
 from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, TrainViews, prepare, streams
@@ -397,7 +397,7 @@ def fit(data, steps: int, out: str, *, strategy: Strategy | None = None,
         raise ValueError(f"watch_every: expected seconds >= 0, got {watch_every!r}")
     ahead_mode = mode_of(compile_ahead)
     rd = _prepare_out(out, data, downscale, crop, resume, overwrite, settings)
-    backend = backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
+    backend = backend or default_backend()
     setup = Setup(settings, strategy or DefaultStrategy(), steps, rd.scene_scale, backend,
                   devices)
     if resume and os.path.exists(os.path.join(out, "checkpoint.json")):
