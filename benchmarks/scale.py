@@ -83,10 +83,10 @@ ROWS = {
     # (KernelConfig.mosaic_warp_lists off: the default before Dec 4, sixth session)
     "localgs:blocks": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
                                                       mosaic_warp_lists=False))),
-    # blocks take tiles and segments by buckets of length, no CUB sort of them
-    # (KernelConfig.block_order; lgs_jax.backends.block_order), built Dec 4, seventh session
-    "localgs:buckets": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                       block_order="buckets"))),
+    # blocks take tiles and segments in a stable argsort of their lengths (CUB on a GPU), not
+    # by buckets of length (KernelConfig.block_order "sort": the default before Dec 5)
+    "localgs:sort": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
+                                                    block_order="sort"))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
     # the Local-GS forward's pair loop unrolled 4 times instead of 8: 95 registers for the H200
