@@ -289,6 +289,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
     finally:
         progress.close()
         stepper.close()
+        views.close()
     return busy
 
 

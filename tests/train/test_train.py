@@ -21,6 +21,7 @@ from skimage.metrics import structural_similarity
 
 import lgs_jax
 from lgs_jax import cli, train
+from lgs_jax.io.dataset import as_float
 from lgs_jax.train import ahead, data as train_data, init, report
 
 
@@ -87,8 +88,10 @@ def test_initial_gaussians_follow_gsplat():
     assert q.min() >= 0 and q.max() < 1
 
 
-def test_streamed_views_are_the_steps_views_two_batches_at_most():
-    images = np.random.default_rng(0).uniform(size=(5, 4, 6, 3)).astype(np.float32)
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8])
+def test_streamed_views_are_the_steps_views_two_batches_at_most(dtype):
+    images = np.random.default_rng(0).uniform(0, 255, size=(5, 4, 6, 3)).astype(dtype)
+    expected = as_float(images)
     whole, streamed = (train_data.TrainViews(images, 2, 3, stream) for stream in (False, True))
     for step in range(4):
         views = train_data.views_for_step(step, 2, 5, 3)
@@ -96,8 +99,12 @@ def test_streamed_views_are_the_steps_views_two_batches_at_most():
             targets, idx = source.args(step)
             source.prefetch(step + 1)
             np.testing.assert_array_equal(np.asarray(idx), views)
-            np.testing.assert_array_equal(np.asarray(targets), images[views])
+            assert targets.dtype == jnp.float32
+            np.testing.assert_array_equal(np.asarray(targets), expected[views])
             assert sorted(source._copies) == [step, step + 1]
+    streamed.close()
+    assert streamed._worker._shutdown
+    np.testing.assert_array_equal(np.asarray(streamed.args(3)[0]), expected[views])  # kept
 
 
 class _Device:
