@@ -127,7 +127,8 @@ def _fit(args) -> int:
                               init_points=args.init_points, convention=args.convention,
                               antialiased=args.antialiased, pair_headroom=args.pair_headroom,
                               row_headroom=args.row_headroom, stream_images=args.stream_images,
-                              pose_opt=args.pose_opt, train_on_all=args.train_on_all)
+                              pose_opt=args.pose_opt, color_opt=args.color_opt,
+                              train_on_all=args.train_on_all)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None or args.uint8_images:
         data = _dataset(args)
@@ -236,6 +237,11 @@ def _fit_parser(sub, common) -> None:
                    help="also optimize each training view's camera pose (gsplat's --pose_opt: "
                         "a 9-D delta per view, Adam at 1e-5, weight decay 1e-6); held-out "
                         "views keep their poses")
+    f.add_argument("--color-opt", action="store_true",
+                   help="also optimize an affine colour correction of each training view "
+                        "(exposure and white balance that change between photos; Adam at "
+                        "1e-3); held-out views render at the views' average appearance; "
+                        "colors.json holds the corrections")
     f.add_argument("--train-on-all", action="store_true",
                    help="train on every view, the held-out ones too (a final scene; nothing "
                         "is evaluated)")

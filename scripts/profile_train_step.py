@@ -121,7 +121,8 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     bwd = jax.jit(jax.grad(lambda p: jnp.sum(draw(p) * w)))
     lossg = jax.jit(lambda p: st._loss_and_grads(setup, capacity, None, st.Pool(p, pool.active),
                                                   jax.tree.map(lambda x: x[None], cam),
-                                                  target[None], bg, jnp.int32(6000)))
+                                                  target[None], bg, jnp.int32(6000),
+                                                  jnp.array([0])))
     ssimg = jax.jit(jax.grad(lambda im: losses.loss_fn(im, target, 0.2, "same")))
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     adam = jax.jit(lambda g_, s_, p_: opt.update(g_, s_, p_))

@@ -10,9 +10,9 @@ R(a) the Gram-Schmidt rotation of the 6-D representation a = (a1, a2) (Zhou et a
 PyTorch3D's rotation_6d_to_matrix: rows b1 = a1/|a1|, b2 = (a2 − (b1·a2) b1)/|·|, b3 = b1 × b2),
 so the world-to-camera matrix `viewmat` becomes D(δ)⁻¹ · viewmat, D⁻¹ = [[Rᵀ, −Rᵀ t], [0, 1]]
 (`adjusted`). At δ = 0, R = I and t = 0 exactly, so the render is the unadjusted one to the bit.
-The deltas take their own Adam (β = 0.9, 0.999, ε = 1e-8, torch's defaults) at rate
-lr_pose · sqrt(batch) with L2 weight decay pose_reg added to the gradient (torch's
-`weight_decay`), as gsplat does. Held-out views keep their poses (gsplat evaluates them so too).
+The deltas are a part of the views' own parameters (`view_params`) with their own Adam (β =
+0.9, 0.999, ε = 1e-8, torch's defaults) at rate lr_pose · sqrt(batch), L2 weight decay pose_reg
+added to the gradient (torch's `weight_decay`), as gsplat does. Held-out views keep their poses (gsplat evaluates them so too).
 """
 
 from __future__ import annotations
@@ -54,23 +54,20 @@ def adjusted(cams: Camera, deltas) -> Camera:
                                                         cams.viewmat, precision=HIGHEST))
 
 
-def pose_optimizer(settings) -> optax.GradientTransformation:
+SIZE = 9  # the delta's length (`view_params`)
+
+
+def enabled(settings) -> bool:
+    return settings.pose_opt
+
+
+def optimizer(settings) -> optax.GradientTransformation:
     """The deltas' optimizer (module docstring)."""
     lr = settings.lr_pose * math.sqrt(settings.batch)
     return optax.chain(optax.add_decayed_weights(settings.pose_reg),
                        optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8), optax.scale(-lr))
 
 
-def init(settings, views: int):
-    """(deltas (views, 9) zeros, their optimizer state), or None without `pose_opt`."""
-    if not settings.pose_opt:
-        return None
-    deltas = jnp.zeros((views, 9), jnp.float32)
-    return deltas, pose_optimizer(settings).init(deltas)
-
-
-def update(settings, poses, grads):
-    """`poses` (deltas, optimizer state) after one step with the deltas' gradient `grads`."""
-    deltas, state = poses
-    updates, state = pose_optimizer(settings).update(grads, state, deltas)
-    return optax.apply_updates(deltas, updates), state
+def project(deltas):
+    """The deltas after an update (`view_params.update`): unchanged."""
+    return deltas

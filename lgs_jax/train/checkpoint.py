@@ -22,8 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 
 RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
-             "curves.png", "cameras.json", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
-PARTS = ("pool", "opt", "strategy", "poses")  # poses: None without pose optimization
+             "curves.png", "cameras.json", "colors.json",
+             "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
+PARTS = ("pool", "opt", "strategy", "views")  # views: `view_params`' state, None without it
 
 
 def run_files(out: str) -> list[str]:
@@ -67,7 +68,7 @@ def config_of(setup, seed: int) -> dict:
 
 
 def save(out: str, state: tuple, meta: dict) -> None:
-    """Write (pool, opt_state, strategy_state, poses) and `meta` (json-able) as the
+    """Write (pool, opt_state, strategy_state, views) and `meta` (json-able) as the
     checkpoint."""
     arrays = {f"{name}_{i}": np.asarray(x) for name, part in zip(PARTS, state)
               for i, x in enumerate(jax.tree.leaves(part))}
@@ -90,7 +91,7 @@ def read_meta(out: str) -> dict:
 
 
 def restore(out: str, templates: tuple) -> tuple:
-    """(pool, opt_state, strategy_state, poses) from the checkpoint, shaped like `templates`
+    """(pool, opt_state, strategy_state, views) from the checkpoint, shaped like `templates`
     (the same structures at the saved pool size)."""
     saved = np.load(os.path.join(out, "checkpoint.npz"))
     parts = []

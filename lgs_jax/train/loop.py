@@ -11,7 +11,8 @@ logged and recorded. Outputs in OUT: metrics.jsonl (per step: loss, training-vie
 Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SSIM), checkpoints
 (`checkpoint.py`; bit-identical resume), and at the end scene.ply (the active Gaussians, INRIA
 PLY), cameras.json (INRIA: the training cameras, at their optimized poses with pose_opt, then
-the held-out ones), heldout_<name>.png (render beside ground truth), curves.png, result.json.
+the held-out ones), colors.json (with color_opt: each training view's colour correction),
+heldout_<name>.png (render beside ground truth), curves.png, result.json.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from ..io.cameras import save_cameras
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import default_backend, next_pow2, pair_capacity, render
-from . import camera_opt, checkpoint, report
+from . import camera_opt, checkpoint, report, view_params
 from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, TrainViews, prepare, streams
 from .init import start_gaussians
@@ -55,16 +56,16 @@ class _State:
     eval_capacity: int
     skipped: int = 0
     rows: int | None = None  # the backward's rows per training view (None: one per pair slot)
-    poses: object = None  # the training views' pose deltas and their optimizer (`camera_opt`)
+    views: object = None  # the training views' own parameters and optimizers (`view_params`)
 
     @property
     def saved(self) -> tuple:
         """What `checkpoint.save` writes, in `checkpoint.PARTS` order."""
-        return self.pool, self.opt_state, self.strategy_state, self.poses
+        return self.pool, self.opt_state, self.strategy_state, self.views
 
 
 def _templates(setup: Setup, size: int, rd: RunData, g=None):
-    """(pool, opt_state, strategy_state, poses) at `size` slots: from Gaussians g, or
+    """(pool, opt_state, strategy_state, views) at `size` slots: from Gaussians g, or
     zeros."""
     bases = (setup.settings.sh_degree + 1) ** 2
     if g is None:
@@ -76,13 +77,13 @@ def _templates(setup: Setup, size: int, rd: RunData, g=None):
         pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     return (pool, opt.init(pool.params), setup.strategy.init(pool, rd.scene_scale),
-            camera_opt.init(setup.settings, rd.train_images.shape[0]))
+            view_params.init(setup.settings, rd.train_images.shape[0]))
 
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
     g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
-    pool, opt_state, sstate, poses = _templates(setup, size, rd, g)
+    pool, opt_state, sstate, views = _templates(setup, size, rd, g)
     first = jax.tree.map(lambda x: x[0], rd.train_cams)
     capacity = pair_capacity(int(_pairs(pool, first, setup.settings.antialiased)),
                              setup.settings.pair_headroom)
@@ -92,7 +93,7 @@ def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _S
                              setup.settings.row_headroom)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
         f"{rd.scene_scale:.3f}")
-    return _State(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, poses=poses)
+    return _State(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, views=views)
 
 
 @functools.partial(jax.jit, static_argnames="antialiased")
@@ -116,12 +117,12 @@ def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
     if problem:
         raise ValueError(f"resume: {problem}")
     templates = _templates(setup, meta["pool_size"], rd)
-    pool, opt_state, sstate, poses = checkpoint.restore(out, templates)
+    pool, opt_state, sstate, views = checkpoint.restore(out, templates)
     _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
     log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
     rows = meta.get("rows") if setup.settings.row_headroom is not None else None
     return _State(pool, opt_state, sstate, meta["step"], meta["capacity"],
-                  meta["eval_capacity"], meta["skipped"], rows, poses)
+                  meta["eval_capacity"], meta["skipped"], rows, views)
 
 
 def _forget_after(path: str, step: int) -> None:
@@ -175,7 +176,7 @@ def _one_step(setup: Setup, st: _State, rd: RunData, views: TrainViews, key, bac
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
     images, idx = views.args(st.step)
     while True:
-        args = (st.pool, st.opt_state, st.strategy_state, st.poses, rd.train_cams, images, idx,
+        args = (st.pool, st.opt_state, st.strategy_state, st.views, rd.train_cams, images, idx,
                 background, st.step, key)
         sig = signature(args)
         size = (st.capacity, st.rows)
@@ -184,7 +185,7 @@ def _one_step(setup: Setup, st: _State, rd: RunData, views: TrainViews, key, bac
         stepper.prepare(args, size, sig)
         m = {k: v.item() for k, v in jax.device_get(new[4]).items()}
         if not (m["overflow"] or m["row_overflow"]):
-            st.pool, st.opt_state, st.strategy_state, st.poses = new[:4]
+            st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
             return m
         need = (m["pairs"], m["walked"])
         (st.capacity, st.rows), waited, ahead = stepper.grow(size, need, sig)
@@ -205,7 +206,7 @@ def _place(setup: Setup, st: _State) -> None:
     where it is already, and for one device)."""
     where = replicated(setup.devices)
     if where is not None:
-        st.pool, st.opt_state, st.strategy_state, st.poses = jax.device_put(st.saved, where)
+        st.pool, st.opt_state, st.strategy_state, st.views = jax.device_put(st.saved, where)
 
 
 def _refine(setup: Setup, st: _State, key, cap: int, say, record) -> int:
@@ -417,10 +418,20 @@ def _cameras(st: _State, rd: RunData) -> list:
     """The training cameras (at their optimized poses with `Settings.pose_opt`), then the
     held-out ones."""
     cams = rd.train_cams
-    if st.poses is not None:
-        cams = camera_opt.adjusted(cams, jax.device_get(st.poses[0]))
+    if st.views is not None and "pose" in st.views:
+        cams = camera_opt.adjusted(cams, jax.device_get(st.views["pose"][0]))
     train = [jax.tree.map(lambda x, i=i: x[i], cams) for i in range(len(rd.train_names))]
     return train + list(rd.test_cams)
+
+
+def _save_colors(path: str, corrections, names) -> None:
+    """colors.json: each training view's colour correction (`color_opt`) as the affine map of
+    render colours to its photo's, C' = matrix · C + offset (matrix = I + A, offset = b)."""
+    p = np.asarray(jax.device_get(corrections), np.float64)
+    rows = [dict(img_name=n, matrix=(np.eye(3) + q[:9].reshape(3, 3)).tolist(),
+                 offset=q[9:].tolist()) for n, q in zip(names, p)]
+    with open(path, "w") as f:
+        json.dump(rows, f, indent=1)
 
 
 def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log,
@@ -436,6 +447,8 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
     save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
     save_cameras(os.path.join(out, "cameras.json"), _cameras(st, rd),
                  rd.train_names + rd.test_names)
+    if st.views is not None and "color" in st.views:
+        _save_colors(os.path.join(out, "colors.json"), st.views["color"][0], rd.train_names)
     report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")),
                        os.path.join(out, "curves.png"))
     ran = max(setup.steps - start, 0)

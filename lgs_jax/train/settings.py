@@ -48,6 +48,10 @@ class Settings:
     (`data.streams`). The same bits either way; not part of the checkpointed recipe.
     pose_opt: also optimize each training view's pose (`camera_opt`: gsplat's --pose_opt),
     at rate lr_pose · sqrt(batch) with L2 weight decay pose_reg (gsplat's defaults).
+    color_opt: also optimize an affine colour correction of each training view's render
+    (`color_opt`: exposure and white balance that change between photos), centred over the
+    views, at rate lr_color · sqrt(batch) with L2 weight decay color_reg (gsplat's app_opt
+    rates); held-out views are evaluated at the views' average appearance.
     train_on_all: train on every view of the dataset, its held-out ones included (for a final
     scene); nothing is evaluated (held-out PSNR and SSIM are None).
     """
@@ -77,6 +81,9 @@ class Settings:
     train_on_all: bool = False
     lr_pose: float = 1e-5
     pose_reg: float = 1e-6
+    color_opt: bool = False
+    lr_color: float = 1e-3
+    color_reg: float = 1e-6
 
     @property
     def raster(self) -> RasterConfig:

@@ -4,11 +4,11 @@
 of views from the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean
 over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's regulariser; gradients w.r.t. the
 parameters (and, for strategies that ask, w.r.t. zero screen offsets of the projected means:
-∂loss/∂mean2d); one Adam update (and, with `Settings.pose_opt`, one of the views' pose
-deltas, `camera_opt`); then the strategy's per-step update. A step whose loss, gradients or new
-parameters (active slots) are not finite changes nothing: it returns its inputs with ok False
-(`fit` reports it). A view whose tile pairs overflow the capacity, or whose
-walked pairs overflow the backward's rows (`render`'s row_capacity), is reported (overflow,
+∂loss/∂mean2d); one Adam update (and one of the views' own parameters, `view_params`: pose
+deltas with `Settings.pose_opt`, colour corrections with `Settings.color_opt`); then the
+strategy's per-step update. A step whose loss, gradients or new parameters (active slots) are
+not finite changes nothing: it returns its inputs with ok False (`fit` reports it). A view whose
+tile pairs overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s row_capacity), is reported (overflow,
 pairs, row_overflow, walked): `fit` grows what overflowed and runs the same step again, so no
 pair is ever dropped.
 
@@ -31,7 +31,7 @@ import optax
 
 from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
-from . import camera_opt
+from . import camera_opt, color_opt, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
@@ -74,47 +74,52 @@ def replicated(devices: int):
 
 
 def _over_views(one, devices: int):
-    """`one(g, cam, target, offsets)` mapped over a batch of views (g shared): `jax.vmap`, and
-    with `devices` > 1 the batch split across the first `devices` devices (a `shard_map` over
+    """`one(g, cam, target, offsets, color)` mapped over a batch of views (g shared):
+    `jax.vmap`, and with `devices` > 1 the batch split across the first `devices` devices (a `shard_map` over
     a mesh axis "views", each device rendering its share of the views with the whole scene;
     the gradient of the shared scene sums the devices' parts, an all-reduce)."""
-    batched = jax.vmap(one, in_axes=(None, 0, 0, 0))
+    batched = jax.vmap(one, in_axes=(None, 0, 0, 0, 0))
     if devices == 1:
         return batched
     whole, views = jax.sharding.PartitionSpec(), jax.sharding.PartitionSpec("views")
     # check_vma off: the renderer's loops start from replicated carries that become per-device
     # values, which the check would have us cast by hand; nothing in `one` communicates
-    return jax.shard_map(batched, mesh=mesh(devices), in_specs=(whole, views, views, views),
+    return jax.shard_map(batched, mesh=mesh(devices), in_specs=(whole,) + (views,) * 4,
                          out_specs=views, check_vma=False)
 
 
 def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
-                    background, step, deltas=None):
-    """((loss, (mse, stats, visible)), (param grads, screen grads or None, pose grads or
-    None)); `deltas` (B, 9) move the views' poses (`camera_opt.adjusted`), or None."""
+                    background, step, idx, per_view=None):
+    """((loss, (mse, stats, visible)), (param grads, screen grads or None, grads of the views'
+    own parameters or None)); `per_view`: the views' own parameters {name: (views, SIZE)}
+    (`view_params`), whose rows of the views `idx` move their poses (`camera_opt.adjusted`)
+    and correct their colours (`color_opt.corrected`), or None."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
     bands = sh_mask(step, num_bases, s.settings.sh_every)
     need2d = s.strategy.needs_screen_grads
 
-    def loss_of(params, offsets, deltas):
+    def loss_of(params, offsets, per_view):
         g = render_gaussians(params, pool.active, bands)
-        views = cams if deltas is None else camera_opt.adjusted(cams, deltas)
+        own = view_params.rows(per_view, idx) or {}
+        views = cams if "pose" not in own else camera_opt.adjusted(cams, own["pose"])
 
-        def one(g, cam, target, off):
+        def one(g, cam, target, off, color):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=s.settings.raster, screen_offsets=off,
                        row_capacity=rows)
-            return (loss_fn(o.image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
-                    jnp.mean((o.image - target) ** 2), o.stats, o.visible)
+            image = o.image if color is None else color_opt.corrected(o.image, color)
+            return (loss_fn(image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
+                    jnp.mean((image - target) ** 2), o.stats, o.visible)
 
-        losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets)
+        losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets,
+                                                                  own.get("color"))
         total = jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
         return total, (jnp.mean(mse), stats, visible)
 
     offsets = jnp.zeros((targets.shape[0], pool.size, 2), jnp.float32) if need2d else None
     return jax.value_and_grad(loss_of, argnums=(0, 1, 2), has_aux=True)(pool.params, offsets,
-                                                                         deltas)
+                                                                         per_view)
 
 
 def step_keys(key, step):
@@ -125,20 +130,20 @@ def step_keys(key, step):
 
 @functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows"),
                    compiler_options=COMPILER_OPTIONS)
-def train_step(pool: Pool, opt_state, strategy_state, poses, all_cams, targets, idx,
+def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, idx,
                background, step, key, *, setup: Setup, capacity: int, rows: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
     (stacked), whose images are `targets` (B, H, W, 3) (`data.TrainViews`: the same program
-    whether the capture's images live on the device or are streamed); `poses`: the training
-    views' pose deltas and their optimizer state (`camera_opt`), or None; `key` is the run's;
-    `rows`: the backward's row buffer (`render`'s row_capacity). Returns (pool, opt_state,
-    strategy_state, poses, metrics): loss, psnr (training views), ok (finite, applied),
-    overflow, pairs (largest per-view pair count), row_overflow, walked (largest per-view count
-    of walked pairs), count (active Gaussians)."""
+    whether the capture's images live on the device or are streamed); `views`: the training
+    views' own parameters and their optimizer states (`view_params`: pose deltas, colour
+    corrections), or None; `key` is the run's; `rows`: the backward's row buffer (`render`'s
+    row_capacity). Returns (pool, opt_state, strategy_state, views, metrics): loss, psnr
+    (training views), ok (finite, applied), overflow, pairs (largest per-view pair count),
+    row_overflow, walked (largest per-view count of walked pairs), count (active Gaussians)."""
     cams = jax.tree.map(lambda x: x[idx], all_cams)
-    deltas = None if poses is None else poses[0][idx]
-    (loss, (mse, stats, visible)), (grads, grads2d, grads_pose) = _loss_and_grads(
-        setup, capacity, rows, pool, cams, targets, background, step, deltas)
+    (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = _loss_and_grads(
+        setup, capacity, rows, pool, cams, targets, background, step, idx,
+        view_params.params(views))
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     updates, new_opt = opt.update(grads, opt_state, pool.params)
     new_pool = Pool(optax.apply_updates(pool.params, updates), pool.active)
@@ -150,23 +155,21 @@ def train_step(pool: Pool, opt_state, strategy_state, poses, all_cams, targets, 
           & _finite(new_pool.params, new_pool.active))
     if grads2d is not None:
         ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
-    new_poses = poses
-    if poses is not None:  # each view's gradient to its row of the deltas (others: zero),
-        # summed in batch order where a view comes twice (a sum, not a scatter-add: no atomics)
-        hits = jnp.arange(poses[0].shape[0])[:, None] == idx[None, :]
-        full = jnp.sum(jnp.where(hits[:, :, None], grads_pose[None], 0.0), axis=1)
-        new_poses = camera_opt.update(setup.settings, poses, full)
-        ok = ok & jnp.all(jnp.isfinite(new_poses[0]))
-    pool, opt_state, strategy_state, poses = _select(
-        ok, (new_pool, new_opt, new_state, new_poses), (pool, opt_state, strategy_state, poses))
+    new_views = views
+    if views is not None:
+        new_views = view_params.update(setup.settings, views, grads_views)
+        ok = ok & jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in
+                                     jax.tree.leaves(view_params.params(new_views))]))
+    pool, opt_state, strategy_state, views = _select(
+        ok, (new_pool, new_opt, new_state, new_views), (pool, opt_state, strategy_state, views))
     if setup.devices > 1:
-        pool, opt_state, strategy_state, poses = jax.lax.with_sharding_constraint(
-            (pool, opt_state, strategy_state, poses), replicated(setup.devices))
+        pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
+            (pool, opt_state, strategy_state, views), replicated(setup.devices))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
                    pairs=jnp.max(stats.pairs_required),
                    row_overflow=jnp.any(stats.row_overflow), walked=jnp.max(stats.pairs_walked),
                    count=jnp.sum(pool.active, dtype=jnp.int32))
-    return pool, opt_state, strategy_state, poses, metrics
+    return pool, opt_state, strategy_state, views, metrics
 
 
 @functools.partial(jax.jit, static_argnames=("strategy", "cap"),

@@ -2,7 +2,8 @@
 (`--xla_force_host_platform_device_count`, set before JAX starts, so in a child process) a run
 with refinements follows the one-device run to float rounding (the gradients' sum is taken in
 another order), compiles its step no more often, and repeats itself to the bit, watched or
-not (`fit`'s `watch` gets one device's copy of the pool); bad device counts are refused by
+not (`fit`'s `watch` gets one device's copy of the pool), the views' own parameters
+(`view_params`: poses and colour corrections) optimized alike; bad device counts are refused by
 name."""
 
 import json
@@ -30,7 +31,8 @@ CHILD = textwrap.dedent("""
                             test=d.test[:1])
     strategy = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=1e-4,
                                      prune_opa=0.02)
-    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100)
+    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100, pose_opt=True,
+                              color_opt=True)
     out, watched = {}, []
     watch = lambda step, g, m: watched.append(
         (step, len(g.means.devices()), int(np.isfinite(np.asarray(g.logit_opacities)).sum()),

@@ -155,7 +155,8 @@ def _fit(data, out, **kwargs):
     (not the default 3), so that the pairs outgrow the first capacity (at step 10)."""
     settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3,
                               pair_headroom=1.5, stream_images=kwargs.pop("stream", None),
-                              pose_opt=kwargs.pop("pose_opt", False))
+                              pose_opt=kwargs.pop("pose_opt", False),
+                              color_opt=kwargs.pop("color_opt", False))
     return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
                      max_gaussians=1024, pool_size=1024, backend="reference",
                      log=kwargs.pop("log", lambda m: None), **kwargs)
@@ -217,12 +218,18 @@ class _Stop(Exception):
 def test_resume_is_bit_identical(skull, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
     same bits as an uninterrupted run: pool, active mask, Adam state, strategy state, and the
-    views' pose deltas and their Adam state (both runs optimize the poses). The uninterrupted
-    run is watched (`fit`'s `watch`, at its start and end only) and the other streams its
-    training images (`Settings.stream_images`), which change nothing."""
+    views' own parameters (pose deltas and colour corrections, `view_params`) and their Adam
+    states (both runs optimize them). The uninterrupted run is watched (`fit`'s `watch`, at its
+    start and end only) and the other streams its training images
+    (`Settings.stream_images`), which change nothing. The first training view's photo is
+    darkened (x0.6), so that its colour correction darkens against the other's."""
+    images = skull.images.copy()
+    images[skull.train[0]] *= 0.6
+    skull = dataclasses.replace(skull, images=images)
+    own = dict(pose_opt=True, color_opt=True)
     seen = []
     _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9,
-         pose_opt=True)
+         **own)
     assert seen == [0, STEPS]
 
     def die(message):
@@ -232,14 +239,21 @@ def test_resume_is_bit_identical(skull, tmp_path):
     lines = []
     with pytest.raises(_Stop):
         _fit(skull, tmp_path / "b", eval_every=7, log=lambda m: lines.append(m) or die(m),
-             stream=True, pose_opt=True)
+             stream=True, **own)
     assert any(m.startswith("training images streamed") for m in lines), lines
     assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
-    _fit(skull, tmp_path / "b", resume=True, stream=True, pose_opt=True)
+    _fit(skull, tmp_path / "b", resume=True, stream=True, **own)
     a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
-    deltas = a["poses_0"]  # two training views, moved from zero
-    assert deltas.shape == (2, 9) and np.all(np.abs(deltas).max(1) > 0)
+    # views' leaves: colour (corrections, Adam count, mu, nu), then pose (deltas, ...)
+    corrections, deltas = a["views_0"], a["views_4"]  # two training views, moved from zero
+    assert corrections.shape == (2, 12) and deltas.shape == (2, 9)
+    assert np.all(np.abs(deltas).max(1) > 0) and np.all(np.abs(corrections).max(1) > 0)
+    np.testing.assert_allclose(corrections.sum(0), 0, atol=1e-7)  # centred over the views
+    colors = json.load(open(tmp_path / "a" / "colors.json"))
+    assert [c["img_name"] for c in colors] == ["02", "03"]
+    grey = [np.mean(np.asarray(c["matrix"]) @ np.full(3, 0.5) + c["offset"]) for c in colors]
+    assert grey[0] < 0.5 < grey[1], grey  # the darkened photo's view renders darker
     cams = lgs_jax.load_cameras(str(tmp_path / "a" / "cameras.json"))  # at the moved poses
     moved = [np.abs(np.asarray(c.viewmat) - np.asarray(skull.cameras[i].viewmat)).max()
              for c, i in zip(cams, list(skull.train) + list(skull.test))]
@@ -424,10 +438,11 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
     assert not seen["settings"].antialiased and seen["settings"].stream_images is None
-    assert not seen["settings"].train_on_all
-    assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all"]) == 0
+    assert not (seen["settings"].train_on_all or seen["settings"].color_opt)
+    assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all",
+                            "--color-opt"]) == 0
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
-    assert seen["settings"].train_on_all
+    assert seen["settings"].train_on_all and seen["settings"].color_opt
     with pytest.raises(lgs_jax.DatasetError):  # --uint8-images loads here: an empty folder
         cli.main(base + ["--uint8-images", "--debug"])
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt

@@ -1,0 +1,54 @@
+"""Per-view colour correction (`Settings.color_opt`, `fit --color-opt`), for captures whose
+exposure or white balance changes from view to view (a phone's automatic exposure): an affine
+colour transform per training view, the lightest form of gsplat simple_trainer's appearance
+options (its `--app_opt` embeddings and `--use_bilateral_grid`, which vary over the image).
+
+Each training view i has a 12-vector p_i = (A_i, b_i), A_i a 3x3 matrix (row-major) and b_i a
+colour, zero at the start. The view's render C (each pixel's colour after compositing over the
+background, a column vector) is compared with its photo as
+
+    C'_i = C + A_i C + b_i     (`corrected`; p_i = 0 gives C to the bit).
+
+After each update the corrections are centred over the training views, p_i ← p_i − mean_j p_j
+(`project`): a projected gradient step onto corrections of mean zero, so that the scene keeps
+the views' average appearance (the corrections cannot drift together while the scene's colours
+drift the other way) and held-out views, which have no correction, render at it. The centring
+moves every view's correction by the mean of the step's change, small beside the change of the
+step's own views (their share of the views), and adds no gradient to the other views. The
+corrections take their own Adam (torch's defaults, as `camera_opt`) at rate lr_color ·
+sqrt(batch), with L2 weight decay color_reg added to the gradient.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import optax
+
+SIZE = 12  # (A row-major, b) per view (`view_params`)
+HIGHEST = jax.lax.Precision.HIGHEST
+
+
+def enabled(settings) -> bool:
+    return settings.color_opt
+
+
+def corrected(image, p):
+    """`image` (H, W, 3) as view p (12,) sees it: C + A C + b per pixel (module docstring)."""
+    a = jnp.reshape(p[:9], (3, 3)).astype(image.dtype)
+    change = jnp.einsum("ij,hwj->hwi", a, image, precision=HIGHEST)
+    return image + change + p[9:].astype(image.dtype)
+
+
+def optimizer(settings) -> optax.GradientTransformation:
+    """The corrections' optimizer (module docstring)."""
+    lr = settings.lr_color * math.sqrt(settings.batch)
+    return optax.chain(optax.add_decayed_weights(settings.color_reg),
+                       optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8), optax.scale(-lr))
+
+
+def project(p):
+    """The corrections (views, 12) centred over the views (module docstring)."""
+    return p - jnp.mean(p, axis=0)
