@@ -102,8 +102,15 @@ def restore(out: str, templates: tuple) -> tuple:
     return tuple(parts)
 
 
-def config_mismatch(saved: dict, current: dict) -> str | None:
-    """A sentence naming what differs between a checkpoint's configuration and this run's."""
+def config_mismatch(saved: dict, current: dict, defaults: dict | None = None) -> str | None:
+    """A sentence naming what differs between a checkpoint's configuration and this run's, or
+    None. `defaults` (`config_of` a setup of default settings and strategy): a setting or
+    strategy field the saved configuration lacks (it was written before the field existed)
+    counts as its default."""
+    if defaults:
+        saved = {k: {**defaults[k], **v} if isinstance(v, dict) and isinstance(defaults.get(k),
+                                                                           dict) else v
+                 for k, v in saved.items()}
     if saved == current:
         return None
     diff = []

@@ -113,7 +113,9 @@ def _walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
 
 def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
     meta = checkpoint.read_meta(out)
-    problem = checkpoint.config_mismatch(meta["config"], checkpoint.config_of(setup, seed))
+    defaults = dataclasses.replace(setup, settings=Settings(), strategy=type(setup.strategy)())
+    problem = checkpoint.config_mismatch(meta["config"], checkpoint.config_of(setup, seed),
+                                         checkpoint.config_of(defaults, seed))
     if problem:
         raise ValueError(f"resume: {problem}")
     templates = _templates(setup, meta["pool_size"], rd)

@@ -718,6 +718,16 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
         dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
     problem = checkpoint.config_mismatch(saved, changed)
     assert "strategy_settings.cap_max: 1000000 -> 7" in problem and "seed: 0 -> 1" in problem
+    # a setting the checkpoint predates counts as its default
+    defaults = checkpoint.config_of(train.Setup(strategy=train.MCMCStrategy()), 0)
+    older = json.loads(json.dumps(saved))
+    del older["settings"]["color_opt"], older["strategy_settings"]["cap_max"]
+    assert checkpoint.config_mismatch(older, saved) is not None
+    assert checkpoint.config_mismatch(older, saved, defaults) is None
+    colour = checkpoint.config_of(dataclasses.replace(
+        setup, settings=train.Settings(color_opt=True)), 0)
+    assert "settings.color_opt: False -> True" in checkpoint.config_mismatch(older, colour,
+                                                                             defaults)
     (tmp_path / "checkpoint.json").write_text(json.dumps(dict(step=3, capacity=8)))
     with pytest.raises(ValueError, match="older lgs_jax.train"):
         checkpoint.read_meta(str(tmp_path))
