@@ -12,7 +12,8 @@ so the world-to-camera matrix `viewmat` becomes D(δ)⁻¹ · viewmat, D⁻¹ = 
 (`adjusted`). At δ = 0, R = I and t = 0 exactly, so the render is the unadjusted one to the bit.
 The deltas are a part of the views' own parameters (`view_params`) with their own Adam (β =
 0.9, 0.999, ε = 1e-8, torch's defaults) at rate lr_pose · sqrt(batch), L2 weight decay pose_reg
-added to the gradient (torch's `weight_decay`), as gsplat does. Held-out views keep their poses (gsplat evaluates them so too).
+added to the gradient (torch's `weight_decay`), as gsplat does. Held-out views keep their
+poses (gsplat evaluates them so too).
 """
 
 from __future__ import annotations

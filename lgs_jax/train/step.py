@@ -8,9 +8,9 @@ parameters (and, for strategies that ask, w.r.t. zero screen offsets of the proj
 deltas with `Settings.pose_opt`, colour corrections with `Settings.color_opt`); then the
 strategy's per-step update. A step whose loss, gradients or new parameters (active slots) are
 not finite changes nothing: it returns its inputs with ok False (`fit` reports it). A view whose
-tile pairs overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s row_capacity), is reported (overflow,
-pairs, row_overflow, walked): `fit` grows what overflowed and runs the same step again, so no
-pair is ever dropped.
+tile pairs overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s
+row_capacity), is reported (overflow, pairs, row_overflow, walked): `fit` grows what overflowed
+and runs the same step again, so no pair is ever dropped.
 
 Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
 among kernel configurations, reductions' included, by timing them while it compiles
@@ -75,9 +75,10 @@ def replicated(devices: int):
 
 def _over_views(one, devices: int):
     """`one(g, cam, target, offsets, color)` mapped over a batch of views (g shared):
-    `jax.vmap`, and with `devices` > 1 the batch split across the first `devices` devices (a `shard_map` over
-    a mesh axis "views", each device rendering its share of the views with the whole scene;
-    the gradient of the shared scene sums the devices' parts, an all-reduce)."""
+    `jax.vmap`, and with `devices` > 1 the batch split across the first `devices` devices (a
+    `shard_map` over a mesh axis "views", each device rendering its share of the views with
+    the whole scene; the gradient of the shared scene sums the devices' parts, an
+    all-reduce)."""
     batched = jax.vmap(one, in_axes=(None, 0, 0, 0, 0))
     if devices == 1:
         return batched
