@@ -124,12 +124,16 @@ def capture_cameras(args, purpose: str):
 
 
 def chosen_camera(args, purpose: str):
-    """The camera `purpose` ("to render", "to view"): --view of `capture_cameras` (0 by
-    default), or of the default scene (its framing camera by default)."""
+    """The camera `purpose` ("to render", "to view"): `pick_view` of `capture_cameras`."""
+    return pick_view(args, capture_cameras(args, purpose))
+
+
+def pick_view(args, cams):
+    """--view of `cams` (loaded by `capture_cameras`; 0 by default), or where `cams` is None of
+    the default scene (its framing camera by default); a usage error out of range."""
     import lgs_jax
     from lgs_jax import data
 
-    cams = capture_cameras(args, purpose)
     if cams is not None:
         view = args.view or 0
         if view >= len(cams):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cli_args import (capture_cameras, check_input, chosen_camera, int_at_least, raster_config,
+from .cli_args import (capture_cameras, check_input, int_at_least, pick_view, raster_config,
                        view_options)
 
 
@@ -53,8 +53,8 @@ def _cameras(args):
     import lgs_jax
     from lgs_jax import data
 
-    chosen = chosen_camera(args, "to view")  # checks --view
     cams = capture_cameras(args, "to view")
+    chosen = pick_view(args, cams)  # checks --view
     if cams is not None:
         return cams, args.view or 0
     orbit = [lgs_jax.default_camera(v) for v in range(data.ORBIT_VIEWS)]
