@@ -173,17 +173,17 @@ def _stepper(setup: Setup, mode: str | None) -> Stepper:
                    Sizes(s.pair_headroom, s.row_headroom), mode)
 
 
-def _one_step(setup: Setup, st: _State, rd: RunData, views: TrainViews, key, background, say,
+def _one_step(setup: Setup, st: _State, rd: RunData, feed: TrainViews, key, background, say,
               stepper: Stepper, clock):
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
-    images, idx = views.args(st.step)
+    images, idx = feed.args(st.step)
     while True:
         args = (st.pool, st.opt_state, st.strategy_state, st.views, rd.train_cams, images, idx,
                 background, st.step, key)
         sig = signature(args)
         size = (st.capacity, st.rows)
         new = stepper.run(args, size, sig)
-        views.prefetch(st.step + 1)  # while the step runs
+        feed.prefetch(st.step + 1)  # while the step runs
         stepper.prepare(args, size, sig)
         m = {k: v.item() for k, v in jax.device_get(new[4]).items()}
         if not (m["overflow"] or m["row_overflow"]):
@@ -256,9 +256,9 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
     key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
     stepper = _stepper(setup, ahead_mode)
-    views = TrainViews(rd.train_images, s.batch, seed,
-                       streams(rd.train_images.nbytes, s.stream_images))
-    if views.stream:
+    feed = TrainViews(rd.train_images, s.batch, seed,
+                      streams(rd.train_images.nbytes, s.stream_images))
+    if feed.stream:
         say(f"training images streamed ({rd.train_images.nbytes / 2**30:.1f} GiB in all)")
     busy = 0.0
     _place(setup, st)
@@ -269,7 +269,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
             while st.step < setup.steps:
                 t0 = time.perf_counter()
                 with clock:
-                    m = _one_step(setup, st, rd, views, key, background, say, stepper,
+                    m = _one_step(setup, st, rd, feed, key, background, say, stepper,
                                   clock)
                     if setup.strategy.refine_due(st.step):
                         m["count"] = _refine(setup, st, key, cap, say, record)
@@ -292,7 +292,7 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
     finally:
         progress.close()
         stepper.close()
-        views.close()
+        feed.close()
     return busy
 
 
