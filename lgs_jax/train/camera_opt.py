@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import optax
 
 from ..scene import Camera
+from .optim import torch_adam
 
 IDENTITY_6D = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
 HIGHEST = jax.lax.Precision.HIGHEST
@@ -64,9 +65,7 @@ def enabled(settings) -> bool:
 
 def optimizer(settings) -> optax.GradientTransformation:
     """The deltas' optimizer (module docstring)."""
-    lr = settings.lr_pose * math.sqrt(settings.batch)
-    return optax.chain(optax.add_decayed_weights(settings.pose_reg),
-                       optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8), optax.scale(-lr))
+    return torch_adam(settings.lr_pose * math.sqrt(settings.batch), settings.pose_reg)
 
 
 def project(deltas):

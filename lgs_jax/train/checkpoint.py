@@ -107,10 +107,9 @@ def config_mismatch(saved: dict, current: dict, defaults: dict | None = None) ->
     None. `defaults` (`config_of` a setup of default settings and strategy): a setting or
     strategy field the saved configuration lacks (it was written before the field existed)
     counts as its default."""
-    if defaults:
-        saved = {k: {**defaults[k], **v} if isinstance(v, dict) and isinstance(defaults.get(k),
-                                                                           dict) else v
-                 for k, v in saved.items()}
+    for k, fields in (defaults or {}).items():
+        if isinstance(fields, dict) and isinstance(saved.get(k), dict):
+            saved = dict(saved, **{k: {**fields, **saved[k]}})
     if saved == current:
         return None
     diff = []

@@ -27,6 +27,8 @@ import jax
 import jax.numpy as jnp
 import optax
 
+from .optim import torch_adam
+
 SIZE = 12  # (A row-major, b) per view (`view_params`)
 HIGHEST = jax.lax.Precision.HIGHEST
 
@@ -44,9 +46,7 @@ def corrected(image, p):
 
 def optimizer(settings) -> optax.GradientTransformation:
     """The corrections' optimizer (module docstring)."""
-    lr = settings.lr_color * math.sqrt(settings.batch)
-    return optax.chain(optax.add_decayed_weights(settings.color_reg),
-                       optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8), optax.scale(-lr))
+    return torch_adam(settings.lr_color * math.sqrt(settings.batch), settings.color_reg)
 
 
 def project(p):

@@ -60,6 +60,14 @@ def optimizer(settings, steps: int, scene_scale: float) -> optax.GradientTransfo
                        scale_by_group_rates(rates))
 
 
+def torch_adam(lr: float, weight_decay: float) -> optax.GradientTransformation:
+    """torch.optim.Adam at rate `lr` with its defaults (β = 0.9, 0.999, ε = 1e-8) and L2
+    `weight_decay` added to the gradient (torch's coupled weight decay): the optimizer of the
+    views' own parameters (`camera_opt`, `color_opt`), as gsplat's trainer builds them."""
+    return optax.chain(optax.add_decayed_weights(weight_decay),
+                       optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8), optax.scale(-lr))
+
+
 def _is_moments(x) -> bool:
     return isinstance(x, dict) and set(x) == set(GROUPS)
 

@@ -19,7 +19,8 @@ class Settings:
     (`RasterConfig.convention`: "3dgs", alpha cap 0.99, or "gsplat", 0.999 as gsplat's trainer
     renders). antialiased: train and evaluate with `RasterConfig.antialiased` (gsplat's
     rasterize_mode="antialiased"; a scene trained so should be rendered so). sh_every: one more
-    SH band every sh_every steps up to sh_degree. batch: views per step. eval_every / checkpoint_every: steps between held-out evaluations / checkpoints.
+    SH band every sh_every steps up to sh_degree. batch: views per step. eval_every /
+    checkpoint_every: steps between held-out evaluations / checkpoints.
     init_points, init_extent: the random start of datasets without SfM points (`init.py`):
     that many points in a cube of half-width init_extent · scene_scale; None: 3.0 (gsplat) for
     captures, 0.25 for NeRF-synthetic scenes (white background; 3DGS's ±1.3 cube on Lego).
