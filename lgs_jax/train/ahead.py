@@ -128,7 +128,9 @@ class Stepper:
     `step(args, size)` is the jitted step; `lower(args, size)` its `jax.stages.Lowered`
     (args may be `jax.ShapeDtypeStruct`s; for mode "process" `lower` must pickle: a module-level
     function or a `functools.partial` of one). `mode`: "thread", "process" (module docstring) or
-    None, which only runs the jitted step and grows to `sizes.grown`.
+    None, which only runs the jitted step and grows to `sizes.grown`. Compiles ahead and their
+    executables are kept per argument signature: a capture of several image sizes runs a step
+    per size, each with its own compile ahead.
     """
 
     def __init__(self, step: Callable, lower: Callable, sizes: Sizes,
@@ -137,14 +139,16 @@ class Stepper:
             raise ValueError(f"mode: expected one of {MODES} or None, got {mode!r}")
         self._step, self._lower, self._sizes, self._mode = step, lower, sizes, mode
         self._threads = concurrent.futures.ThreadPoolExecutor(1) if mode else None
-        self._job = None  # (size, signature, future) of the background compile
+        # per signature (a capture of several image sizes has one per size):
+        self._jobs = {}  # signature -> (size, future) of the background compile
+        self._ready = {}  # signature -> (size, executable) taken from a finished job
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
-        self._ready = None  # (size, signature, executable) taken from a finished job
 
     def run(self, args, size: tuple, sig: tuple):
         """One step at `size`; `sig` = signature(args)."""
-        if self._ready is not None and self._ready[:2] == (size, sig):
-            return self._ready[2](*args)
+        ready = self._ready.get(sig)
+        if ready is not None and ready[0] == size:
+            return ready[1](*args)
         return self._step(args, size)
 
     def prepare(self, args, size: tuple, sig: tuple) -> None:
@@ -153,16 +157,17 @@ class Stepper:
         if self._threads is None:
             return
         following = self._sizes.following(size)
-        if self._job is not None:
-            if self._job[:2] == (following, sig):
+        job = self._jobs.get(sig)
+        if job is not None:
+            if job[0] == following:
                 return
-            self._job[2].cancel()  # not started yet (else it finishes, unused)
+            job[1].cancel()  # not started yet (else it finishes, unused)
         abstract = _abstract(args)
         if self._mode == "process":
             compile_ = lambda: _compile_in_child(self._lower, abstract, following)
         else:
             compile_ = lambda: self._lower(abstract, following).compile()
-        self._job = (following, sig, self._threads.submit(compile_))
+        self._jobs[sig] = (following, self._threads.submit(compile_))
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at
@@ -170,12 +175,14 @@ class Stepper:
         the shapes `sig` (waiting for its compile if unfinished), else `Sizes.grown` (compiled
         by the next `run`; also when the compile ahead failed, which `failure` then says, else
         None)."""
-        job, self._job, self.failure = self._job, None, None
-        if job is not None and self._sizes.holds(job[0], need) and job[1] == sig:
+        job, self.failure = self._jobs.pop(sig, None), None
+        self._ready.pop(sig, None)
+        if job is not None and self._sizes.holds(job[0], need):
             t0 = time.perf_counter()
             try:
-                executable = job[2].result()  # None from a child: the jitted step loads it
-                self._ready = None if executable is None else (job[0], sig, executable)
+                executable = job[1].result()  # None from a child: the jitted step loads it
+                if executable is not None:
+                    self._ready[sig] = (job[0], executable)
                 return job[0], time.perf_counter() - t0, True
             except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
                 self.failure = _reason(e)
@@ -183,7 +190,7 @@ class Stepper:
 
     def close(self) -> None:
         """Forget the executables; a compile under way finishes in the background unwaited."""
-        self._job = self._ready = None
+        self._jobs, self._ready = {}, {}
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
 

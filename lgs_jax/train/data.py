@@ -16,18 +16,22 @@ from ..scene import stack_cameras
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RunData:
-    """train_cams: stacked training cameras; train_images (T, H, W, 3) on the host, float32 or
-    uint8 as the dataset holds them (`TrainViews` puts them on the device, whole or a step's
-    views at a time), train_names (file stems); test_cams, test_images (float32 numpy),
-    test_names of the held-out views; background (3,);
-    scene_scale: 1.1 x the largest camera distance from the cameras' mean centre (gsplat);
-    points, colors: SfM points (may be empty); nerf_synthetic: white background."""
+    """train_cams: the training cameras stacked (`stack_any`: each view's own size is
+    train_sizes[i], its image's); train_images on the host, float32 or uint8 as the dataset
+    holds them (`TrainViews` puts them on the device, whole or a step's views at a time):
+    (T, H, W, 3) where every view has one size, else a list of (H_i, W_i, 3); train_sizes
+    ((width, height) per training view), train_names (file stems); test_cams, test_images
+    (float32 numpy, a list where sizes differ), test_names of the held-out views;
+    background (3,); scene_scale: 1.1 x the largest camera distance from the cameras' mean
+    centre (gsplat); points, colors: SfM points (may be empty); nerf_synthetic: white
+    background."""
 
     train_cams: object
-    train_images: np.ndarray
+    train_images: np.ndarray | list
+    train_sizes: tuple
     train_names: list
     test_cams: list
-    test_images: np.ndarray
+    test_images: np.ndarray | list
     test_names: list
     background: np.ndarray
     scene_scale: float
@@ -35,19 +39,63 @@ class RunData:
     colors: np.ndarray
     nerf_synthetic: bool
 
+    @property
+    def sizes(self) -> list:
+        """The distinct training image sizes (width, height), in order of first appearance."""
+        return list(dict.fromkeys(self.train_sizes))
+
+    def groups(self) -> np.ndarray | None:
+        """Each training view's index in `sizes` (`views_for_step`), None for one size."""
+        if len(self.sizes) == 1:
+            return None
+        return np.array([self.sizes.index(s) for s in self.train_sizes])
+
+    def train_camera(self, i: int):
+        """Training view i's camera at its own image size."""
+        width, height = self.train_sizes[i]
+        return dataclasses.replace(jax.tree.map(lambda x: x[i], self.train_cams), width=width,
+                                   height=height)
+
+
+def stack_any(cams: list):
+    """Cameras of any sizes stacked (`stack_cameras`), their static size set to the first's:
+    the stack holds every view's parameters; a batch of one size is rendered at its size
+    (`step.train_step` sets it from its images)."""
+    first = cams[0]
+    return stack_cameras([dataclasses.replace(c, width=first.width, height=first.height)
+                          for c in cams])
+
+
+def nbytes(images) -> int:
+    """Bytes of `images`: an array, or a list of arrays of several sizes."""
+    return images.nbytes if isinstance(images, np.ndarray) else sum(im.nbytes for im in images)
+
+
+def _take_views(images, idx):
+    """The views `idx` of `images` (an array, or a list of views of several sizes): an array
+    where they share one size, else a list."""
+    if isinstance(images, np.ndarray):
+        return images[idx]
+    views = [images[i] for i in idx]
+    return np.stack(views) if len({v.shape for v in views}) == 1 else views
+
 
 def _cropped(d: Dataset, crop):
     """(cameras, images) of `d`, cropped to the window crop = (x0, y0, w, h) when given."""
     cams, images = list(d.cameras), d.images
-    if isinstance(images, list):
-        raise ValueError(f"data: {d.path} has images of several sizes; fit needs one size")
     if not crop:
         return cams, images
     x0, y0, w, h = crop
-    if min(crop) < 0 or w < 1 or h < 1 or x0 + w > cams[0].width or y0 + h > cams[0].height:
+    width, height = min(c.width for c in cams), min(c.height for c in cams)
+    if min(crop) < 0 or w < 1 or h < 1 or x0 + w > width or y0 + h > height:
+        sizes = sorted({f"{c.width}x{c.height}" for c in cams})
         raise ValueError(f"crop: {tuple(crop)} is not a non-empty window (x0, y0, w, h) of "
-                         f"the {cams[0].width}x{cams[0].height} images")
-    return [c.cropped(x0, y0, w, h) for c in cams], images[:, y0:y0 + h, x0:x0 + w]
+                         f"the {', '.join(sizes)} images")
+    if isinstance(images, list):
+        images = np.stack([im[y0:y0 + h, x0:x0 + w] for im in images])
+    else:
+        images = images[:, y0:y0 + h, x0:x0 + w]
+    return [c.cropped(x0, y0, w, h) for c in cams], images
 
 
 def _stem(name: str) -> str:
@@ -67,10 +115,14 @@ def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> 
                          f"{len(d.test)} held-out of {len(d.names)} (train_on_all trains on "
                          f"every view and holds out none)")
     cams, images = _cropped(d, crop)
+    test = _take_views(images, d.test)
     return RunData(
-        train_cams=stack_cameras([cams[i] for i in d.train]),
-        train_images=np.asarray(images[d.train]), test_cams=[cams[i] for i in d.test],
-        test_images=as_float(images[d.test]),
+        train_cams=stack_any([cams[i] for i in d.train]),
+        train_images=_take_views(images, d.train),
+        train_sizes=tuple((cams[i].width, cams[i].height) for i in d.train),
+        test_cams=[cams[i] for i in d.test],
+        test_images=as_float(test) if isinstance(test, np.ndarray) else [as_float(im) for im in
+                                                                         test],
         train_names=[_stem(d.names[i]) for i in d.train],
         test_names=[_stem(d.names[i]) for i in d.test],
         background=np.asarray(d.background, np.float32), scene_scale=1.1 * d.extent,
@@ -78,10 +130,17 @@ def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> 
         nerf_synthetic=bool(np.all(d.background == 1)))
 
 
-def views_for_step(step: int, batch: int, n_train: int, seed: int) -> np.ndarray:
+def views_for_step(step: int, batch: int, n_train: int, seed: int,
+                   groups: np.ndarray | None = None) -> np.ndarray:
     """Training view indices of 0-based `step`: a new random order of all training views every
     epoch (gsplat's shuffling DataLoader), read `batch` at a time. Depends only on (step, seed),
-    so a resumed run sees the same views as an uninterrupted one."""
+    so a resumed run sees the same views as an uninterrupted one.
+
+    groups: each view's image size (an index; `RunData.groups`), or None for one size. A step's
+    views must share a size, so with several sizes and `batch` > 1 an epoch is that order cut
+    into batches of one size each (`_one_size_batches`)."""
+    if groups is not None and batch > 1:
+        return _one_size_batches(step, batch, groups, seed)
     pos = step * batch + np.arange(batch)
     out = np.empty(batch, np.int64)
     for epoch in np.unique(pos // n_train):
@@ -89,6 +148,23 @@ def views_for_step(step: int, batch: int, n_train: int, seed: int) -> np.ndarray
         here = pos // n_train == epoch
         out[here] = order[pos[here] % n_train]
     return out
+
+
+def _one_size_batches(step: int, batch: int, groups: np.ndarray, seed: int) -> np.ndarray:
+    """`views_for_step` with several sizes: each epoch's random order of the views, split by
+    size (in that order), each size's views read `batch` at a time (its last batch filled up
+    from its first views again), and the epoch's batches in a random order. Every view is
+    seen once an epoch (a size whose count `batch` does not divide: some twice)."""
+    counts = np.bincount(groups)
+    per_epoch = int(np.sum(-(-counts // batch)))
+    epoch, k = divmod(step, per_epoch)
+    rng = np.random.default_rng([seed, epoch])
+    order = rng.permutation(len(groups))
+    batches = []
+    for g in range(len(counts)):
+        mine = order[groups[order] == g]
+        batches += list(np.resize(mine, -(-len(mine) // batch) * batch).reshape(-1, batch))
+    return batches[rng.permutation(per_epoch)[k]].astype(np.int64)
 
 
 HOST_STREAM_BYTES = 2 << 30
@@ -115,11 +191,19 @@ class TrainViews:
     copies started while a step runs (`prefetch`), so that device memory holds two batches
     instead of the capture and the host's copying (a staging copy of each image) runs beside
     the loop's dispatch instead of before it. The same values, and the same compiled step,
-    either way: the same results to the bit. `close` ends the worker."""
+    either way: the same results to the bit. `close` ends the worker.
 
-    def __init__(self, images: np.ndarray, batch: int, seed: int, stream: bool):
+    `images` is (T, H, W, 3), or a list of views of several sizes (`RunData.train_images`;
+    `groups` their sizes, `RunData.groups`), kept whole on the device as one array per view."""
+
+    def __init__(self, images, batch: int, seed: int, stream: bool,
+                 groups: np.ndarray | None = None):
         self.images, self.batch, self.seed, self.stream = images, batch, seed, stream
-        self._whole = None if stream else jnp.asarray(images)
+        self.groups = groups
+        self._whole = None
+        if not stream:
+            self._whole = (jnp.asarray(images) if isinstance(images, np.ndarray)
+                           else [jnp.asarray(im) for im in images])
         self._worker = ThreadPoolExecutor(1, "lgs_jax-views") if stream else None
         self._copies: dict[int, Future] = {}
 
@@ -133,13 +217,16 @@ class TrainViews:
         if step in self._copies:
             return
         self._copies = {k: v for k, v in self._copies.items() if k == step - 1}
-        views = views_for_step(step, self.batch, self.images.shape[0], self.seed)
+        views = views_for_step(step, self.batch, len(self.images), self.seed, self.groups)
         if self.stream:
             self._copies[step] = self._worker.submit(self._copy, views)
+            return
+        idx, done = jnp.asarray(views), Future()
+        if isinstance(self._whole, list):
+            done.set_result((_stack(*(self._whole[v] for v in views)), idx))
         else:
-            done, idx = Future(), jnp.asarray(views)
             done.set_result((_take(self._whole, idx), idx))
-            self._copies[step] = done
+        self._copies[step] = done
 
     def _copy(self, views):
         """(targets, idx) of `views` from the host: each view's image as it lies in the capture

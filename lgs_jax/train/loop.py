@@ -35,7 +35,7 @@ from ..projection import project
 from ..render import default_backend, next_pow2, pair_capacity, render
 from . import camera_opt, checkpoint, report, view_params
 from .ahead import Sizes, Stepper, mode_of, signature
-from .data import RunData, TrainViews, prepare, streams
+from .data import RunData, TrainViews, nbytes, prepare, streams
 from .init import start_gaussians
 from .losses import PADDINGS
 from .optim import optimizer
@@ -77,14 +77,14 @@ def _templates(setup: Setup, size: int, rd: RunData, g=None):
         pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     return (pool, opt.init(pool.params), setup.strategy.init(pool, rd.scene_scale),
-            view_params.init(setup.settings, rd.train_images.shape[0]))
+            view_params.init(setup.settings, len(rd.train_names)))
 
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
     g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
     pool, opt_state, sstate, views = _templates(setup, size, rd, g)
-    first = jax.tree.map(lambda x: x[0], rd.train_cams)
+    first = rd.train_camera(0)
     capacity = pair_capacity(int(_pairs(pool, first, setup.settings.antialiased)),
                              setup.settings.pair_headroom)
     rows = None
@@ -256,10 +256,15 @@ def _loop(out, setup: Setup, st: _State, rd: RunData, seed: int, cap: int, log, 
     key, background = jax.random.key(seed), jnp.asarray(rd.background)
     say = lambda message: progress.write(log, message)
     stepper = _stepper(setup, ahead_mode)
-    feed = TrainViews(rd.train_images, s.batch, seed,
-                      streams(rd.train_images.nbytes, s.stream_images))
+    size = nbytes(rd.train_images)
+    feed = TrainViews(rd.train_images, s.batch, seed, streams(size, s.stream_images),
+                      rd.groups())
     if feed.stream:
-        say(f"training images streamed ({rd.train_images.nbytes / 2**30:.1f} GiB in all)")
+        say(f"training images streamed ({size / 2**30:.1f} GiB in all)")
+    if len(rd.sizes) > 1:
+        say(f"training images of {len(rd.sizes)} sizes ("
+            + ", ".join(f"{w}x{h}" for w, h in rd.sizes) + "): a step's views share one, "
+            "and each size compiles its own step")
     busy = 0.0
     _place(setup, st)
     watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
@@ -343,9 +348,9 @@ def _prepare_out(out: str, data, downscale, crop, resume, overwrite, settings) -
     if problem:
         raise ValueError(f"out: {problem}")
     rd = prepare(data, downscale, crop, settings.train_on_all)
-    if settings.batch > rd.train_images.shape[0]:
+    if settings.batch > len(rd.train_names):
         raise ValueError(f"settings.batch: {settings.batch} views per step, but the data has "
-                         f"{rd.train_images.shape[0]} training views")
+                         f"{len(rd.train_names)} training views")
     if overwrite and os.path.isdir(out):
         for name in checkpoint.run_files(out):
             os.remove(os.path.join(out, name))
@@ -422,7 +427,8 @@ def _cameras(st: _State, rd: RunData) -> list:
     cams = rd.train_cams
     if st.views is not None and "pose" in st.views:
         cams = camera_opt.adjusted(cams, jax.device_get(st.views["pose"][0]))
-    train = [jax.tree.map(lambda x, i=i: x[i], cams) for i in range(len(rd.train_names))]
+    train = [dataclasses.replace(jax.tree.map(lambda x, i=i: x[i], cams), width=w, height=h)
+             for i, (w, h) in enumerate(rd.train_sizes)]
     return train + list(rd.test_cams)
 
 

@@ -21,6 +21,7 @@ idle, could round differently. Without autotuning a compile picks by fixed rules
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import types
 
@@ -134,14 +135,17 @@ def step_keys(key, step):
 def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, idx,
                background, step, key, *, setup: Setup, capacity: int, rows: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
-    (stacked), whose images are `targets` (B, H, W, 3) (`data.TrainViews`: the same program
-    whether the capture's images live on the device or are streamed); `views`: the training
-    views' own parameters and their optimizer states (`view_params`: pose deltas, colour
-    corrections), or None; `key` is the run's; `rows`: the backward's row buffer (`render`'s
-    row_capacity). Returns (pool, opt_state, strategy_state, views, metrics): loss, psnr
-    (training views), ok (finite, applied), overflow, pairs (largest per-view pair count),
-    row_overflow, walked (largest per-view count of walked pairs), count (active Gaussians)."""
-    cams = jax.tree.map(lambda x: x[idx], all_cams)
+    (stacked, `data.stack_any`), whose images are `targets` (B, H, W, 3) (`data.TrainViews`:
+    the same program whether the capture's images live on the device or are streamed), which
+    set the size the views are rendered at (a capture of several sizes: a compile per size);
+    `views`: the training views' own parameters and their optimizer states (`view_params`:
+    pose deltas, colour corrections), or None; `key` is the run's; `rows`: the backward's row
+    buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, views,
+    metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs (largest
+    per-view pair count), row_overflow, walked (largest per-view count of walked pairs), count
+    (active Gaussians)."""
+    cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
+                               width=targets.shape[2], height=targets.shape[1])
     (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = _loss_and_grads(
         setup, capacity, rows, pool, cams, targets, background, step, idx,
         view_params.params(views))
