@@ -128,6 +128,7 @@ def _fit(args) -> int:
                               antialiased=args.antialiased, pair_headroom=args.pair_headroom,
                               row_headroom=args.row_headroom, stream_images=args.stream_images,
                               pose_opt=args.pose_opt, color_opt=args.color_opt,
+                              bilateral_grid=args.bilateral_grid,
                               train_on_all=args.train_on_all)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None or args.uint8_images:
@@ -242,6 +243,12 @@ def _fit_parser(sub, common) -> None:
                         "(exposure and white balance that change between photos; Adam at "
                         "1e-3); held-out views render at the views' average appearance; "
                         "colors.json holds the corrections")
+    f.add_argument("--bilateral-grid", action="store_true",
+                   help="also optimize a bilateral grid of affine colour maps per training "
+                        "view (gsplat's --use_bilateral_grid: 16x16 cells by 8 brightness "
+                        "levels, for camera processing that varies over the image; Adam at "
+                        "2e-3, total variation weighted 10); held-out views render without "
+                        "one; bilateral_grids.npz holds the grids")
     f.add_argument("--train-on-all", action="store_true",
                    help="train on every view, the held-out ones too (a final scene; nothing "
                         "is evaluated)")

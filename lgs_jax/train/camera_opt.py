@@ -63,8 +63,8 @@ def enabled(settings) -> bool:
     return settings.pose_opt
 
 
-def optimizer(settings) -> optax.GradientTransformation:
-    """The deltas' optimizer (module docstring)."""
+def optimizer(settings, steps: int) -> optax.GradientTransformation:
+    """The deltas' optimizer (module docstring; constant over the `steps`)."""
     return torch_adam(settings.lr_pose * math.sqrt(settings.batch), settings.pose_reg)
 
 

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
-             "curves.png", "cameras.json", "colors.json",
+             "curves.png", "cameras.json", "colors.json", "bilateral_grids.npz",
              "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
 PARTS = ("pool", "opt", "strategy", "views")  # views: `view_params`' state, None without it
 

@@ -44,8 +44,8 @@ def corrected(image, p):
     return image + change + p[9:].astype(image.dtype)
 
 
-def optimizer(settings) -> optax.GradientTransformation:
-    """The corrections' optimizer (module docstring)."""
+def optimizer(settings, steps: int) -> optax.GradientTransformation:
+    """The corrections' optimizer (module docstring; constant over the `steps`)."""
     return torch_adam(settings.lr_color * math.sqrt(settings.batch), settings.color_reg)
 
 

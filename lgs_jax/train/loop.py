@@ -12,6 +12,7 @@ Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SS
 (`checkpoint.py`; bit-identical resume), and at the end scene.ply (the active Gaussians, INRIA
 PLY), cameras.json (INRIA: the training cameras, at their optimized poses with pose_opt, then
 the held-out ones), colors.json (with color_opt: each training view's colour correction),
+bilateral_grids.npz (with bilateral_grid: each training view's grid),
 heldout_<name>.png (render beside ground truth), curves.png, result.json.
 """
 
@@ -33,7 +34,7 @@ from ..io.cameras import save_cameras
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import default_backend, next_pow2, pair_capacity, render
-from . import camera_opt, checkpoint, report, view_params
+from . import bilateral_grid, camera_opt, checkpoint, report, view_params
 from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, TrainViews, nbytes, prepare, streams
 from .init import start_gaussians
@@ -77,7 +78,7 @@ def _templates(setup: Setup, size: int, rd: RunData, g=None):
         pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     return (pool, opt.init(pool.params), setup.strategy.init(pool, rd.scene_scale),
-            view_params.init(setup.settings, len(rd.train_names)))
+            view_params.init(setup.settings, len(rd.train_names), setup.steps))
 
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
@@ -319,7 +320,8 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          f"pairs would drop pairs), got {h!r}")
     if not (r is None or (number(r) and r >= 1)):
         raise ValueError(f"settings.row_headroom: expected None or a number >= 1, got {r!r}")
-    for name in ("antialiased", "pose_opt", "train_on_all", "stream_images"):
+    for name in ("antialiased", "pose_opt", "color_opt", "bilateral_grid", "train_on_all",
+                 "stream_images"):
         v = getattr(settings, name)
         if not (isinstance(v, bool) or (v is None and name == "stream_images")):
             raise ValueError(f"settings.{name}: expected a bool"
@@ -457,6 +459,9 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
                  rd.train_names + rd.test_names)
     if st.views is not None and "color" in st.views:
         _save_colors(os.path.join(out, "colors.json"), st.views["color"][0], rd.train_names)
+    if st.views is not None and "grid" in st.views:
+        bilateral_grid.save(os.path.join(out, "bilateral_grids.npz"), st.views["grid"][0],
+                            rd.train_names)
     report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")),
                        os.path.join(out, "curves.png"))
     ran = max(setup.steps - start, 0)

@@ -60,12 +60,14 @@ def optimizer(settings, steps: int, scene_scale: float) -> optax.GradientTransfo
                        scale_by_group_rates(rates))
 
 
-def torch_adam(lr: float, weight_decay: float) -> optax.GradientTransformation:
-    """torch.optim.Adam at rate `lr` with its defaults (β = 0.9, 0.999, ε = 1e-8) and L2
-    `weight_decay` added to the gradient (torch's coupled weight decay): the optimizer of the
-    views' own parameters (`camera_opt`, `color_opt`), as gsplat's trainer builds them."""
-    return optax.chain(optax.add_decayed_weights(weight_decay),
-                       optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8), optax.scale(-lr))
+def torch_adam(lr, weight_decay: float, eps: float = 1e-8) -> optax.GradientTransformation:
+    """torch.optim.Adam at rate `lr` (a float, or a schedule of the update count) with β = 0.9,
+    0.999 and `eps` (torch's default 1e-8), and L2 `weight_decay` added to the gradient (torch's
+    coupled weight decay; none where 0): the optimizer of the views' own parameters
+    (`camera_opt`, `color_opt`, `bilateral_grid`), as gsplat's trainer builds them."""
+    decay = [optax.add_decayed_weights(weight_decay)] if weight_decay else []
+    return optax.chain(*decay, optax.scale_by_adam(b1=0.9, b2=0.999, eps=eps),
+                       optax.scale_by_learning_rate(lr))
 
 
 def _is_moments(x) -> bool:

@@ -53,6 +53,11 @@ class Settings:
     (`color_opt`: exposure and white balance that change between photos), centred over the
     views, at rate lr_color · sqrt(batch) with L2 weight decay color_reg (gsplat's app_opt
     rates); held-out views are evaluated at the views' average appearance.
+    bilateral_grid: also optimize a bilateral grid of affine colour maps per training view
+    (`bilateral_grid`: gsplat's --use_bilateral_grid, for camera processing that varies over
+    the image), centred over the views, at rate lr_grid · sqrt(batch) (warmed up over 1000
+    steps, decaying to 1%) with the grids' total variation weighted by grid_tv in the loss;
+    held-out views are evaluated without a grid.
     train_on_all: train on every view of the dataset, its held-out ones included (for a final
     scene); nothing is evaluated (held-out PSNR and SSIM are None).
     """
@@ -85,6 +90,9 @@ class Settings:
     color_opt: bool = False
     lr_color: float = 1e-3
     color_reg: float = 1e-6
+    bilateral_grid: bool = False
+    lr_grid: float = 2e-3
+    grid_tv: float = 10.0
 
     @property
     def raster(self) -> RasterConfig:

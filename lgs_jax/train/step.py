@@ -2,11 +2,12 @@
 
 `train_step` (one jit per Setup, pair capacity, backward rows and pool size): render the batch
 of views from the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean
-over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's regulariser; gradients w.r.t. the
-parameters (and, for strategies that ask, w.r.t. zero screen offsets of the projected means:
-∂loss/∂mean2d); one Adam update (and one of the views' own parameters, `view_params`: pose
-deltas with `Settings.pose_opt`, colour corrections with `Settings.color_opt`); then the
-strategy's per-step update. A step whose loss, gradients or new parameters (active slots) are
+over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's and the views' own regularisers;
+gradients w.r.t. the parameters (and, for strategies that ask, w.r.t. zero screen offsets of the
+projected means: ∂loss/∂mean2d); one Adam update (and one of the views' own parameters,
+`view_params`: pose deltas with `Settings.pose_opt`, colour corrections with
+`Settings.color_opt`, bilateral grids with `Settings.bilateral_grid`); then the strategy's
+per-step update. A step whose loss, gradients or new parameters (active slots) are
 not finite changes nothing: it returns its inputs with ok False (`fit` reports it). A view whose
 tile pairs overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s
 row_capacity), is reported (overflow, pairs, row_overflow, walked): `fit` grows what overflowed
@@ -32,7 +33,7 @@ import optax
 
 from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
-from . import camera_opt, color_opt, view_params
+from . import camera_opt, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
@@ -75,7 +76,7 @@ def replicated(devices: int):
 
 
 def _over_views(one, devices: int):
-    """`one(g, cam, target, offsets, color)` mapped over a batch of views (g shared):
+    """`one(g, cam, target, offsets, look)` mapped over a batch of views (g shared):
     `jax.vmap`, and with `devices` > 1 the batch split across the first `devices` devices (a
     `shard_map` over a mesh axis "views", each device rendering its share of the views with
     the whole scene; the gradient of the shared scene sums the devices' parts, an
@@ -95,7 +96,8 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
     """((loss, (mse, stats, visible)), (param grads, screen grads or None, grads of the views'
     own parameters or None)); `per_view`: the views' own parameters {name: (views, SIZE)}
     (`view_params`), whose rows of the views `idx` move their poses (`camera_opt.adjusted`)
-    and correct their colours (`color_opt.corrected`), or None."""
+    and correct their renders (`view_params.corrected`: colour maps, bilateral grids), or
+    None; their regularizer (the grids' total variation) adds to the loss."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
     bands = sh_mask(step, num_bases, s.settings.sh_every)
@@ -106,17 +108,19 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
         own = view_params.rows(per_view, idx) or {}
         views = cams if "pose" not in own else camera_opt.adjusted(cams, own["pose"])
 
-        def one(g, cam, target, off, color):
+        def one(g, cam, target, off, look):
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=s.settings.raster, screen_offsets=off,
                        row_capacity=rows)
-            image = o.image if color is None else color_opt.corrected(o.image, color)
+            image = view_params.corrected(o.image, look)
             return (loss_fn(image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((image - target) ** 2), o.stats, o.visible)
 
+        look = {k: v for k, v in own.items() if k in view_params.APPEARANCE}
         losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets,
-                                                                  own.get("color"))
-        total = jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
+                                                                  look)
+        total = (jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
+                 + view_params.regularizer(s.settings, per_view))
         return total, (jnp.mean(mse), stats, visible)
 
     offsets = jnp.zeros((targets.shape[0], pool.size, 2), jnp.float32) if need2d else None
@@ -162,7 +166,7 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
         ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
     new_views = views
     if views is not None:
-        new_views = view_params.update(setup.settings, views, grads_views)
+        new_views = view_params.update(setup.settings, setup.steps, views, grads_views)
         ok = ok & jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in
                                      jax.tree.leaves(view_params.params(new_views))]))
     pool, opt_state, strategy_state, views = _select(

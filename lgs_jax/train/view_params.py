@@ -1,5 +1,6 @@
 """The training views' own parameters, optimized beside the scene's: each view's pose delta
-(`camera_opt`, `Settings.pose_opt`) and colour correction (`color_opt`, `Settings.color_opt`).
+(`camera_opt`, `Settings.pose_opt`), colour correction (`color_opt`, `Settings.color_opt`) and
+bilateral grid (`bilateral_grid`, `Settings.bilateral_grid`).
 
 The state is a dict, part name -> (params (views, SIZE) float32, zero at the start, their
 optimizer state), holding the parts switched on, or None with neither (`init`). A step's views
@@ -7,7 +8,9 @@ take their rows as onehot(idx) · P (`rows`: exact, one nonzero term a row), so 
 gradient is onehot(idx)ᵀ times the rows' gradients: a dot, summed in one order where a view
 comes twice in a batch, with no scatter-add (deterministic on GPUs). The other views' rows get
 no gradient. After each part's update (`update`) the part's `project` runs (the colour
-corrections are centred over the views).
+corrections and grids are centred over the views). A part's `regularizer`, where it has one,
+adds to the loss over every view's parameters (`regularizer`: the grids' total variation).
+A step's render is corrected by the colour map, then by the grid (`corrected`).
 """
 
 from __future__ import annotations
@@ -16,20 +19,22 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from . import camera_opt, color_opt
+from . import bilateral_grid, camera_opt, color_opt
 
-PARTS = {"color": color_opt, "pose": camera_opt}
-"""name -> module with SIZE, enabled(settings), optimizer(settings), project(params)."""
+PARTS = {"color": color_opt, "grid": bilateral_grid, "pose": camera_opt}
+"""name -> module with SIZE, enabled(settings), optimizer(settings, steps), project(params),
+and optionally regularizer(settings, params)."""
+APPEARANCE = ("color", "grid")  # the parts that correct a render, in the order they apply
 
 
-def init(settings, views: int):
-    """{name: (zeros (views, SIZE), optimizer state)} of the parts `settings` switches on, or
-    None."""
+def init(settings, views: int, steps: int):
+    """{name: (zeros (views, SIZE), optimizer state)} of the parts `settings` switches on, for
+    a run of `steps`, or None."""
     state = {}
     for name, part in PARTS.items():
         if part.enabled(settings):
             p = jnp.zeros((views, part.SIZE), jnp.float32)
-            state[name] = (p, part.optimizer(settings).init(p))
+            state[name] = (p, part.optimizer(settings, steps).init(p))
     return state or None
 
 
@@ -48,11 +53,27 @@ def rows(params_, idx):
             for name, p in params_.items()}
 
 
-def update(settings, state, grads):
-    """`state` after one step with the gradients {name: (views, SIZE)} of its params."""
+def regularizer(settings, params_):
+    """The loss's terms of the views' parameters {name: (views, SIZE)} (or None): 0 without."""
+    return sum(PARTS[name].regularizer(settings, p) for name, p in (params_ or {}).items()
+               if hasattr(PARTS[name], "regularizer"))
+
+
+def corrected(image, own: dict):
+    """`image` (H, W, 3) of a view corrected by its rows `own` {name: (SIZE,)} of the
+    appearance parts it has (colour map, then grid)."""
+    for name in APPEARANCE:
+        if name in own:
+            image = PARTS[name].corrected(image, own[name])
+    return image
+
+
+def update(settings, steps: int, state, grads):
+    """`state` after one step of a run of `steps` with the gradients {name: (views, SIZE)} of
+    its params."""
     new = {}
     for name, (p, opt_state) in state.items():
         part = PARTS[name]
-        updates, opt_state = part.optimizer(settings).update(grads[name], opt_state, p)
+        updates, opt_state = part.optimizer(settings, steps).update(grads[name], opt_state, p)
         new[name] = (part.project(optax.apply_updates(p, updates)), opt_state)
     return new

@@ -30,7 +30,7 @@ def test_projection_centres_the_corrections():
 @pytest.mark.parametrize("idx", [[2, 0], [1, 1], [3, 1, 3]])
 def test_rows_are_exact_and_their_gradient_sums_per_view(idx):
     settings = Settings(pose_opt=True, color_opt=True)
-    state = view_params.init(settings, 4)
+    state = view_params.init(settings, 4, 10)
     assert sorted(state) == ["color", "pose"] and state["pose"][0].shape == (4, 9)
     rng = np.random.default_rng(2)
     params = {k: jnp.asarray(rng.normal(size=p.shape), jnp.float32)
@@ -47,14 +47,14 @@ def test_rows_are_exact_and_their_gradient_sums_per_view(idx):
         for b, v in enumerate(np.asarray(idx)):
             want[v] += np.asarray(weights[k])[b]
         np.testing.assert_allclose(np.asarray(grads[k]), want, rtol=1e-6, atol=0)
-    assert view_params.init(Settings(), 4) is None and view_params.rows(None, idx) is None
+    assert view_params.init(Settings(), 4, 10) is None and view_params.rows(None, idx) is None
 
 
 def test_update_moves_the_corrections_and_keeps_them_centred():
     settings = Settings(color_opt=True)
-    state = view_params.init(settings, 3)
+    state = view_params.init(settings, 3, 10)
     grads = {"color": jnp.zeros((3, 12)).at[0].set(1.0)}
-    new = view_params.update(settings, state, grads)
+    new = view_params.update(settings, 10, state, grads)
     p = np.asarray(new["color"][0])
     assert p[0, 0] < 0 and p[1, 0] > 0 and p[1, 0] == p[2, 0]  # view 0 down, others up alike
     np.testing.assert_allclose(p.sum(0), 0, atol=1e-9)

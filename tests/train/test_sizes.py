@@ -1,7 +1,7 @@
 """`fit` on captures whose images differ in size: a step's views share one size (the view order
 per epoch), each view is rendered at its own size against its own image, and a whole run
-(streamed or not, two sizes, two views a step) trains to the same bits and writes each
-camera at its size."""
+(streamed or not, two sizes, two views a step, bilateral grids) trains to the same bits and
+writes each camera at its size; each size keeps its own compile ahead."""
 
 import dataclasses
 import json
@@ -126,7 +126,9 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
 
 
 def test_fit_trains_on_two_sizes_to_the_same_bits_streamed_or_not(capture, tmp_path):
-    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100, sh_degree=0)
+    """With bilateral grids, which slice each view at its own size."""
+    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100, sh_degree=0,
+                              bilateral_grid=True)
     runs = {}
     for stream in (False, True):
         lines = []
@@ -138,6 +140,9 @@ def test_fit_trains_on_two_sizes_to_the_same_bits_streamed_or_not(capture, tmp_p
     a, b = (np.load(tmp_path / f"stream{s}" / "checkpoint.npz") for s in (False, True))
     for key in a.files:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    grids = np.load(tmp_path / "streamFalse" / "bilateral_grids.npz")
+    assert grids["grids"].shape == (8, 12, 8, 16, 16) and list(grids["names"])[0] == "v1"
+    assert 0 < np.max(np.abs(grids["grids"][:, 0] - 1)) < 0.1  # moved from the identity
     cams = json.loads((tmp_path / "streamFalse" / "cameras.json").read_text())
     by_name = {c["img_name"]: (c["width"], c["height"]) for c in cams}
     assert by_name == {f"v{i}": SIZES[i % 2] for i in range(9)}

@@ -438,11 +438,13 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
     assert not seen["settings"].antialiased and seen["settings"].stream_images is None
-    assert not (seen["settings"].train_on_all or seen["settings"].color_opt)
+    assert not (seen["settings"].train_on_all or seen["settings"].color_opt
+                or seen["settings"].bilateral_grid)
     assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all",
-                            "--color-opt"]) == 0
+                            "--color-opt", "--bilateral-grid"]) == 0
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
     assert seen["settings"].train_on_all and seen["settings"].color_opt
+    assert seen["settings"].bilateral_grid
     with pytest.raises(lgs_jax.DatasetError):  # --uint8-images loads here: an empty folder
         cli.main(base + ["--uint8-images", "--debug"])
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
