@@ -121,8 +121,8 @@ def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> 
         train_images=_take_views(images, d.train),
         train_sizes=tuple((cams[i].width, cams[i].height) for i in d.train),
         test_cams=[cams[i] for i in d.test],
-        test_images=as_float(test) if isinstance(test, np.ndarray) else [as_float(im) for im in
-                                                                         test],
+        test_images=as_float(test) if isinstance(test, np.ndarray) else list(map(as_float,
+                                                                                 test)),
         train_names=[_stem(d.names[i]) for i in d.train],
         test_names=[_stem(d.names[i]) for i in d.test],
         background=np.asarray(d.background, np.float32), scene_scale=1.1 * d.extent,
