@@ -69,7 +69,7 @@ def test_gradients_equal_central_differences():
     image = jnp.asarray(rng.uniform(0.05, 0.95, (6, 9, 3)))
     p = jnp.asarray(rng.normal(0, 0.3, bg.SIZE))
     weights = jnp.asarray(rng.normal(size=(6, 9, 3)))
-    loss = lambda image, p: jnp.sum(weights * bg.corrected(image, p))
+    loss = jax.jit(lambda image, p: jnp.sum(weights * bg.corrected(image, p)))
     grads = jax.grad(loss, argnums=(0, 1))(image, p)
     for which, x in enumerate((image, p)):
         flat = np.asarray(x).ravel()
