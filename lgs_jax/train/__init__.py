@@ -14,6 +14,11 @@ Modules (each usable alone):
   `loop`       `fit`: the loop, outputs, checkpoints (`checkpoint`) and reports (`report`).
   `evaluate`   a scene's PSNR and SSIM on a capture's views (`python -m lgs_jax eval`).
   `camera_opt` the training views' pose deltas (`Settings.pose_opt`, gsplat's --pose_opt).
+  `color_opt`  an affine colour correction per training view (`Settings.color_opt`).
+  `bilateral_grid` a bilateral grid of colour maps per training view (`Settings.bilateral_grid`,
+               gsplat's --use_bilateral_grid).
+  `view_params` the views' own parameters above as one state, their rows and updates.
+  `data`       a capture made ready for `fit` (one or several image sizes), the view order.
 """
 
 from .checkpoint import run_dir_problem
