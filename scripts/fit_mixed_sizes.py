@@ -17,7 +17,6 @@ import json
 import os
 import tempfile
 
-import numpy as np
 
 import lgs_jax
 from lgs_jax import train
