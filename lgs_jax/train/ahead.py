@@ -49,6 +49,7 @@ import jax
 from ..render import pair_capacity
 
 MODES = ("thread", "process")
+KEPT_SIGNATURES = 8  # `Stepper` keeps compiles ahead for the shapes of this many latest steps
 
 # JAX settings a child compile must share with this process for its cache entry to be the one
 # this process looks up (the cache's key covers the program, the devices and the options).
@@ -130,7 +131,8 @@ class Stepper:
     function or a `functools.partial` of one). `mode`: "thread", "process" (module docstring) or
     None, which only runs the jitted step and grows to `sizes.grown`. Compiles ahead and their
     executables are kept per argument signature: a capture of several image sizes runs a step
-    per size, each with its own compile ahead.
+    per size, each with its own compile ahead. Those of the `KEPT_SIGNATURES` signatures run
+    latest are kept; older ones (a pool since grown) are dropped.
     """
 
     def __init__(self, step: Callable, lower: Callable, sizes: Sizes,
@@ -142,10 +144,18 @@ class Stepper:
         # per signature (a capture of several image sizes has one per size):
         self._jobs = {}  # signature -> (size, future) of the background compile
         self._ready = {}  # signature -> (size, executable) taken from a finished job
+        self._latest = []  # the signatures run latest, oldest first
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
 
     def run(self, args, size: tuple, sig: tuple):
         """One step at `size`; `sig` = signature(args)."""
+        self._latest = [s for s in self._latest if s != sig][-(KEPT_SIGNATURES - 1):] + [sig]
+        for old in set(self._jobs) | set(self._ready):
+            if old not in self._latest:
+                self._ready.pop(old, None)
+                job = self._jobs.pop(old, None)
+                if job is not None:
+                    job[1].cancel()  # not started yet (else it finishes, unused)
         ready = self._ready.get(sig)
         if ready is not None and ready[0] == size:
             return ready[1](*args)
@@ -190,7 +200,7 @@ class Stepper:
 
     def close(self) -> None:
         """Forget the executables; a compile under way finishes in the background unwaited."""
-        self._jobs, self._ready = {}, {}
+        self._jobs, self._ready, self._latest = {}, {}, []
         if self._threads is not None:
             self._threads.shutdown(wait=False, cancel_futures=True)
 

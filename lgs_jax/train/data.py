@@ -46,9 +46,10 @@ class RunData:
 
     def groups(self) -> np.ndarray | None:
         """Each training view's index in `sizes` (`views_for_step`), None for one size."""
-        if len(self.sizes) == 1:
+        sizes = self.sizes
+        if len(sizes) == 1:
             return None
-        return np.array([self.sizes.index(s) for s in self.train_sizes])
+        return np.array([sizes.index(s) for s in self.train_sizes])
 
     def train_camera(self, i: int):
         """Training view i's camera at its own image size."""

@@ -177,3 +177,21 @@ def test_each_size_keeps_its_own_compile_ahead():
         assert stepper.run(args, size, sig) == ("executable", n, (2048, None))
     assert sorted(lowered) == [3, 4]  # one compile each
     stepper.close()
+
+
+def test_compiles_ahead_of_shapes_no_longer_run_are_dropped(monkeypatch):
+    """Only the `KEPT_SIGNATURES` latest signatures keep their compile ahead (a pool that grew
+    leaves its old shapes behind for good)."""
+    monkeypatch.setattr(ahead, "KEPT_SIGNATURES", 2)
+    stepper = ahead.Stepper(lambda a, c: ("jit", c),
+                            lambda a, c: type("L", (), {"compile": lambda self: print})(),
+                            ahead.Sizes(1.5))
+    args = [(jnp.zeros(n),) for n in (3, 4, 5)]
+    sigs = [ahead.signature(a) for a in args]
+    for a, sig in zip(args[:2], sigs[:2]):
+        stepper.run(a, (1024, None), sig)
+        stepper.prepare(a, (1024, None), sig)
+    stepper.run(args[2], (1024, None), sigs[2])  # the third shape: the first is dropped
+    assert not stepper.grow((1024, None), (1100, 0), sigs[0])[2]
+    assert stepper.grow((1024, None), (1100, 0), sigs[1])[2]
+    stepper.close()
