@@ -149,6 +149,16 @@ class Stepper:
 
     def run(self, args, size: tuple, sig: tuple):
         """One step at `size`; `sig` = signature(args)."""
+        if not self._latest or self._latest[-1] != sig:  # another shape than the last step's
+            self._keep_latest(sig)
+        ready = self._ready.get(sig)
+        if ready is not None and ready[0] == size:
+            return ready[1](*args)
+        return self._step(args, size)
+
+    def _keep_latest(self, sig: tuple) -> None:
+        """`sig` the latest signature run; forget the compiles of those no longer among the
+        `KEPT_SIGNATURES` latest."""
         self._latest = [s for s in self._latest if s != sig][-(KEPT_SIGNATURES - 1):] + [sig]
         for old in set(self._jobs) | set(self._ready):
             if old not in self._latest:
@@ -156,10 +166,6 @@ class Stepper:
                 job = self._jobs.pop(old, None)
                 if job is not None:
                     job[1].cancel()  # not started yet (else it finishes, unused)
-        ready = self._ready.get(sig)
-        if ready is not None and ready[0] == size:
-            return ready[1](*args)
-        return self._step(args, size)
 
     def prepare(self, args, size: tuple, sig: tuple) -> None:
         """Start compiling the step for the size after `size` (`Sizes.following`, module

@@ -51,10 +51,12 @@ class RunData:
             return None
         return np.array([sizes.index(s) for s in self.train_sizes])
 
-    def train_camera(self, i: int):
-        """Training view i's camera at its own image size."""
+    def train_camera(self, i: int, cams=None):
+        """Training view i's camera at its own image size, from `cams` (a stack like
+        train_cams, e.g. at optimized poses) or train_cams."""
         width, height = self.train_sizes[i]
-        return dataclasses.replace(jax.tree.map(lambda x: x[i], self.train_cams), width=width,
+        stack = self.train_cams if cams is None else cams
+        return dataclasses.replace(jax.tree.map(lambda x: x[i], stack), width=width,
                                    height=height)
 
 

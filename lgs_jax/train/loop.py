@@ -429,8 +429,7 @@ def _cameras(st: _State, rd: RunData) -> list:
     cams = rd.train_cams
     if st.views is not None and "pose" in st.views:
         cams = camera_opt.adjusted(cams, jax.device_get(st.views["pose"][0]))
-    train = [dataclasses.replace(jax.tree.map(lambda x, i=i: x[i], cams), width=w, height=h)
-             for i, (w, h) in enumerate(rd.train_sizes)]
+    train = [rd.train_camera(i, cams) for i in range(len(rd.train_names))]
     return train + list(rd.test_cams)
 
 
