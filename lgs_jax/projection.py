@@ -219,8 +219,12 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
         opacity = opacity * _compensation(axx * ayy - sxy * sxy, det_safe)
     centre = camera_center(viewmat)
     d = [mean[i] - centre[i] for i in range(3)]
-    dnorm = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    d = [jnp.where(dnorm > 0, x / jnp.where(dnorm > 0, dnorm, 1.0), 0.0) for x in d]
+    # The square root of a guarded square: at a mean on the camera centre (an invalid row's
+    # placeholder mean 0 seen from a camera at the origin) sqrt's derivative is infinite, and
+    # its zero cotangent times it made the camera's gradient NaN.
+    d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    dnorm = jnp.sqrt(jnp.where(d2 > 0, d2, 1.0))
+    d = [jnp.where(d2 > 0, x / dnorm, 0.0) for x in d]
     basis = sh_basis_terms(*d, n_sh)
     sums = sh_sums(basis, sh, input_ok)
     rgb = [jnp.maximum(s + 0.5, 0.0) for s in sums]

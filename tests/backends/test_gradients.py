@@ -5,6 +5,8 @@ jit. The Pallas backward kernel's own unit test against the tiles walk is in
 tests/backends/test_pallas.py. Default set: one representative per backend and switch; the
 products are marked slow."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -65,6 +67,25 @@ def test_reference_gradients_equal_autodiff_through_brute_float64(config, seed):
     assert_close_to_scale(bgr, bgb, 1e-8)
 
 
+@given(seed=st.integers(0, 2**32 - 1))
+def test_camera_gradients_equal_autodiff_through_brute_and_are_finite(seed):
+    """The camera's gradient (its world-to-camera matrix and intrinsics: what pose and
+    intrinsics optimization read) through every adversarial kind: finite, and the reference's
+    and tiles' equal brute's (float64). The camera sits at the world origin, where each invalid
+    row's placeholder mean lies: the square root's infinite derivative there once made it NaN."""
+    g = scenes.scene(seed)
+    cam = scenes.camera(dtype=np.float64)
+    bg = jnp.asarray(scenes.BACKGROUND, np.float64)
+    grad = lambda b: jax.grad(_loss, argnums=1)(g, cam, bg, b, C(), _weights(np.float64))
+    want = grad("brute")
+    for backend in ("brute", "reference", "tiles"):
+        got = want if backend == "brute" else grad(backend)
+        for name in ("viewmat", "fx", "fy", "cx", "cy"):
+            x = np.asarray(getattr(got, name))
+            assert np.all(np.isfinite(x)), (backend, name)
+            assert_close_to_scale(x, getattr(want, name), 1e-8, f"{backend} {name}")
+
+
 @pytest.mark.parametrize("backend,config", [
     pytest.param("reference", C(), id="reference", marks=SLOW),
     pytest.param("tiles", C(blend="fast"), id="tiles_fast"),
@@ -93,6 +114,26 @@ def test_gradients_match_central_differences(backend, config):
             fd = float(f(shifted(plus)) - f(shifted(minus))) / (2 * eps)
             got = float(np.asarray(getattr(grads, name))[idx])
             assert abs(fd - got) <= 1e-5 * max(1.0, abs(fd)), (name, idx, fd, got)
+    # The camera's: its intrinsics and six entries of its world-to-camera matrix (what pose
+    # and intrinsics optimization read), moved one at a time as the Gaussians' fields are.
+    cam_loss = lambda c: _loss(g, c, bg, backend, config, weights)
+    f, grads = jax.jit(cam_loss), jax.grad(cam_loss)(cam)
+    view = np.asarray(cam.viewmat)
+
+    def moved(name, idx, v):
+        if name == "viewmat":
+            m = view.copy()
+            m[idx] = v
+            v = m
+        return dataclasses.replace(cam, **{name: v})
+
+    entries = [(k, ()) for k in ("fx", "fy", "cx", "cy")] + [
+        ("viewmat", np.unravel_index(flat, (3, 4))) for flat in rng.choice(12, 6, replace=False)]
+    for name, idx in entries:
+        x = float(np.asarray(getattr(cam, name))[idx])
+        fd = float(f(moved(name, idx, x + eps)) - f(moved(name, idx, x - eps))) / (2 * eps)
+        got = float(np.asarray(getattr(grads, name))[idx])
+        assert abs(fd - got) <= 1e-5 * max(1.0, abs(fd)), (name, idx, fd, got)
 
 
 @pytest.mark.slow  # the fast backends' float32 gradients are in the default set
