@@ -214,10 +214,18 @@ def gsplat_peer(g, cam):
     scales, opac = torch.exp(t(g.log_scales)), torch.sigmoid(t(g.logit_opacities))
     sync = torch.cuda.synchronize
 
+    def render():
+        return rasterization(means, quats, scales, opac, sh, viewmat, K, w, h, near_plane=near,
+                             far_plane=far, sh_degree=deg, packed=False,
+                             rasterize_mode="classic")[0]
+
     def e2e():
-        out = rasterization(means, quats, scales, opac, sh, viewmat, K, w, h, near_plane=near,
-                            far_plane=far, sh_degree=deg, packed=False,
-                            rasterize_mode="classic")[0]
+        out = render()
+        sync()
+        return out
+
+    def e2e_queued():
+        out = [render() for _ in range(QUEUED)]
         sync()
         return out
 
@@ -240,13 +248,6 @@ def gsplat_peer(g, cam):
     offs = offsets()
     raster = lambda: (rasterize_to_pixels(m2d, conics, colors, opac[None], w, h, 16, offs,
                                           flatten_ids), sync())
-    def e2e_queued():
-        out = [rasterization(means, quats, scales, opac, sh, viewmat, K, w, h, near_plane=near,
-                             far_plane=far, sh_degree=deg, packed=False,
-                             rasterize_mode="classic")[0] for _ in range(QUEUED)]
-        sync()
-        return out
-
     image = e2e()[0].float().cpu().numpy()
     fns = {"gsplat:project": proj, "gsplat:emit": isect, "gsplat:sort": offsets,
            "gsplat:raster": raster, "gsplat:e2e": e2e, "gsplat:e2e_queued": e2e_queued}
