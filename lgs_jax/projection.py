@@ -8,7 +8,8 @@ Implements conventions.md, "Camera and projection":
       lim_x− = cx/fx + 0.3·W/(2fx) (y likewise);
   Σ2 = J Σc Jᵀ + 0.3·I;  det = Σ2xx·Σ2yy − Σ2xy², invalid if det <= 0;
   conic (a, b, c) = (Σ2yy, −Σ2xy, Σ2xx)/det;  mean2d = (fx·tx/tz + cx, fy·ty/tz + cy);
-  rgb = max(SH(dir) + 0.5, 0), dir = normalise(μ − camera centre).
+  rgb = max(SH(dir) + 0.5, 0), dir = normalise(μ − camera centre);
+  or, given per-Gaussian `colors` (N, C), rgb = colors as given (any C >= 1, no clamp).
 Antialiased (`RasterConfig(antialiased=True)`, gsplat's rasterize_mode="antialiased", the
 Mip-Splatting 2D filter): the dilation keeps each Gaussian's integral, the opacity scaled by
   ρ = sqrt(max(det(J Σc Jᵀ) / det(Σ2), 0))  (≤ 1; 0 where J Σc Jᵀ is singular in rounding),
@@ -41,7 +42,8 @@ class Projected:
 
     `invalid` marks Gaussians the contract calls invalid: NaN anywhere, ±inf in means or quats,
     +inf in log_scales, a zero quaternion, a centre outside (near, far), det <= 0, or a projection
-    that overflows the dtype (non-finite mean2d, conic or colour). `valid` marks those that can
+    that overflows the dtype (non-finite mean2d, conic or colour; with `colors`, a
+    non-finite colour). `valid` marks those that can
     reach the image: not invalid and opacity >= 1/255. Rows that are not valid hold finite
     placeholders (unit conic, zero colour, opacity and depth), so no NaN can leak.
     """
@@ -51,7 +53,7 @@ class Projected:
     conic: Any  # (N, 3) (a, b, c) = Σ2⁻¹ entries (xx, xy, yy)
     depth: Any  # (N,) camera-space z
     opacity: Any  # (N,)
-    rgb: Any  # (N, 3)
+    rgb: Any  # (N, 3), or (N, C): the `colors` given to `project`
     valid: Any  # (N,) bool: can reach the image
     invalid: Any  # (N,) bool: invalid per the contract (a subset of ~valid)
 
@@ -86,9 +88,10 @@ def _camera_covariance(rot, scales, w):
     return dot(0, 0), dot(0, 1), dot(0, 2), dot(1, 1), dot(1, 2), dot(2, 2)
 
 
-def project(g: Gaussians, cam: Camera, antialiased: bool = False) -> Projected:
+def project(g: Gaussians, cam: Camera, antialiased: bool = False, colors=None) -> Projected:
     """Project Gaussians `g` through camera `cam` (all arithmetic in g's dtype); `antialiased`
-    scales each opacity by ρ (module docstring).
+    scales each opacity by ρ (module docstring). `colors`: optional (N, C) values that take
+    the SH colour's place (`rgb` is then (N, C), `g.sh` is not read).
 
     Written on per-Gaussian (N,) columns, every step elementwise (no stacked 3x3 matrices, no
     reductions over small axes), so that XLA fuses the projection and its autodiff backward
@@ -115,13 +118,13 @@ def project(g: Gaussians, cam: Camera, antialiased: bool = False) -> Projected:
     needs one whole. Behind the barrier the stacks were three XLA concatenates written and read
     back (about 0.2 ms of a 10M-Gaussian 4K forward on an H200, BENCHMARKS.md §7 "Dec 3, third
     session"), and in the backward the cotangents arrived stacked too."""
-    return _stacked(lax.optimization_barrier(_project(g, cam, bool(antialiased))))
+    return _stacked(lax.optimization_barrier(_project(g, cam, bool(antialiased), colors)))
 
 
 @functools.partial(jax.checkpoint, static_argnums=(2,))
-def _project(g: Gaussians, cam: Camera, antialiased: bool) -> dict:
+def _project(g: Gaussians, cam: Camera, antialiased: bool, colors=None) -> dict:
     columns = gaussian_columns(g.means, g.quats, g.log_scales, g.logit_opacities)
-    return _projected_columns(*columns, g.sh, cam, antialiased)
+    return _projected_columns(*columns, g.sh, cam, antialiased, colors)
 
 
 def _stacked(cols: dict) -> Projected:
@@ -166,19 +169,20 @@ gaussian_columns.defvjp(_columns_fwd, _columns_bwd)
 
 
 def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
-                       antialiased: bool = False) -> dict:
-    """`project` on `gaussian_columns` and the SH coefficients `sh` (N, K, 3): `Projected`'s
-    fields as (N,) columns, a tuple of them for each vector field."""
+                       antialiased: bool = False, colors=None) -> dict:
+    """`project` on `gaussian_columns` and the SH coefficients `sh` (N, K, 3), or the
+    `colors` (N, C) in their place: `Projected`'s fields as (N,) columns, a tuple of them for
+    each vector field."""
     dt = mean[0].dtype
     viewmat = jnp.asarray(cam.viewmat, dt)
     fx, fy, cx, cy, near, far = (jnp.asarray(v, dt) for v in
                                  (cam.fx, cam.fy, cam.cx, cam.cy, cam.near, cam.far))
-    n_sh = sh.shape[1]
+    colour_in = ([sh[:, k, c] for k in range(sh.shape[1]) for c in range(3)] if colors is None
+                 else [colors[:, c] for c in range(colors.shape[1])])
     all_of = lambda xs: functools.reduce(jnp.logical_and, xs)
     input_ok = all_of([jnp.isfinite(x) for x in mean + quat]
                       + [~jnp.isnan(x) & (x != jnp.inf) for x in log_scale]
-                      + [~jnp.isnan(logit_opacities)]
-                      + [~jnp.isnan(sh[:, k, c]) for k in range(n_sh) for c in range(3)]
+                      + [~jnp.isnan(logit_opacities)] + [~jnp.isnan(x) for x in colour_in]
                       + [sum(q * q for q in quat) > 0])
     # Placeholders keep invalid rows finite so no NaN can leak through a masked arithmetic path.
     mean = [jnp.where(input_ok, x, 0.0) for x in mean]
@@ -217,17 +221,8 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
     opacity = jax.nn.sigmoid(jnp.where(input_ok, logit_opacities, 0.0))
     if antialiased:
         opacity = opacity * _compensation(axx * ayy - sxy * sxy, det_safe)
-    centre = camera_center(viewmat)
-    d = [mean[i] - centre[i] for i in range(3)]
-    # The square root of a guarded square: at a mean on the camera centre (an invalid row's
-    # placeholder mean 0 seen from a camera at the origin) sqrt's derivative is infinite, and
-    # its zero cotangent times it made the camera's gradient NaN.
-    d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    dnorm = jnp.sqrt(jnp.where(d2 > 0, d2, 1.0))
-    d = [jnp.where(d2 > 0, x / dnorm, 0.0) for x in d]
-    basis = sh_basis_terms(*d, n_sh)
-    sums = sh_sums(basis, sh, input_ok)
-    rgb = [jnp.maximum(s + 0.5, 0.0) for s in sums]
+    rgb = (_sh_colour(mean, sh, viewmat, input_ok) if colors is None
+           else [jnp.where(input_ok, x, 0.0) for x in colour_in])
 
     finite = all_of([jnp.isfinite(x) for x in mean2d + conic + tuple(rgb)])
     invalid = ~(input_ok & in_range & det_ok & finite)
@@ -239,10 +234,24 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
         conic=keep(conic, (1.0, 0.0, 1.0)),
         depth=jnp.where(valid, tz, 0.0),
         opacity=jnp.where(valid, opacity, 0.0),
-        rgb=keep(rgb, (0.0, 0.0, 0.0)),
+        rgb=keep(rgb, (0.0,) * len(rgb)),
         valid=valid,
         invalid=invalid,
     )
+
+
+def _sh_colour(mean, sh, viewmat, input_ok):
+    """rgb = max(SH(dir) + 0.5, 0) per Gaussian, dir = normalise(mean − camera centre)."""
+    centre = camera_center(viewmat)
+    d = [mean[i] - centre[i] for i in range(3)]
+    # The square root of a guarded square: at a mean on the camera centre (an invalid row's
+    # placeholder mean 0 seen from a camera at the origin) sqrt's derivative is infinite, and
+    # its zero cotangent times it made the camera's gradient NaN.
+    d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    dnorm = jnp.sqrt(jnp.where(d2 > 0, d2, 1.0))
+    d = [jnp.where(d2 > 0, x / dnorm, 0.0) for x in d]
+    basis = sh_basis_terms(*d, sh.shape[1])
+    return [jnp.maximum(s + 0.5, 0.0) for s in sh_sums(basis, sh, input_ok)]
 
 
 def _compensation(det_raw, det):

@@ -110,7 +110,8 @@ class RenderStats:
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass
 class RenderOutput:
-    """image (H, W, 3) = C + T·background; alpha (H, W) = 1 − T; depth (H, W) = Σ z·α·T;
+    """image (H, W, 3) = C + T·background ((H, W, C) for `render(..., colors=(N, C))`);
+    alpha (H, W) = 1 − T; depth (H, W) = Σ z·α·T;
     visible (N,) bool: the Gaussians whose alpha ellipse reaches the image (they have tile
     pairs), i.e. this view's visibility mask, which densification strategies count."""
 
@@ -158,8 +159,9 @@ def _is_traced(tree) -> bool:
 
 
 @functools.partial(jax.jit, static_argnames=("width", "height", "antialiased"))
-def _count(g: Gaussians, cam: Camera, width: int, height: int, antialiased: bool):
-    return binning.count_pairs(project(g, cam, antialiased), width, height)
+def _count(g: Gaussians, cam: Camera, width: int, height: int, antialiased: bool,
+           colors=None):
+    return binning.count_pairs(project(g, cam, antialiased, colors), width, height)
 
 
 def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
@@ -183,28 +185,54 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
 
 @functools.partial(jax.jit, static_argnames=("backend", "config", "capacity", "row_capacity"))
 def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
-            capacity: int, row_capacity: int | None, screen_offsets=None) -> RenderOutput:
+            capacity: int, row_capacity: int | None, screen_offsets=None,
+            colors=None) -> RenderOutput:
     width, height = cam.width, cam.height
-    p = project(g, cam, config.antialiased)
+    p = project(g, cam, config.antialiased, colors)
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
-    table = None
-    if spec.gaussian_table is not None:
-        tiles_x, tiles_y = tile_grid(width, height)
-        table = spec.gaussian_table(p, config, tiles_x * tiles_y, capacity)
-    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity, table)
-            if spec.binned else None)
-    result = spec.rasterize(p, bins, width, height, config)
-    color = (result.color[:height, :width].reshape(height * width, 3) if result.image_color
-             else tiles_to_image(result.color, width, height))
-    state = PixelState(color=color, trans=tiles_to_image(result.trans, width, height),
+    tiles_x, tiles_y = tile_grid(width, height)
+    bins, results = None, []
+    for q in _three_channel_passes(p):
+        table = (None if spec.gaussian_table is None
+                 else spec.gaussian_table(q, config, tiles_x * tiles_y, capacity))
+        if spec.binned and bins is None:
+            bins = binning.bin_gaussians(p, width, height, capacity, row_capacity, table)
+        elif spec.binned:
+            bins = dataclasses.replace(bins, table=table)
+        results.append(spec.rasterize(q, bins, width, height, config))
+    channels = p.rgb.shape[-1]
+    color = jnp.concatenate([_image_color(r, width, height) for r in results], -1)
+    result = results[0]
+    state = PixelState(color=color[:, :channels],
+                       trans=tiles_to_image(result.trans, width, height),
                        depth=tiles_to_image(result.depth, width, height), done=None)
     image, alpha, depth = finish(state, background)
-    return RenderOutput(image=image.reshape(height, width, 3), alpha=alpha.reshape(height, width),
+    return RenderOutput(image=image.reshape(height, width, channels),
+                        alpha=alpha.reshape(height, width),
                         depth=depth.reshape(height, width),
                         stats=_stats(p, backend, capacity, bins, result),
                         visible=_visible(p, width, height))
+
+
+def _three_channel_passes(p: Projected) -> list[Projected]:
+    """`p` itself where its colour has three channels, else one `Projected` per three
+    channels of it (the last padded with zeros): a backend composites three channels a pass,
+    and every pass blends the same α (the same pairs, the same arithmetic), so the passes'
+    transmittance and depth are the same bits."""
+    channels = p.rgb.shape[-1]
+    if channels == 3:
+        return [p]
+    rgb = jnp.pad(p.rgb, ((0, 0), (0, -channels % 3)))
+    return [dataclasses.replace(p, rgb=rgb[:, c:c + 3]) for c in range(0, rgb.shape[1], 3)]
+
+
+def _image_color(result: RasterResult, width: int, height: int):
+    """A backend's colour as (H·W, 3) pixel rows."""
+    if result.image_color:
+        return result.color[:height, :width].reshape(height * width, 3)
+    return tiles_to_image(result.color, width, height)
 
 
 def _visible(p: Projected, width: int, height: int):
@@ -222,14 +250,15 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
                         overflow=jnp.bool_(False), pairs_walked=zero,
                         row_overflow=jnp.bool_(False), backend=backend, kernel=kernel,
                         interpreted=interpreted)
-    return RenderOutput(image=jnp.broadcast_to(background, (h, w, 3)).astype(dtype),
+    image = jnp.broadcast_to(background, (h, w, background.shape[0])).astype(dtype)
+    return RenderOutput(image=image,
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
                         stats=stats, visible=jnp.zeros((0,), bool))
 
 
 def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: str | None = None,
            config: RasterConfig | None = None, capacity: int | None = None,
-           row_capacity: int | None = None, screen_offsets=None) -> RenderOutput:
+           row_capacity: int | None = None, screen_offsets=None, colors=None) -> RenderOutput:
     """Render `gaussians` through `camera` (conventions.md is the contract every backend meets).
 
     Args:
@@ -256,6 +285,13 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         differentiate with respect to it to get ∂L/∂mean2d per Gaussian, the screen-space
         gradient densification strategies accumulate (with `visible`); binning sees the offset
         means too, so a non-zero offset renders the shifted scene exactly.
+      colors: optional (N, C) per-Gaussian values composited in place of the SH colour, C >= 1
+        (features, labels, normals: view-independent, used as given, no clamp; a row with a
+        non-finite value is invalid, as a NaN SH coefficient makes it; `gaussians.sh` is then
+        not read). The image is (H, W, C) = Σ colors·α·T + T·background, background (C,)
+        (zeros by default), differentiable w.r.t. `colors` too. Three channels are
+        composited in one pass, other C in ceil(C/3) passes sharing the projection and the
+        pairs (each pass blends again: about C/3 times the kernel's time).
 
     Raises:
       ValueError: a bad argument (the message names it).
@@ -270,17 +306,11 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if backend not in BACKENDS:
         raise ValueError(f"backend: expected one of {BACKENDS} or None, got {backend!r}")
     dt = gaussians.dtype
-    if background is None:
-        background = jnp.zeros((3,), dt)
-    validate_background(background)
-    background = jnp.asarray(background, dt)
-    if capacity is not None and (not isinstance(capacity, (int, np.integer))
-                                 or not 0 < capacity <= binning.MAX_PAIRS):
-        raise ValueError(f"capacity: expected an int in [1, 2^31 - 1] or None, got {capacity!r}")
-    if row_capacity is not None and (not isinstance(row_capacity, (int, np.integer))
-                                     or not 0 < row_capacity <= binning.MAX_PAIRS):
-        raise ValueError("row_capacity: expected an int in [1, 2^31 - 1] or None, got "
-                         f"{row_capacity!r}")
+    colors, background = _checked_colors(colors, background, gaussians.num, dt)
+    for name, value in (("capacity", capacity), ("row_capacity", row_capacity)):
+        if value is not None and (not isinstance(value, (int, np.integer))
+                                  or not 0 < value <= binning.MAX_PAIRS):
+            raise ValueError(f"{name}: expected an int in [1, 2^31 - 1] or None, got {value!r}")
     if gaussians.num == 0:
         return _empty_render(camera, background, dt, backend, config)
     traced = _is_traced((gaussians, camera, background))
@@ -292,7 +322,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
                              "eager render's stats.capacity), then check stats.overflow and "
                              "stats.pairs_required, or use lgs_jax.render_growing")
         required = int(_count(gaussians, camera, camera.width, camera.height,
-                              config.antialiased))
+                              config.antialiased, colors))
         if required >= binning.MAX_PAIRS:
             raise CapacityError(required, 0)
         capacity = pair_capacity(required)
@@ -301,10 +331,29 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
                          f"{np.shape(screen_offsets)}")
     rows = int(row_capacity) if row_capacity is not None and REGISTRY[backend].pair_rows else None
     out = _render(gaussians, camera, background, backend, config, int(capacity), rows,
-                  screen_offsets)
+                  screen_offsets, colors)
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):
         raise CapacityError(int(out.stats.pairs_required), int(capacity))
     return out
+
+
+def _checked_colors(colors, background, n: int, dtype):
+    """`render`'s (colors, background) as arrays of `dtype`, (n, C) or None and (C,) (C = 3
+    without colours; a zero background by default), or `ValueError` naming the problem."""
+    channels = 3
+    if colors is not None:
+        shape = np.shape(colors)
+        if len(shape) != 2 or shape[0] != n or shape[1] < 1:
+            raise ValueError(f"colors: expected shape ({n}, C) with C >= 1 (one row per "
+                             f"Gaussian), got {shape}")
+        kind = jnp.result_type(colors)
+        if not (jnp.issubdtype(kind, jnp.floating) or jnp.issubdtype(kind, jnp.integer)):
+            raise ValueError(f"colors: expected real numbers, got dtype {kind}")
+        colors, channels = jnp.asarray(colors, dtype), shape[1]
+    if background is None:
+        background = jnp.zeros((channels,), dtype)
+    validate_background(background, channels)
+    return colors, jnp.asarray(background, dtype)
 
 
 def render_growing(render_fn: Callable[..., Any], *args, capacity: int, **kwargs):

@@ -235,11 +235,12 @@ def rotation_problem(r) -> str | None:
     return None
 
 
-def validate_background(background) -> None:
-    """Raise `ValueError` unless `background` is a (3,) colour (array or sequence) and, when
-    concrete, finite (a NaN or inf background would reach every pixel of the image)."""
-    if np.shape(background) != (3,):
-        raise ValueError(f"background: expected shape (3,), got {np.shape(background)}")
+def validate_background(background, channels: int = 3) -> None:
+    """Raise `ValueError` unless `background` is a (channels,) colour (array or sequence) and,
+    when concrete, finite (a NaN or inf background would reach every pixel of the image)."""
+    if np.shape(background) != (channels,):
+        raise ValueError(f"background: expected shape ({channels},), got "
+                         f"{np.shape(background)}")
     if all(_is_concrete(x) for x in jax.tree.leaves(background)):
         values = np.asarray(background, dtype=np.float64)
         if not np.all(np.isfinite(values)):

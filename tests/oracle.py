@@ -82,27 +82,36 @@ def project_one(mean, quat, log_scale, logit, sh, view, fx, fy, cx, cy, w, h, ne
                 rgb=sh_rgb(np.asarray(sh, float), d))
 
 
-def project_all(g, cam, antialiased=False):
-    """Oracle projection of every Gaussian: list of dicts or None."""
+def project_all(g, cam, antialiased=False, colors=None):
+    """Oracle projection of every Gaussian: list of dicts or None. `colors` (N, C): each
+    Gaussian's colour instead of its SH colour (the SH coefficients unread; a non-finite
+    colour makes the Gaussian invalid)."""
     args = [np.asarray(cam.viewmat, float)] + [float(np.asarray(v)) for v in
                                                (cam.fx, cam.fy, cam.cx, cam.cy)]
     out = []
     for i in range(np.shape(g.means)[0]):
-        out.append(project_one(np.asarray(g.means[i], float), np.asarray(g.quats[i], float),
-                               np.asarray(g.log_scales[i], float), float(g.logit_opacities[i]),
-                               np.asarray(g.sh[i], float), *args, cam.width, cam.height,
-                               float(np.asarray(cam.near)), float(np.asarray(cam.far)),
-                               antialiased))
+        sh = np.asarray(g.sh[i], float) if colors is None else np.zeros((1, 3))
+        p = project_one(np.asarray(g.means[i], float), np.asarray(g.quats[i], float),
+                        np.asarray(g.log_scales[i], float), float(g.logit_opacities[i]), sh,
+                        *args, cam.width, cam.height, float(np.asarray(cam.near)),
+                        float(np.asarray(cam.far)), antialiased)
+        if p is not None and colors is not None:
+            rgb = np.asarray(colors[i], float)
+            p = dict(p, rgb=rgb) if np.all(np.isfinite(rgb)) else None
+        out.append(p)
     return out
 
 
-def composite(g, cam, background=(0, 0, 0), cap=0.99, inclusive=False, antialiased=False):
-    """Brute-force float64 compositing: (image (H,W,3), alpha (H,W), depth (H,W))."""
-    proj = project_all(g, cam, antialiased)
+def composite(g, cam, background=(0, 0, 0), cap=0.99, inclusive=False, antialiased=False,
+              colors=None):
+    """Brute-force float64 compositing: (image (H,W,C), alpha (H,W), depth (H,W)), C = 3 or
+    the channels of `colors` (`project_all`)."""
+    proj = project_all(g, cam, antialiased, colors)
     order = sorted((p["depth"], i) for i, p in enumerate(proj) if p is not None)
     w, h = cam.width, cam.height
     px, py = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    color, depth = np.zeros((h, w, 3)), np.zeros((h, w))
+    channels = 3 if colors is None else np.shape(colors)[1]
+    color, depth = np.zeros((h, w, channels)), np.zeros((h, w))
     trans, done = np.ones((h, w)), np.zeros((h, w), bool)
     for _, i in order:
         p = proj[i]
