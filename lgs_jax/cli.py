@@ -129,7 +129,7 @@ def _fit(args) -> int:
                               row_headroom=args.row_headroom, stream_images=args.stream_images,
                               pose_opt=args.pose_opt, color_opt=args.color_opt,
                               bilateral_grid=args.bilateral_grid,
-                              train_on_all=args.train_on_all)
+                              train_on_all=args.train_on_all, sh_degree=args.sh_degree)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None or args.uint8_images:
         data = _dataset(args)
@@ -224,6 +224,9 @@ def _fit_parser(sub, common) -> None:
                    help="default strategy: reset opacities every 3000 steps (3DGS; gsplat "
                         "1.5.3 never does, through a bug)")
     f.add_argument("--batch", type=int_at_least(1), default=1, help="views per step")
+    f.add_argument("--sh-degree", type=int, choices=range(4), default=Settings.sh_degree,
+                   help="highest SH degree of the colours, one band more every 1000 steps "
+                        "(0: view-independent colours; default: 3)")
     f.add_argument("--devices", type=int_at_least(1), default=1,
                    help="split each step's views across this many devices (data parallel; "
                         "--batch a multiple of it; default 1)")

@@ -436,12 +436,14 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert cli.main(base + ["--downscale", "4", "--opacity-reset", "--steps", "7"]) == 0
     assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
     assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
+    assert seen["settings"].sh_degree == 3
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
     assert not seen["settings"].antialiased and seen["settings"].stream_images is None
     assert not (seen["settings"].train_on_all or seen["settings"].color_opt
                 or seen["settings"].bilateral_grid)
     assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all",
-                            "--color-opt", "--bilateral-grid"]) == 0
+                            "--color-opt", "--bilateral-grid", "--sh-degree", "1"]) == 0
+    assert seen["settings"].sh_degree == 1
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
     assert seen["settings"].train_on_all and seen["settings"].color_opt
     assert seen["settings"].bilateral_grid
