@@ -193,20 +193,18 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
     tiles_x, tiles_y = tile_grid(width, height)
-    bins, results = None, []
-    for q in _three_channel_passes(p):
-        table = (None if spec.gaussian_table is None
-                 else spec.gaussian_table(q, config, tiles_x * tiles_y, capacity))
-        if spec.binned and bins is None:
-            bins = binning.bin_gaussians(p, width, height, capacity, row_capacity, table)
-        elif spec.binned:
-            bins = dataclasses.replace(bins, table=table)
-        results.append(spec.rasterize(q, bins, width, height, config))
+    table = lambda q: (None if spec.gaussian_table is None
+                       else spec.gaussian_table(q, config, tiles_x * tiles_y, capacity))
     channels = p.rgb.shape[-1]
-    color = jnp.concatenate([_image_color(r, width, height) for r in results], -1)
-    result = results[0]
-    state = PixelState(color=color[:, :channels],
-                       trans=tiles_to_image(result.trans, width, height),
+    three = channels == 3
+    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity,
+                                  table(p) if three else None) if spec.binned else None)
+    if three:
+        result = spec.rasterize(p, bins, width, height, config)
+        color = _image_color(result, width, height)
+    else:
+        color, result = _channel_passes(p, bins, table, spec.rasterize, width, height, config)
+    state = PixelState(color=color, trans=tiles_to_image(result.trans, width, height),
                        depth=tiles_to_image(result.depth, width, height), done=None)
     image, alpha, depth = finish(state, background)
     return RenderOutput(image=image.reshape(height, width, channels),
@@ -216,16 +214,27 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
                         visible=_visible(p, width, height))
 
 
-def _three_channel_passes(p: Projected) -> list[Projected]:
-    """`p` itself where its colour has three channels, else one `Projected` per three
-    channels of it (the last padded with zeros): a backend composites three channels a pass,
-    and every pass blends the same α (the same pairs, the same arithmetic), so the passes'
-    transmittance and depth are the same bits."""
+def _channel_passes(p: Projected, bins, table, rasterize, width: int, height: int,
+                    config: RasterConfig):
+    """(colour (H·W, C), the first pass's `RasterResult`) of a `p` whose colour has C != 3
+    channels: a backend composites three channels a pass, so the channels are padded with
+    zeros to a multiple of three and composited three at a time over the same pairs, each
+    pass with its own Gaussian table (`table(q)`), in a `lax.map` (the kernels are traced and
+    compiled once, whatever C). Every pass blends the same α (the same pairs, the same
+    arithmetic), so their transmittance and depth are the same bits."""
     channels = p.rgb.shape[-1]
-    if channels == 3:
-        return [p]
     rgb = jnp.pad(p.rgb, ((0, 0), (0, -channels % 3)))
-    return [dataclasses.replace(p, rgb=rgb[:, c:c + 3]) for c in range(0, rgb.shape[1], 3)]
+    chunks = rgb.reshape(rgb.shape[0], -1, 3).transpose(1, 0, 2)
+
+    def one_pass(rgb3):
+        q = dataclasses.replace(p, rgb=rgb3)
+        b = None if bins is None else dataclasses.replace(bins, table=table(q))
+        result = rasterize(q, b, width, height, config)
+        return _image_color(result, width, height), result
+
+    colors, results = jax.lax.map(one_pass, chunks)
+    color = colors.transpose(1, 0, 2).reshape(width * height, -1)[:, :channels]
+    return color, jax.tree.map(lambda x: x[0], results)
 
 
 def _image_color(result: RasterResult, width: int, height: int):
@@ -291,7 +300,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         not read). The image is (H, W, C) = Σ colors·α·T + T·background, background (C,)
         (zeros by default), differentiable w.r.t. `colors` too. Three channels are
         composited in one pass, other C in ceil(C/3) passes sharing the projection and the
-        pairs (each pass blends again: about C/3 times the kernel's time).
+        pairs (each pass blends again: about C/3 times the kernel's time; one compile).
 
     Raises:
       ValueError: a bad argument (the message names it).
