@@ -33,12 +33,12 @@ def _rows(g, cam, channels, backend: str, cap: int, grad: bool):
         f = None if c is None else jnp.asarray(rng.uniform(0, 1, (g.num, c)), g.dtype)
         w = jnp.asarray(rng.normal(size=(cam.height, cam.width, 3 if c is None else c)),
                         g.dtype)
-        image = lambda g, f: lgs_jax.render(g, cam, backend=backend, capacity=cap,
-                                            colors=f).image
-        loss = lambda g, f, w=w: jnp.sum(image(g, f) * w)
+        image = lambda g, f, w: lgs_jax.render(g, cam, backend=backend, capacity=cap,
+                                               colors=f).image
+        loss = lambda g, f, w: jnp.sum(image(g, f, w) * w)
         fn = jax.jit(jax.grad(loss, argnums=(0, 1)) if grad else image)
         rows["sh" if c is None else f"C={c}"] = (
-            lambda fn=fn, f=f: jax.block_until_ready(fn(g, f)))
+            lambda fn=fn, f=f, w=w: jax.block_until_ready(fn(g, f, w)))
     return rows
 
 
@@ -58,7 +58,7 @@ def main(argv=None):
           f"{'' if args.no_grad else 'fwd+bwd ms':>10} {'/ sh':>6}")
     for spec in args.scene or ["guitar@1280x720"]:
         case = parse_scene(spec, args.data)
-        g, cam = case.scene, case.camera
+        g, cam = jax.device_put(case.scene), jax.device_put(case.camera)  # no host copies
         cap = int(lgs_jax.render(g, cam, backend=backend).stats.capacity)
         fwd = median_ms(_rows(g, cam, channels, backend, cap, False), args.repeat)
         both = ({} if args.no_grad else

@@ -94,8 +94,8 @@ def test_colors_under_jit_and_vmap():
     many = jax.jit(jax.vmap(lambda c: _render(g, c, "reference", f).image))(
         lgs_jax.stack_cameras(cams))
     assert many.shape == (2, scenes.H, scenes.W, 2) and many.dtype == np.float32
-    for i, c in enumerate(cams):
-        np.testing.assert_allclose(many[i], _render(g, c, "reference", f).image, atol=1e-6)
+    for i, c in enumerate(cams):  # an ulp of the batched projection, times values up to ~6
+        np.testing.assert_allclose(many[i], _render(g, c, "reference", f).image, atol=1e-5)
 
 
 @pytest.mark.parametrize("colors,background,match", [
