@@ -4,7 +4,7 @@
 . scripts/gpu_env.sh
 export LGS_JAX_CACHE="$PWD/build/jax_cache"; t0=$(date +%s)
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader > $out/device.txt
-timeout 100 python3 scripts/donate_probe.py --data carry/data --repeat 20 > $out/donate.log 2>&1
+timeout 130 python3 scripts/donate_probe.py --data carry/data --repeat 20 > $out/donate.log 2>&1
 echo "donate rc=$? $(( $(date +%s) - t0 )) s" >> $out/times.log; grep -v "arn" $out/donate.log
 timeout 100 python3 -m benchmarks.features --data carry/data --scene guitar_x16_1080p \
   --channels 1,8,32 --repeat 5 > $out/features.log 2>&1
