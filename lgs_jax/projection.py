@@ -43,9 +43,9 @@ class Projected:
     `invalid` marks Gaussians the contract calls invalid: NaN anywhere, ±inf in means or quats,
     +inf in log_scales, a zero quaternion, a centre outside (near, far), det <= 0, or a projection
     that overflows the dtype (non-finite mean2d, conic or colour; with `colors`, a
-    non-finite colour). `valid` marks those that can
-    reach the image: not invalid and opacity >= 1/255. Rows that are not valid hold finite
-    placeholders (unit conic, zero colour, opacity and depth), so no NaN can leak.
+    non-finite colour). `valid` marks those that can reach the image: not invalid and
+    opacity >= 1/255. Rows that are not valid hold finite placeholders (unit conic, zero
+    colour, opacity and depth), so no NaN can leak.
     """
 
     mean2d: Any  # (N, 2) pixel coordinates (x, y)

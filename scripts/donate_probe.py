@@ -15,6 +15,7 @@ did), and `queued` (8 calls, one block, per call). Also the time until each call
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -24,7 +25,7 @@ import jax.numpy as jnp
 
 import lgs_jax
 
-sys.path.insert(0, ".")
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from benchmarks.common import add_data_argument, device_line, load_scene  # noqa: E402
 from benchmarks.scale import count_pairs  # noqa: E402
 
