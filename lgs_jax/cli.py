@@ -128,7 +128,7 @@ def _fit(args) -> int:
                               antialiased=args.antialiased, pair_headroom=args.pair_headroom,
                               row_headroom=args.row_headroom, stream_images=args.stream_images,
                               pose_opt=args.pose_opt, color_opt=args.color_opt,
-                              bilateral_grid=args.bilateral_grid,
+                              bilateral_grid=args.bilateral_grid, app_opt=args.app_opt,
                               train_on_all=args.train_on_all, sh_degree=args.sh_degree)
     data, watch, served = args.data, None, None
     if args.viewer_port is not None or args.uint8_images:
@@ -237,21 +237,7 @@ def _fit_parser(sub, common) -> None:
                    help="train and evaluate with antialiased renders (gsplat's "
                         "--antialiased: opacities scaled so that the 0.3-pixel dilation keeps "
                         "each Gaussian's integral); render the result with --antialiased too")
-    f.add_argument("--pose-opt", action="store_true",
-                   help="also optimize each training view's camera pose (gsplat's --pose_opt: "
-                        "a 9-D delta per view, Adam at 1e-5, weight decay 1e-6); held-out "
-                        "views keep their poses")
-    f.add_argument("--color-opt", action="store_true",
-                   help="also optimize an affine colour correction of each training view "
-                        "(exposure and white balance that change between photos; Adam at "
-                        "1e-3); held-out views render at the views' average appearance; "
-                        "colors.json holds the corrections")
-    f.add_argument("--bilateral-grid", action="store_true",
-                   help="also optimize a bilateral grid of affine colour maps per training "
-                        "view (gsplat's --use_bilateral_grid: 16x16 cells by 8 brightness "
-                        "levels, for camera processing that varies over the image; Adam at "
-                        "2e-3, total variation weighted 10); held-out views render without "
-                        "one; bilateral_grids.npz holds the grids")
+    _fit_view_options(f)
     f.add_argument("--train-on-all", action="store_true",
                    help="train on every view, the held-out ones too (a final scene; nothing "
                         "is evaluated)")
@@ -268,6 +254,31 @@ def _fit_parser(sub, common) -> None:
                         "less memory, the same results (default: a row per pair slot)")
     _fit_run_options(f)
     f.set_defaults(func=_fit)
+
+
+def _fit_view_options(f) -> None:
+    """`fit`'s options that optimize the training views' own parameters (`view_params`)."""
+    f.add_argument("--pose-opt", action="store_true",
+                   help="also optimize each training view's camera pose (gsplat's --pose_opt: "
+                        "a 9-D delta per view, Adam at 1e-5, weight decay 1e-6); held-out "
+                        "views keep their poses")
+    f.add_argument("--color-opt", action="store_true",
+                   help="also optimize an affine colour correction of each training view "
+                        "(exposure and white balance that change between photos; Adam at "
+                        "1e-3); held-out views render at the views' average appearance; "
+                        "colors.json holds the corrections")
+    f.add_argument("--bilateral-grid", action="store_true",
+                   help="also optimize a bilateral grid of affine colour maps per training "
+                        "view (gsplat's --use_bilateral_grid: 16x16 cells by 8 brightness "
+                        "levels, for camera processing that varies over the image; Adam at "
+                        "2e-3, total variation weighted 10); held-out views render without "
+                        "one; bilateral_grids.npz holds the grids")
+    f.add_argument("--app-opt", action="store_true",
+                   help="also optimize appearance embeddings (gsplat's --app_opt: a feature "
+                        "per Gaussian, an embedding per training view and a small MLP giving "
+                        "each Gaussian's colour change in each view, for lighting that changes "
+                        "over the scene between photos); held-out views and scene.ply are the "
+                        "scene at the views' average appearance; appearance.npz holds the rest")
 
 
 def _fit_run_options(f) -> None:

@@ -17,6 +17,8 @@ Modules (each usable alone):
   `color_opt`  an affine colour correction per training view (`Settings.color_opt`).
   `bilateral_grid` a bilateral grid of colour maps per training view (`Settings.bilateral_grid`,
                gsplat's --use_bilateral_grid).
+  `appearance` appearance embeddings: per-Gaussian features, per-view embeddings and the
+               head they share (`Settings.app_opt`, gsplat's --app_opt).
   `view_params` the views' own parameters above as one state, their rows and updates.
   `data`       a capture made ready for `fit` (one or several image sizes), the view order.
 """

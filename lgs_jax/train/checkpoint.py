@@ -23,7 +23,7 @@ import numpy as np
 
 RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
              "curves.png", "cameras.json", "colors.json", "bilateral_grids.npz",
-             "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
+             "appearance.npz", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
 PARTS = ("pool", "opt", "strategy", "views")  # views: `view_params`' state, None without it
 
 

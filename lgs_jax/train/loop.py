@@ -13,6 +13,8 @@ Gaussians, seconds; per refinement: its counts; per evaluation: held-out PSNR/SS
 PLY), cameras.json (INRIA: the training cameras, at their optimized poses with pose_opt, then
 the held-out ones), colors.json (with color_opt: each training view's colour correction),
 bilateral_grids.npz (with bilateral_grid: each training view's grid),
+appearance.npz (with app_opt: the features, embeddings and head, `appearance.save`; scene.ply
+and the held-out renders are the scene at the zero embedding, `appearance.baked`),
 heldout_<name>.png (render beside ground truth), curves.png, result.json.
 """
 
@@ -34,7 +36,7 @@ from ..io.cameras import save_cameras
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import default_backend, next_pow2, pair_capacity, render
-from . import bilateral_grid, camera_opt, checkpoint, report, view_params
+from . import appearance, bilateral_grid, camera_opt, checkpoint, report, view_params
 from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, TrainViews, nbytes, prepare, streams
 from .init import start_gaussians
@@ -65,26 +67,31 @@ class _State:
         return self.pool, self.opt_state, self.strategy_state, self.views
 
 
-def _templates(setup: Setup, size: int, rd: RunData, g=None):
+def _templates(setup: Setup, size: int, rd: RunData, seed: int, g=None):
     """(pool, opt_state, strategy_state, views) at `size` slots: from Gaussians g, or
-    zeros."""
+    zeros; with app_opt the pool's features and the appearance head drawn from `seed`."""
     bases = (setup.settings.sh_degree + 1) ** 2
+    z = lambda *shape: jnp.zeros((size,) + shape, jnp.float32)
     if g is None:
-        z = lambda *shape: jnp.zeros((size,) + shape, jnp.float32)
         params = dict(means=z(3), quats=z(4), log_scales=z(3), logit_opacities=z(),
                       sh_dc=z(1, 3), sh_rest=z(bases - 1, 3))
         pool = Pool(params, jnp.zeros(size, bool))
     else:
         pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
+    key_features, key_head = jax.random.split(jax.random.fold_in(jax.random.key(seed), 7))
+    if setup.settings.app_opt:
+        features = z(appearance.FEATURES) if g is None else appearance.init_features(
+            key_features, size)
+        pool = Pool(dict(pool.params, features=features), pool.active)
     opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
     return (pool, opt.init(pool.params), setup.strategy.init(pool, rd.scene_scale),
-            view_params.init(setup.settings, len(rd.train_names), setup.steps))
+            view_params.init(setup.settings, len(rd.train_names), setup.steps, key_head))
 
 
 def _fresh(setup: Setup, rd: RunData, seed: int, cap: int, pool_size, log) -> _State:
     g = start_gaussians(rd, setup.settings, setup.strategy, seed, cap, log)
     size = max(min(pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
-    pool, opt_state, sstate, views = _templates(setup, size, rd, g)
+    pool, opt_state, sstate, views = _templates(setup, size, rd, seed, g)
     first = rd.train_camera(0)
     capacity = pair_capacity(int(_pairs(pool, first, setup.settings.antialiased)),
                              setup.settings.pair_headroom)
@@ -119,7 +126,7 @@ def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:
                                          checkpoint.config_of(defaults, seed))
     if problem:
         raise ValueError(f"resume: {problem}")
-    templates = _templates(setup, meta["pool_size"], rd)
+    templates = _templates(setup, meta["pool_size"], rd, seed)
     pool, opt_state, sstate, views = checkpoint.restore(out, templates)
     _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
     log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
@@ -144,7 +151,18 @@ def _save(out: str, setup: Setup, st: _State, seed: int) -> None:
                 pool_size=st.pool.size, skipped=st.skipped,
                 config=checkpoint.config_of(setup, seed))
     checkpoint.save(out, st.saved, meta)
-    save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
+    save_ply(os.path.join(out, "scene.ply"), active_gaussians(_scene(st)))
+
+
+_baked = jax.jit(appearance.baked)
+
+
+def _scene(st: _State) -> Pool:
+    """The pool as a plain scene: with appearance embeddings, at the zero embedding
+    (`appearance.baked`); else the pool itself."""
+    if st.views is None or "head" not in st.views:
+        return st.pool
+    return Pool(_baked(st.pool.params, st.views["head"][0]), st.pool.active)
 
 
 def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
@@ -152,7 +170,7 @@ def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):
     truth written to `out` when given."""
     if not rd.test_cams:
         return None, None
-    images, st.eval_capacity = render_views(st.pool, rd.test_cams, jnp.asarray(rd.background),
+    images, st.eval_capacity = render_views(_scene(st), rd.test_cams, jnp.asarray(rd.background),
                                             setup.backend, st.eval_capacity,
                                             setup.settings.raster)
     if out:
@@ -242,7 +260,8 @@ class _Watch:
         now = time.perf_counter()
         if self.fn is None or not (force or now - self.last >= self.every):
             return
-        g = _shown(st.pool.params, st.pool.active)
+        pool = _scene(st)
+        g = _shown(pool.params, pool.active)
         if self.devices > 1:  # replicated: one device's copy, no transfer
             g = jax.tree.map(lambda x: x.addressable_data(0), g)
         self.fn(st.step, g, metrics)
@@ -320,8 +339,8 @@ def _check_args(steps, max_gaussians, settings: Settings) -> None:
                          f"pairs would drop pairs), got {h!r}")
     if not (r is None or (number(r) and r >= 1)):
         raise ValueError(f"settings.row_headroom: expected None or a number >= 1, got {r!r}")
-    for name in ("antialiased", "pose_opt", "color_opt", "bilateral_grid", "train_on_all",
-                 "stream_images"):
+    for name in ("antialiased", "pose_opt", "color_opt", "bilateral_grid", "app_opt",
+                 "train_on_all", "stream_images"):
         v = getattr(settings, name)
         if not (isinstance(v, bool) or (v is None and name == "stream_images")):
             raise ValueError(f"settings.{name}: expected a bool"
@@ -453,7 +472,12 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
         with open(os.path.join(out, "metrics.jsonl"), "a") as f:
             f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
         log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
-    save_ply(os.path.join(out, "scene.ply"), active_gaussians(st.pool))
+    save_ply(os.path.join(out, "scene.ply"), active_gaussians(_scene(st)))
+    if st.views is not None and "head" in st.views:
+        keep = np.asarray(st.pool.active)
+        appearance.save(os.path.join(out, "appearance.npz"),
+                        np.asarray(st.pool.params["features"])[keep], st.views["embed"][0],
+                        jax.device_get(st.views["head"][0]), rd.train_names)
     save_cameras(os.path.join(out, "cameras.json"), _cameras(st, rd),
                  rd.train_names + rd.test_names)
     if st.views is not None and "color" in st.views:

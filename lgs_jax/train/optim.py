@@ -4,7 +4,8 @@
 0.999, ε = 1e-15) on every group, learning rates means 1.6e-4 · scene_scale decaying
 exponentially to 1% of that over the run (lr_s = lr_0 · 0.01^(s / steps) at update s, torch's
 ExponentialLR with γ = 0.01^(1 / steps)), quats 1e-3, log-scales 5e-3, logit opacities 5e-2,
-SH band 0 2.5e-3, higher bands 2.5e-3 / 20. It is one `optax.scale_by_adam` over the whole
+SH band 0 2.5e-3, higher bands 2.5e-3 / 20, appearance features (`appearance`, where the pool
+has them) 2.5e-3. It is one `optax.scale_by_adam` over the whole
 parameter dict followed by a per-group rate, so the Adam moments `mu` and `nu` are dicts shaped
 like the parameters: `carry_moments` moves their rows with the Gaussians.
 
@@ -21,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from .pool import GROUPS, rows
+from .pool import GROUPS, OPTIONAL_GROUPS, rows
 
 
 class GroupRateState(NamedTuple):
@@ -55,7 +56,7 @@ def optimizer(settings, steps: int, scene_scale: float) -> optax.GradientTransfo
     rates = dict(means=means_schedule(settings, steps, scene_scale), quats=settings.lr_quats,
                  log_scales=settings.lr_log_scales,
                  logit_opacities=settings.lr_logit_opacities, sh_dc=settings.lr_sh_dc,
-                 sh_rest=settings.lr_sh_rest)
+                 sh_rest=settings.lr_sh_rest, features=settings.lr_features)
     return optax.chain(optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-15),
                        scale_by_group_rates(rates))
 
@@ -71,7 +72,7 @@ def torch_adam(lr, weight_decay: float, eps: float = 1e-8) -> optax.GradientTran
 
 
 def _is_moments(x) -> bool:
-    return isinstance(x, dict) and set(x) == set(GROUPS)
+    return isinstance(x, dict) and set(GROUPS) <= set(x) <= set(GROUPS + OPTIONAL_GROUPS)
 
 
 def map_moments(opt_state, fn):
@@ -82,10 +83,11 @@ def map_moments(opt_state, fn):
     return jax.tree.map(f, opt_state, is_leaf=_is_moments)
 
 
-def carry_moments(opt_state, src, fresh, groups=GROUPS):
-    """Moments of row i become those of row src[i], or zero where fresh[i], in `groups`."""
+def carry_moments(opt_state, src, fresh, groups=None):
+    """Moments of row i become those of row src[i], or zero where fresh[i], in `groups` (None:
+    every group)."""
     def f(group, m):
-        if group not in groups:
+        if groups is not None and group not in groups:
             return m
         return jnp.where(rows(fresh, m), jnp.zeros((), m.dtype), m[src])
     return map_moments(opt_state, f)

@@ -25,14 +25,15 @@ import numpy as np
 from ..scene import Gaussians
 
 GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")
+OPTIONAL_GROUPS = ("features",)  # `appearance`'s per-Gaussian features, with Settings.app_opt
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Pool:
     """params: dict GROUPS -> (size, ...) arrays (means (N, 3), quats (N, 4) w x y z,
-    log_scales (N, 3), logit_opacities (N,), sh_dc (N, 1, 3), sh_rest (N, K − 1, 3));
-    active: (size,) bool."""
+    log_scales (N, 3), logit_opacities (N,), sh_dc (N, 1, 3), sh_rest (N, K − 1, 3); with
+    appearance embeddings also features (N, appearance.FEATURES)); active: (size,) bool."""
 
     params: dict
     active: Any

@@ -58,6 +58,11 @@ class Settings:
     the image), centred over the views, at rate lr_grid · sqrt(batch) (warmed up over 1000
     steps, decaying to 1%) with the grids' total variation weighted by grid_tv in the loss;
     held-out views are evaluated without a grid.
+    app_opt: also optimize appearance embeddings (`appearance`: gsplat's --app_opt, for photos
+    whose lighting changes in ways that differ over the scene): a feature per Gaussian (rate
+    lr_features), an embedding per training view (rate lr_app · 10 · sqrt(batch)) and a head
+    the views share (lr_app · sqrt(batch)), L2 weight decay app_reg on both; held-out views
+    and scene.ply are the scene at the zero embedding, the views' average appearance.
     train_on_all: train on every view of the dataset, its held-out ones included (for a final
     scene); nothing is evaluated (held-out PSNR and SSIM are None).
     """
@@ -93,6 +98,10 @@ class Settings:
     bilateral_grid: bool = False
     lr_grid: float = 2e-3
     grid_tv: float = 10.0
+    app_opt: bool = False
+    lr_app: float = 1e-3
+    app_reg: float = 1e-6
+    lr_features: float = 2.5e-3
 
     @property
     def raster(self) -> RasterConfig:

@@ -6,8 +6,9 @@ over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's and the view
 gradients w.r.t. the parameters (and, for strategies that ask, w.r.t. zero screen offsets of the
 projected means: ∂loss/∂mean2d); one Adam update (and one of the views' own parameters,
 `view_params`: pose deltas with `Settings.pose_opt`, colour corrections with
-`Settings.color_opt`, bilateral grids with `Settings.bilateral_grid`); then the strategy's
-per-step update. A step whose loss, gradients or new parameters (active slots) are
+`Settings.color_opt`, bilateral grids with `Settings.bilateral_grid`, appearance embeddings
+and their head with `Settings.app_opt`, each view's Gaussians then seen with their band 0
+moved, `appearance.seen`); then the strategy's per-step update. A step whose loss, gradients or new parameters (active slots) are
 not finite changes nothing: it returns its inputs with ok False (`fit` reports it). A view whose
 tile pairs overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s
 row_capacity), is reported (overflow, pairs, row_overflow, walked): `fit` grows what overflowed
@@ -33,7 +34,7 @@ import optax
 
 from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
-from . import camera_opt, view_params
+from . import appearance, camera_opt, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
@@ -107,8 +108,16 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
         g = render_gaussians(params, pool.active, bands)
         own = view_params.rows(per_view, idx) or {}
         views = cams if "pose" not in own else camera_opt.adjusted(cams, own["pose"])
+        look = {k: v for k, v in own.items() if k in view_params.APPEARANCE}
+        if "embed" in own:  # each view's change of band 0 (`appearance.seen`), 0 where inactive
+            dc = jax.vmap(appearance.dc_change, in_axes=(None, 0, None))(
+                own["head"], own["embed"], params["features"])
+            look["dc"] = jnp.where(pool.active[None, :, None, None], dc, 0.0)
 
         def one(g, cam, target, off, look):
+            if "dc" in look:
+                g = dataclasses.replace(g, sh=jnp.concatenate([g.sh[:, :1] + look["dc"],
+                                                               g.sh[:, 1:]], 1))
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=s.settings.raster, screen_offsets=off,
                        row_capacity=rows)
@@ -116,7 +125,6 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
             return (loss_fn(image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((image - target) ** 2), o.stats, o.visible)
 
-        look = {k: v for k, v in own.items() if k in view_params.APPEARANCE}
         losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets,
                                                                   look)
         total = (jnp.mean(losses) + s.strategy.regularizer(params, pool.active)

@@ -1,16 +1,20 @@
 """The training views' own parameters, optimized beside the scene's: each view's pose delta
-(`camera_opt`, `Settings.pose_opt`), colour correction (`color_opt`, `Settings.color_opt`) and
-bilateral grid (`bilateral_grid`, `Settings.bilateral_grid`).
+(`camera_opt`, `Settings.pose_opt`), colour correction (`color_opt`, `Settings.color_opt`),
+bilateral grid (`bilateral_grid`, `Settings.bilateral_grid`) and appearance embedding with the
+head the views share (`appearance`, `Settings.app_opt`).
 
-The state is a dict, part name -> (params (views, SIZE) float32, zero at the start, their
-optimizer state), holding the parts switched on, or None with neither (`init`). A step's views
+The state is a dict, part name -> (params, their optimizer state), holding the parts switched
+on, or None with none (`init`): a part's params are (views, SIZE) float32, zero at the start,
+or, for a part marked `shared` (the appearance head), one pytree every view uses, from the
+part's `init(settings, views, key)`. A step's views
 take their rows as onehot(idx) · P (`rows`: exact, one nonzero term a row), so each view's
 gradient is onehot(idx)ᵀ times the rows' gradients: a dot, summed in one order where a view
 comes twice in a batch, with no scatter-add (deterministic on GPUs). The other views' rows get
 no gradient. After each part's update (`update`) the part's `project` runs (the colour
 corrections and grids are centred over the views). A part's `regularizer`, where it has one,
 adds to the loss over every view's parameters (`regularizer`: the grids' total variation).
-A step's render is corrected by the colour map, then by the grid (`corrected`).
+A step's render is corrected by the colour map, then by the grid (`corrected`); with
+embeddings, each view sees the Gaussians' band 0 moved by the head (`appearance.seen`).
 """
 
 from __future__ import annotations
@@ -19,23 +23,33 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from . import bilateral_grid, camera_opt, color_opt
+from . import appearance, bilateral_grid, camera_opt, color_opt
 
-PARTS = {"color": color_opt, "grid": bilateral_grid, "pose": camera_opt}
-"""name -> module with SIZE, enabled(settings), optimizer(settings, steps), project(params),
-and optionally regularizer(settings, params)."""
+PARTS = {"color": color_opt, "grid": bilateral_grid, "pose": camera_opt, "embed": appearance,
+         "head": appearance.HEAD}
+"""name -> module (or object) with SIZE, enabled(settings), optimizer(settings, steps),
+project(params), and optionally regularizer(settings, params); a `shared` part has init
+instead of SIZE."""
 APPEARANCE = ("color", "grid")  # the parts that correct a render, in the order they apply
 
 
-def init(settings, views: int, steps: int):
-    """{name: (zeros (views, SIZE), optimizer state)} of the parts `settings` switches on, for
-    a run of `steps`, or None."""
+def init(settings, views: int, steps: int, key=None):
+    """{name: (params, optimizer state)} of the parts `settings` switches on, for a run of
+    `steps`, or None: zeros (views, SIZE), a shared part's from its init with `key` (a JAX key;
+    the run's seed's)."""
     state = {}
     for name, part in PARTS.items():
         if part.enabled(settings):
-            p = jnp.zeros((views, part.SIZE), jnp.float32)
+            if _shared(part):
+                p = part.init(settings, views, jax.random.key(0) if key is None else key)
+            else:
+                p = jnp.zeros((views, part.SIZE), jnp.float32)
             state[name] = (p, part.optimizer(settings, steps).init(p))
     return state or None
+
+
+def _shared(part) -> bool:
+    return getattr(part, "shared", False)
 
 
 def params(state):
@@ -44,12 +58,15 @@ def params(state):
 
 
 def rows(params_, idx):
-    """{name: rows (B, SIZE) of the views idx (B,)} (module docstring), or None."""
+    """{name: rows (B, SIZE) of the views idx (B,)} (module docstring), a shared part's params
+    whole, or None."""
     if params_ is None:
         return None
-    views = next(iter(params_.values())).shape[0]
+    per_view = {name: p for name, p in params_.items() if not _shared(PARTS[name])}
+    views = next(iter(per_view.values())).shape[0]  # a shared part comes with a per-view one
     onehot = (idx[:, None] == jnp.arange(views)[None, :]).astype(jnp.float32)
-    return {name: jnp.einsum("bv,vk->bk", onehot, p, precision=jax.lax.Precision.HIGHEST)
+    return {name: p if name not in per_view else
+            jnp.einsum("bv,vk->bk", onehot, p, precision=jax.lax.Precision.HIGHEST)
             for name, p in params_.items()}
 
 

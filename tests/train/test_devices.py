@@ -32,7 +32,7 @@ CHILD = textwrap.dedent("""
     strategy = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=1e-4,
                                      prune_opa=0.02)
     settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100, pose_opt=True,
-                              color_opt=True)
+                              color_opt=True, app_opt=True)
     out, watched = {}, []
     watch = lambda step, g, m: watched.append(
         (step, len(g.means.devices()), int(np.isfinite(np.asarray(g.logit_opacities)).sum()),

@@ -156,7 +156,8 @@ def _fit(data, out, **kwargs):
     settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3,
                               pair_headroom=1.5, stream_images=kwargs.pop("stream", None),
                               pose_opt=kwargs.pop("pose_opt", False),
-                              color_opt=kwargs.pop("color_opt", False))
+                              color_opt=kwargs.pop("color_opt", False),
+                              app_opt=kwargs.pop("app_opt", False))
     return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
                      max_gaussians=1024, pool_size=1024, backend="reference",
                      log=kwargs.pop("log", lambda m: None), **kwargs)
@@ -218,15 +219,15 @@ class _Stop(Exception):
 def test_resume_is_bit_identical(skull, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
     same bits as an uninterrupted run: pool, active mask, Adam state, strategy state, and the
-    views' own parameters (pose deltas and colour corrections, `view_params`) and their Adam
-    states (both runs optimize them). The uninterrupted run is watched (`fit`'s `watch`, at its
+    views' own parameters (pose deltas, colour corrections and appearance embeddings with their
+    head, `view_params`) and their Adam states (both runs optimize them). The uninterrupted run is watched (`fit`'s `watch`, at its
     start and end only) and the other streams its training images
     (`Settings.stream_images`), which change nothing. The first training view's photo is
     darkened (x0.6), so that its colour correction darkens against the other's."""
     images = skull.images.copy()
     images[skull.train[0]] *= 0.6
     skull = dataclasses.replace(skull, images=images)
-    own = dict(pose_opt=True, color_opt=True)
+    own = dict(pose_opt=True, color_opt=True, app_opt=True)
     seen = []
     _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9,
          **own)
@@ -245,11 +246,19 @@ def test_resume_is_bit_identical(skull, tmp_path):
     _fit(skull, tmp_path / "b", resume=True, stream=True, **own)
     a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
-    # views' leaves: colour (corrections, Adam count, mu, nu), then pose (deltas, ...)
-    corrections, deltas = a["views_0"], a["views_4"]  # two training views, moved from zero
-    assert corrections.shape == (2, 12) and deltas.shape == (2, 9)
-    assert np.all(np.abs(deltas).max(1) > 0) and np.all(np.abs(corrections).max(1) > 0)
-    np.testing.assert_allclose(corrections.sum(0), 0, atol=1e-7)  # centred over the views
+    # views' leaves: colour (corrections, Adam count, mu, nu), embed (the same), head (its
+    # six weights, Adam count, mu, nu), then pose (deltas, ...)
+    corrections, embeddings, deltas = a["views_0"], a["views_4"], a["views_27"]
+    assert (corrections.shape, embeddings.shape, deltas.shape) == ((2, 12), (2, 16), (2, 9))
+    for moved in (corrections, embeddings, deltas):  # two training views, moved from zero
+        assert np.all(np.abs(moved).max(1) > 0)
+    for centred in (corrections, embeddings):
+        np.testing.assert_allclose(centred.sum(0), 0, atol=1e-7)
+    saved = np.load(tmp_path / "a" / "appearance.npz")
+    np.testing.assert_array_equal(saved["embeddings"], embeddings)
+    assert list(saved["names"]) == ["02", "03"] and np.abs(saved["w3"]).max() > 0
+    assert saved["features"].shape == (lgs_jax.load_ply(str(tmp_path / "a" / "scene.ply")).num,
+                                       32)
     colors = json.load(open(tmp_path / "a" / "colors.json"))
     assert [c["img_name"] for c in colors] == ["02", "03"]
     grey = [np.mean(np.asarray(c["matrix"]) @ np.full(3, 0.5) + c["offset"]) for c in colors]
@@ -440,13 +449,14 @@ def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     assert seen["compile_ahead"] is None  # fit's default: on a GPU
     assert not seen["settings"].antialiased and seen["settings"].stream_images is None
     assert not (seen["settings"].train_on_all or seen["settings"].color_opt
-                or seen["settings"].bilateral_grid)
+                or seen["settings"].bilateral_grid or seen["settings"].app_opt)
     assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all",
-                            "--color-opt", "--bilateral-grid", "--sh-degree", "1"]) == 0
+                            "--color-opt", "--bilateral-grid", "--app-opt",
+                            "--sh-degree", "1"]) == 0
     assert seen["settings"].sh_degree == 1
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
     assert seen["settings"].train_on_all and seen["settings"].color_opt
-    assert seen["settings"].bilateral_grid
+    assert seen["settings"].bilateral_grid and seen["settings"].app_opt
     with pytest.raises(lgs_jax.DatasetError):  # --uint8-images loads here: an empty folder
         cli.main(base + ["--uint8-images", "--debug"])
     assert seen["settings"].stream_images is False and seen["settings"].pose_opt
