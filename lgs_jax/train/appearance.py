@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..scene import Gaussians
 from ..sh import C0
 from .optim import torch_adam
 
@@ -136,9 +137,30 @@ class _Head:
 HEAD = _Head()
 
 
+HEAD_WEIGHTS = ("w1", "b1", "w2", "b2", "w3", "b3")
+
+
 def save(path: str, features, embeddings, head: dict, names) -> None:
     """appearance.npz: the active Gaussians' features (in scene.ply's order), each training
-    view's embedding (`names`, the same order) and the head's weights: with `seen`, the scene
-    as each training photo shows it."""
+    view's embedding (`names`, the same order) and the head's weights (`as_photo` reads it)."""
     np.savez(path, features=np.asarray(features), embeddings=np.asarray(embeddings),
-             names=np.asarray(names), **{k: np.asarray(v) for k, v in head.items()})
+             names=np.asarray(names), **{k: np.asarray(head[k]) for k in HEAD_WEIGHTS})
+
+
+def as_photo(scene: Gaussians, path: str, name: str) -> Gaussians:
+    """The scene of a run's scene.ply (`scene`: at the zero embedding) as its training photo
+    `name` shows it, from the run's appearance.npz at `path`: band 0 moved by
+    (h(e_name, f_i) − h(0, f_i)) / C0, the change from the zero embedding to the photo's."""
+    z = np.load(path)
+    names = [str(n) for n in z["names"]]
+    if name not in names:
+        raise ValueError(f"name: {name!r} is not a training view of {path} ({names[:3]}, ...)")
+    if z["features"].shape[0] != scene.num:
+        raise ValueError(f"scene: {scene.num} Gaussians, but {path} holds features of "
+                         f"{z['features'].shape[0]}")
+    head = {k: jnp.asarray(z[k]) for k in HEAD_WEIGHTS}
+    f = jnp.asarray(z["features"])
+    e = jnp.asarray(z["embeddings"][names.index(name)])
+    move = dc_change(head, e, f) - dc_change(head, jnp.zeros_like(e), f)
+    sh = jnp.asarray(scene.sh)
+    return dataclasses.replace(scene, sh=jnp.concatenate([sh[:, :1] + move, sh[:, 1:]], 1))

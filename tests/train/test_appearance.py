@@ -1,14 +1,17 @@
 """lgs_jax.train.appearance: the head against its float64 formula; a view's colour change
 added to the SH colour before the clamp (through `project`); the start (zero last layer) and
-the zero embedding as plain scenes; the shared head's rows and update in `view_params`; the
-features and their moments carried by densification."""
+the zero embedding as plain scenes; a run's scene as a training photo shows it (`as_photo`);
+the shared head's rows and update in `view_params`; the features and their moments carried by
+densification."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from lgs_jax import Camera
 from lgs_jax.projection import project
+from lgs_jax.scene import Gaussians
 from lgs_jax.sh import C0
 from lgs_jax.train import Settings, appearance, view_params
 from lgs_jax.train.ops import duplicate
@@ -109,3 +112,21 @@ def test_densification_carries_the_features_and_their_moments():
     mu = new_state[0].mu["features"]
     assert np.all(np.asarray(mu[5]) == 0) and np.all(np.asarray(mu[2]) != 0)
 
+
+
+def test_a_runs_scene_as_a_training_photo_shows_it(tmp_path):
+    params, head = _params(), _head()
+    rng = np.random.default_rng(6)
+    embeddings = rng.normal(size=(2, appearance.EMBED)).astype(np.float32)
+    path = str(tmp_path / "appearance.npz")
+    appearance.save(path, params["features"], embeddings, head, ["a", "b"])
+    baked = appearance.baked(params, head)
+    scene = Gaussians(baked["means"], baked["quats"], baked["log_scales"],
+                      baked["logit_opacities"],
+                      jnp.concatenate([baked["sh_dc"], baked["sh_rest"]], 1))
+    for k, name in enumerate(["a", "b"]):
+        want = appearance.seen(params, head, jnp.asarray(embeddings[k]))["sh_dc"]
+        got = appearance.as_photo(scene, path, name).sh[:, :1]
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), atol=1e-5)
+    with pytest.raises(ValueError, match="name: 'c'"):
+        appearance.as_photo(scene, path, "c")
