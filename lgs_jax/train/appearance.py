@@ -16,14 +16,17 @@ with its SH band 0 moved by that change,
 so its colour is max(SH_i(dir) + 0.5 + h(e_v, f_i), 0): the change adds to the view-dependent
 colour before the clamp, exactly as if band 0 had been trained to it (`seen`). Where gsplat's
 head also takes the view direction and replaces the SH colour (colours = sigmoid(head + base)),
-this one leaves the view dependence to the SH bands, so that a scene at one embedding is a plain
-scene: `baked` gives each Gaussian its band 0 at the zero embedding, which held-out views and the
-written scene.ply use, and the head's zero last layer makes the first step's renders those of a
-run without embeddings.
+this one leaves the view dependence to the SH bands, so that the scene as one view sees it is a
+plain scene, and so is the average over the training views V:
+
+    sh_dc_i + (1/|V|) Σ_v h(e_v, f_i) / C0      (`baked`),
+
+the views' average appearance, which held-out views and the written scene.ply use (`as_photo`
+gives back a training photo's). The head's zero last layer makes the first step's renders those
+of a run without embeddings.
 
 After each update the embeddings are centred over the training views (`project`, as
-`color_opt`'s corrections): the zero embedding is their mean, the views' average appearance,
-at which held-out views render. Rates (gsplat's app_opt): the embeddings lr_app · 10, the head
+`color_opt`'s corrections), so that they cannot drift together. Rates (gsplat's app_opt): the embeddings lr_app · 10, the head
 lr_app (both Adam, torch's defaults, times sqrt(batch), L2 weight decay app_reg), the features
 lr_features in the scene's Adam (`optim.optimizer`).
 
@@ -107,10 +110,21 @@ def seen(params: dict, head: dict, embedding) -> dict:
     return dict(params, sh_dc=params["sh_dc"] + dc_change(head, embedding, params["features"]))
 
 
-def baked(params: dict, head: dict) -> dict:
-    """The pool's parameters at the zero embedding (the training views' average appearance),
+def mean_dc_change(head: dict, embeddings, features):
+    """(1/V) Σ_v `dc_change`(e_v, f_i) (N, 1, 3) over the embeddings (V, EMBED), one view at a
+    time (memory of one view's head), summed in view order."""
+    def add(total, e):
+        return total + dc_change(head, e, features), None
+
+    total, _ = jax.lax.scan(add, jnp.zeros((features.shape[0], 1, 3), jnp.float32), embeddings)
+    return total / embeddings.shape[0]
+
+
+def baked(params: dict, head: dict, embeddings) -> dict:
+    """The pool's parameters at the training views' average appearance (module docstring),
     without the features: a plain scene (held-out views, scene.ply)."""
-    out = seen(params, head, jnp.zeros((EMBED,), jnp.float32))
+    out = dict(params, sh_dc=params["sh_dc"] + mean_dc_change(head, embeddings,
+                                                              params["features"]))
     del out["features"]
     return out
 
@@ -148,9 +162,9 @@ def save(path: str, features, embeddings, head: dict, names) -> None:
 
 
 def as_photo(scene: Gaussians, path: str, name: str) -> Gaussians:
-    """The scene of a run's scene.ply (`scene`: at the zero embedding) as its training photo
-    `name` shows it, from the run's appearance.npz at `path`: band 0 moved by
-    (h(e_name, f_i) − h(0, f_i)) / C0, the change from the zero embedding to the photo's."""
+    """The scene of a run's scene.ply (`scene`: at the views' average appearance, `baked`) as
+    its training photo `name` shows it, from the run's appearance.npz at `path`: band 0 moved
+    by h(e_name, f_i) / C0 − (1/V) Σ_v h(e_v, f_i) / C0."""
     z = np.load(path)
     names = [str(n) for n in z["names"]]
     if name not in names:
@@ -160,7 +174,8 @@ def as_photo(scene: Gaussians, path: str, name: str) -> Gaussians:
                          f"{z['features'].shape[0]}")
     head = {k: jnp.asarray(z[k]) for k in HEAD_WEIGHTS}
     f = jnp.asarray(z["features"])
-    e = jnp.asarray(z["embeddings"][names.index(name)])
-    move = dc_change(head, e, f) - dc_change(head, jnp.zeros_like(e), f)
+    embeddings = jnp.asarray(z["embeddings"])
+    move = (dc_change(head, embeddings[names.index(name)], f)
+            - mean_dc_change(head, embeddings, f))
     sh = jnp.asarray(scene.sh)
     return dataclasses.replace(scene, sh=jnp.concatenate([sh[:, :1] + move, sh[:, 1:]], 1))

@@ -14,7 +14,7 @@ PLY), cameras.json (INRIA: the training cameras, at their optimized poses with p
 the held-out ones), colors.json (with color_opt: each training view's colour correction),
 bilateral_grids.npz (with bilateral_grid: each training view's grid),
 appearance.npz (with app_opt: the features, embeddings and head, `appearance.save`; scene.ply
-and the held-out renders are the scene at the zero embedding, `appearance.baked`),
+and the held-out renders are the scene at the views' average appearance, `appearance.baked`),
 heldout_<name>.png (render beside ground truth), curves.png, result.json.
 """
 
@@ -158,11 +158,12 @@ _baked = jax.jit(appearance.baked)
 
 
 def _scene(st: _State) -> Pool:
-    """The pool as a plain scene: with appearance embeddings, at the zero embedding
-    (`appearance.baked`); else the pool itself."""
+    """The pool as a plain scene: with appearance embeddings, at the training views' average
+    appearance (`appearance.baked`); else the pool itself."""
     if st.views is None or "head" not in st.views:
         return st.pool
-    return Pool(_baked(st.pool.params, st.views["head"][0]), st.pool.active)
+    return Pool(_baked(st.pool.params, st.views["head"][0], st.views["embed"][0]),
+                st.pool.active)
 
 
 def _evaluate(st: _State, rd: RunData, setup: Setup, out: str | None = None):

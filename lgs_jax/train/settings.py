@@ -62,7 +62,7 @@ class Settings:
     whose lighting changes in ways that differ over the scene): a feature per Gaussian (rate
     lr_features), an embedding per training view (rate lr_app · 10 · sqrt(batch)) and a head
     the views share (lr_app · sqrt(batch)), L2 weight decay app_reg on both; held-out views
-    and scene.ply are the scene at the zero embedding, the views' average appearance.
+    and scene.ply are the scene at the training views' average appearance.
     train_on_all: train on every view of the dataset, its held-out ones included (for a final
     scene); nothing is evaluated (held-out PSNR and SSIM are None).
     """

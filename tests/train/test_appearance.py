@@ -1,6 +1,6 @@
 """lgs_jax.train.appearance: the head against its float64 formula; a view's colour change
 added to the SH colour before the clamp (through `project`); the start (zero last layer) and
-the zero embedding as plain scenes; a run's scene as a training photo shows it (`as_photo`);
+the views' average as plain scenes; a run's scene as a training photo shows it (`as_photo`);
 the shared head's rows and update in `view_params`; the features and their moments carried by
 densification."""
 
@@ -12,7 +12,6 @@ import pytest
 from lgs_jax import Camera
 from lgs_jax.projection import project
 from lgs_jax.scene import Gaussians
-from lgs_jax.sh import C0
 from lgs_jax.train import Settings, appearance, view_params
 from lgs_jax.train.ops import duplicate
 from lgs_jax.train.optim import optimizer
@@ -67,18 +66,21 @@ def test_a_view_sees_its_colour_change_added_before_the_clamp():
     np.testing.assert_array_equal(np.asarray(moved.conic), np.asarray(plain.conic))
 
 
-def test_the_start_and_the_zero_embedding_are_plain_scenes():
+def test_the_start_and_the_views_average_are_plain_scenes():
     params = _params()
     start = appearance.init_head(jax.random.key(0))
     e = jnp.ones(appearance.EMBED, jnp.float32)
     assert np.asarray(appearance.seen(params, start, e)["sh_dc"]).tobytes() == np.asarray(
         params["sh_dc"]).tobytes()
     head = _head()
-    baked = appearance.baked(params, head)
+    embeddings = jnp.asarray(np.random.default_rng(7).normal(size=(3, appearance.EMBED)),
+                             jnp.float32)
+    baked = appearance.baked(params, head, embeddings)
     assert "features" not in baked and set(baked) == set(params) - {"features"}
-    zero = appearance.colour_change(head, jnp.zeros(appearance.EMBED), params["features"])
-    np.testing.assert_allclose(np.asarray(baked["sh_dc"][:, 0]) * C0,
-                               np.asarray(params["sh_dc"][:, 0] * C0 + zero), atol=1e-6)
+    views = [appearance.seen(params, head, e)["sh_dc"] for e in embeddings]
+    np.testing.assert_allclose(np.asarray(baked["sh_dc"]), np.mean(np.asarray(views), 0),
+                               atol=1e-5)
+    assert np.abs(np.asarray(views[0]) - np.asarray(views[1])).max() > 0.1
 
 
 def test_the_shared_head_is_whole_in_every_step_and_moves():
@@ -120,7 +122,7 @@ def test_a_runs_scene_as_a_training_photo_shows_it(tmp_path):
     embeddings = rng.normal(size=(2, appearance.EMBED)).astype(np.float32)
     path = str(tmp_path / "appearance.npz")
     appearance.save(path, params["features"], embeddings, head, ["a", "b"])
-    baked = appearance.baked(params, head)
+    baked = appearance.baked(params, head, jnp.asarray(embeddings))
     scene = Gaussians(baked["means"], baked["quats"], baked["log_scales"],
                       baked["logit_opacities"],
                       jnp.concatenate([baked["sh_dc"], baked["sh_rest"]], 1))
