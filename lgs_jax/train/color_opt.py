@@ -21,10 +21,12 @@ sqrt(batch), with L2 weight decay color_reg added to the gradient.
 
 from __future__ import annotations
 
+import json
 import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 
 from .optim import torch_adam
@@ -52,3 +54,14 @@ def optimizer(settings, steps: int) -> optax.GradientTransformation:
 def project(p):
     """The corrections (views, 12) centred over the views (module docstring)."""
     return p - jnp.mean(p, axis=0)
+
+
+def save(path: str, corrections, names) -> None:
+    """colors.json: each training view's colour correction (`names`, the same order) as the
+    affine map of render colours to its photo's, C' = matrix · C + offset (matrix = I + A,
+    offset = b)."""
+    p = np.asarray(jax.device_get(corrections), np.float64)
+    rows = [dict(img_name=n, matrix=(np.eye(3) + q[:9].reshape(3, 3)).tolist(),
+                 offset=q[9:].tolist()) for n, q in zip(names, p)]
+    with open(path, "w") as f:
+        json.dump(rows, f, indent=1)

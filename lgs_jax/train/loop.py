@@ -36,7 +36,8 @@ from ..io.cameras import save_cameras
 from ..io.ply import save_ply
 from ..projection import project
 from ..render import default_backend, next_pow2, pair_capacity, render
-from . import appearance, bilateral_grid, camera_opt, checkpoint, report, view_params
+from . import (appearance, bilateral_grid, camera_opt, checkpoint, color_opt, report,
+               view_params)
 from .ahead import Sizes, Stepper, mode_of, signature
 from .data import RunData, TrainViews, nbytes, prepare, streams
 from .init import start_gaussians
@@ -453,16 +454,6 @@ def _cameras(st: _State, rd: RunData) -> list:
     return train + list(rd.test_cams)
 
 
-def _save_colors(path: str, corrections, names) -> None:
-    """colors.json: each training view's colour correction (`color_opt`) as the affine map of
-    render colours to its photo's, C' = matrix · C + offset (matrix = I + A, offset = b)."""
-    p = np.asarray(jax.device_get(corrections), np.float64)
-    rows = [dict(img_name=n, matrix=(np.eye(3) + q[:9].reshape(3, 3)).tolist(),
-                 offset=q[9:].tolist()) for n, q in zip(names, p)]
-    with open(path, "w") as f:
-        json.dump(rows, f, indent=1)
-
-
 def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, log,
             compile_seconds) -> dict:
     """Final evaluation and outputs (module docstring); returns the result."""
@@ -482,7 +473,7 @@ def _finish(out, setup: Setup, st: _State, rd: RunData, start, busy, seconds, lo
     save_cameras(os.path.join(out, "cameras.json"), _cameras(st, rd),
                  rd.train_names + rd.test_names)
     if st.views is not None and "color" in st.views:
-        _save_colors(os.path.join(out, "colors.json"), st.views["color"][0], rd.train_names)
+        color_opt.save(os.path.join(out, "colors.json"), st.views["color"][0], rd.train_names)
     if st.views is not None and "grid" in st.views:
         bilateral_grid.save(os.path.join(out, "bilateral_grids.npz"), st.views["grid"][0],
                             rd.train_names)
