@@ -3,12 +3,15 @@ plain, with colour corrections (`--color-opt`) and with appearance embeddings (`
 
     python scripts/relit_capture.py [--data DIR] [--scene skull] [--downscale 16]
         [--steps 1000] [--modes plain,color_opt,app_opt,bilateral_grid] [--out DIR]
+    python scripts/relit_capture.py --scene lego_train --truth lego_sh3/lego_sh3.ply ...
 
 Each training photo k is multiplied by a gain that changes linearly across it,
 g_k(x, y) = 1 + a_k · (x / W − 1/2) + b_k · (y / H − 1/2), with a_k, b_k uniform in ±0.8 (seed
 0), clipped to [0, 1]: light that differs over the scene and from photo to photo, which one
 affine colour map per photo cannot undo. Held-out photos are left as they are, so the held-out
-score says how well each mode keeps the relighting out of the scene. Prints, per mode, the
+score says how well each mode keeps the relighting out of the scene. With --truth the photos
+are renders of that scene relit in scene space instead (`relit_in_scene`: half of the scene
+lit brighter or darker in each training view, what appearance embeddings are for). Prints, per mode, the
 training views' PSNR (mean of the last 10% of steps, against the relit photos), the held-out
 PSNR and SSIM, and the seconds.
 """
@@ -30,6 +33,7 @@ import lgs_jax  # noqa: E402
 from lgs_jax import train  # noqa: E402
 from lgs_jax.train import report  # noqa: E402
 from lgs_jax.io.dataset import as_float  # noqa: E402
+from lgs_jax.sh import C0  # noqa: E402
 
 
 def relit(d, seed: int = 0):
@@ -45,6 +49,29 @@ def relit(d, seed: int = 0):
     return dataclasses.replace(d, images=np.stack(images))
 
 
+def relit_in_scene(d, truth, seed: int = 0, keep: int = 10):
+    """`d` with its photos replaced by renders of the scene `truth` at its cameras: in each
+    training view k the Gaussians with x above the median x have their colours times a gain
+    g_k uniform in [0.4, 1.6] (as SH: sh · g, band 0 plus (g − 1) · ½ / C0, so max(SH·Y + ½, 0)
+    is scaled exactly), the others as they are; held-out views show the scene as it is. The
+    start points: every `keep`-th Gaussian's mean and band-0 colour."""
+    rng = np.random.default_rng(seed)
+    sh = np.asarray(truth.sh, np.float32)
+    side = np.asarray(truth.means)[:, 0] > np.median(np.asarray(truth.means)[:, 0])
+    images = []
+    for k, cam in enumerate(d.cameras):
+        g = 1.0 if k in set(d.test.tolist()) else rng.uniform(0.4, 1.6)
+        lit = np.where(side[:, None, None], sh * g, sh)
+        lit[:, 0] += np.where(side[:, None], (g - 1) * 0.5 / C0, 0.0)
+        scene = dataclasses.replace(truth, sh=lit)
+        image = lgs_jax.render(scene, cam, background=d.background).image
+        images.append(np.clip(np.asarray(image), 0, 1))
+    points = np.asarray(truth.means)[::keep]
+    colors = np.clip(sh[::keep, 0] * C0 + 0.5, 0, 1)
+    return dataclasses.replace(d, images=np.stack(images).astype(np.float32),
+                               points=points.astype(np.float32), colors=colors)
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..",
@@ -54,12 +81,17 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=1000)
     p.add_argument("--modes", default="plain,color_opt,app_opt")
     p.add_argument("--out", default=None, help="run directories (default: a temporary one)")
+    p.add_argument("--truth", default=None,
+                   help="a scene (PLY) at the capture's cameras: relight it in scene space "
+                        "(`relit_in_scene`) instead of relighting the photos over the image")
     args = p.parse_args(argv)
-    d = relit(lgs_jax.load_dataset(os.path.join(args.data, args.scene),
-                                   downscale=args.downscale))
+    d = lgs_jax.load_dataset(os.path.join(args.data, args.scene), downscale=args.downscale)
+    d = relit(d) if args.truth is None else relit_in_scene(
+        d, lgs_jax.load_ply(os.path.join(args.data, args.truth)))
     out = args.out or tempfile.mkdtemp()
+    how = "over the image" if args.truth is None else f"in scene space ({args.truth})"
     print(f"{args.scene} at 1/{args.downscale}, {args.steps} steps, training photos relit "
-          f"(seed 0), {jax.devices()[0].device_kind}, JAX {jax.__version__}")
+          f"{how} (seed 0), {jax.devices()[0].device_kind}, JAX {jax.__version__}")
     print("| mode | training PSNR (last 10%) | held-out PSNR | held-out SSIM | Gaussians | s |")
     print("|---|---:|---:|---:|---:|---:|", flush=True)
     for mode in args.modes.split(","):
