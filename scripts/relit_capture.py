@@ -5,15 +5,14 @@ plain, with colour corrections (`--color-opt`) and with appearance embeddings (`
         [--steps 1000] [--modes plain,color_opt,app_opt,bilateral_grid] [--out DIR]
     python scripts/relit_capture.py --scene lego_train --truth lego_sh3/lego_sh3.ply ...
 
-Each training photo k is multiplied by a gain that changes linearly across it,
-g_k(x, y) = 1 + a_k · (x / W − 1/2) + b_k · (y / H − 1/2), with a_k, b_k uniform in ±0.8 (seed
-0), clipped to [0, 1]: light that differs over the scene and from photo to photo, which one
-affine colour map per photo cannot undo. Held-out photos are left as they are, so the held-out
-score says how well each mode keeps the relighting out of the scene. With --truth the photos
-are renders of that scene relit in scene space instead (`relit_in_scene`: half of the scene
-lit brighter or darker in each training view, what appearance embeddings are for). Prints, per mode, the
-training views' PSNR (mean of the last 10% of steps, against the relit photos), the held-out
-PSNR and SSIM, and the seconds.
+Each training photo k is multiplied by a gain that changes linearly across it, g_k(x, y) = 1 + a_k ·
+(x / W − 1/2) + b_k · (y / H − 1/2), with a_k, b_k uniform in ±0.8 (seed 0), clipped to [0, 1]:
+light that differs over the scene and from photo to photo, which one affine colour map per photo
+cannot undo. Held-out photos are left as they are, so the held-out score says how well each mode
+keeps the relighting out of the scene. With --truth the photos are renders of that scene relit in
+scene space instead (`relit_in_scene`: half of the scene lit brighter or darker in each training
+view, what appearance embeddings are for). Prints, per mode, the training views' PSNR (mean of the
+last 10% of steps, against the relit photos), the held-out PSNR and SSIM, and the seconds.
 """
 
 from __future__ import annotations

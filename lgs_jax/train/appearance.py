@@ -25,10 +25,10 @@ the views' average appearance, which held-out views and the written scene.ply us
 gives back a training photo's). The head's zero last layer makes the first step's renders those
 of a run without embeddings.
 
-After each update the embeddings are centred over the training views (`project`, as
-`color_opt`'s corrections), so that they cannot drift together. Rates (gsplat's app_opt): the embeddings lr_app · 10, the head
-lr_app (both Adam, torch's defaults, times sqrt(batch), L2 weight decay app_reg), the features
-lr_features in the scene's Adam (`optim.optimizer`).
+After each update the embeddings are centred over the training views (`project`, as `color_opt`'s
+corrections), so that they cannot drift together. Rates (gsplat's app_opt): the embeddings lr_app ·
+10, the head lr_app (both Adam, torch's defaults, times sqrt(batch), L2 weight decay app_reg), the
+features lr_features in the scene's Adam (`optim.optimizer`).
 
 Memory: the head's two hidden layers for every Gaussian of a step's views are kept for the
 backward, 2 · WIDTH floats per Gaussian and view (512 bytes: 0.5 GB at 1M Gaussians).

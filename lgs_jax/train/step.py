@@ -1,18 +1,18 @@
 """The jitted pieces of a run: one training step, one refinement (with pool growth), renders.
 
-`train_step` (one jit per Setup, pair capacity, backward rows and pool size): render the batch
-of views from the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean
-over views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's and the views' own regularisers;
-gradients w.r.t. the parameters (and, for strategies that ask, w.r.t. zero screen offsets of the
-projected means: ∂loss/∂mean2d); one Adam update (and one of the views' own parameters,
-`view_params`: pose deltas with `Settings.pose_opt`, colour corrections with
-`Settings.color_opt`, bilateral grids with `Settings.bilateral_grid`, appearance embeddings
-and their head with `Settings.app_opt`, each view's Gaussians then seen with their band 0
-moved, `appearance.seen`); then the strategy's per-step update. A step whose loss, gradients or new parameters (active slots) are
-not finite changes nothing: it returns its inputs with ok False (`fit` reports it). A view whose
-tile pairs overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s
-row_capacity), is reported (overflow, pairs, row_overflow, walked): `fit` grows what overflowed
-and runs the same step again, so no pair is ever dropped.
+`train_step` (one jit per Setup, pair capacity, backward rows and pool size): render the batch of
+views from the pool (inactive slots culled, SH bands beyond the schedule zeroed), loss = mean over
+views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's and the views' own regularisers; gradients
+w.r.t. the parameters (and, for strategies that ask, w.r.t. zero screen offsets of the projected
+means: ∂loss/∂mean2d); one Adam update (and one of the views' own parameters, `view_params`: pose
+deltas with `Settings.pose_opt`, colour corrections with `Settings.color_opt`, bilateral grids with
+`Settings.bilateral_grid`, appearance embeddings and their head with `Settings.app_opt`, each view's
+Gaussians then seen with their band 0 moved, `appearance.seen`); then the strategy's per-step
+update. A step whose loss, gradients or new parameters (active slots) are not finite changes
+nothing: it returns its inputs with ok False (`fit` reports it). A view whose tile pairs overflow
+the capacity, or whose walked pairs overflow the backward's rows (`render`'s row_capacity), is
+reported (overflow, pairs, row_overflow, walked): `fit` grows what overflowed and runs the same step
+again, so no pair is ever dropped.
 
 Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
 among kernel configurations, reductions' included, by timing them while it compiles

@@ -6,8 +6,8 @@ head the views share (`appearance`, `Settings.app_opt`).
 The state is a dict, part name -> (params, their optimizer state), holding the parts switched
 on, or None with none (`init`): a part's params are (views, SIZE) float32, zero at the start,
 or, for a part marked `shared` (the appearance head), one pytree every view uses, from the
-part's `init(settings, views, key)`. A step's views
-take their rows as onehot(idx) · P (`rows`: exact, one nonzero term a row), so each view's
+part's `init(settings, views, key)`. A step's views take their rows as onehot(idx) · P
+(`rows`: exact, one nonzero term a row; a shared part whole), so each view's
 gradient is onehot(idx)ᵀ times the rows' gradients: a dot, summed in one order where a view
 comes twice in a batch, with no scatter-add (deterministic on GPUs). The other views' rows get
 no gradient. After each part's update (`update`) the part's `project` runs (the colour

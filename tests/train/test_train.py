@@ -218,12 +218,12 @@ class _Stop(Exception):
 
 def test_resume_is_bit_identical(skull, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
-    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state, and the
-    views' own parameters (pose deltas, colour corrections and appearance embeddings with their
-    head, `view_params`) and their Adam states (both runs optimize them). The uninterrupted run is watched (`fit`'s `watch`, at its
-    start and end only) and the other streams its training images
-    (`Settings.stream_images`), which change nothing. The first training view's photo is
-    darkened (x0.6), so that its colour correction darkens against the other's."""
+    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state, and the views'
+    own parameters (pose deltas, colour corrections and appearance embeddings with their head,
+    `view_params`) and their Adam states (both runs optimize them). The uninterrupted run is watched
+    (`fit`'s `watch`, at its start and end only) and the other streams its training images
+    (`Settings.stream_images`), which change nothing. The first training view's photo is darkened
+    (x0.6), so that its colour correction darkens against the other's."""
     images = skull.images.copy()
     images[skull.train[0]] *= 0.6
     skull = dataclasses.replace(skull, images=images)
