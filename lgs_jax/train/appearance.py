@@ -110,6 +110,13 @@ def seen(params: dict, head: dict, embedding) -> dict:
     return dict(params, sh_dc=params["sh_dc"] + dc_change(head, embedding, params["features"]))
 
 
+def with_dc_change(g: Gaussians, change) -> Gaussians:
+    """`g` with its band 0 moved by `change` (N, 1, 3): sh[:, 0] + change, the other bands
+    as they are."""
+    sh = jnp.asarray(g.sh)
+    return dataclasses.replace(g, sh=jnp.concatenate([sh[:, :1] + change, sh[:, 1:]], 1))
+
+
 def mean_dc_change(head: dict, embeddings, features):
     """(1/V) Σ_v `dc_change`(e_v, f_i) (N, 1, 3) over the embeddings (V, EMBED), one view at a
     time (memory of one view's head), summed in view order."""
@@ -177,5 +184,4 @@ def as_photo(scene: Gaussians, path: str, name: str) -> Gaussians:
     embeddings = jnp.asarray(z["embeddings"])
     move = (dc_change(head, embeddings[names.index(name)], f)
             - mean_dc_change(head, embeddings, f))
-    sh = jnp.asarray(scene.sh)
-    return dataclasses.replace(scene, sh=jnp.concatenate([sh[:, :1] + move, sh[:, 1:]], 1))
+    return with_dc_change(scene, move)

@@ -116,8 +116,7 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
 
         def one(g, cam, target, off, look):
             if "dc" in look:
-                g = dataclasses.replace(g, sh=jnp.concatenate([g.sh[:, :1] + look["dc"],
-                                                               g.sh[:, 1:]], 1))
+                g = appearance.with_dc_change(g, look["dc"])
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=s.settings.raster, screen_offsets=off,
                        row_capacity=rows)
