@@ -288,7 +288,7 @@ def _gsplat_loop(args, rd, model, settings, strategy, log):
     """simple_trainer's loop (module docstring): returns (curve, training seconds)."""
     import torch
 
-    from lgs_jax.train.data import views_for_step
+    from lgs_jax.train.feed import views_for_step
 
     params, opts, sched, theirs, state = model
     vm, ks = _cams_torch(rd.train_cams)
@@ -337,7 +337,7 @@ def run_gsplat(args, scene: str) -> dict:
     """gsplat 1.5.3's trainer on the scene; its curve, time per step and peak memory."""
     import torch
 
-    from lgs_jax.train.data import prepare
+    from lgs_jax.train.feed import prepare
     from lgs_jax.train.init import start_gaussians
 
     torch.backends.cuda.matmul.allow_tf32 = False  # float32 arithmetic, as ours

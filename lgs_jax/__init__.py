@@ -7,9 +7,9 @@ Public API: `Gaussians`, `Camera`, `RasterConfig` (with its `KernelConfig`), `re
 """
 
 from .config import KernelConfig, RasterConfig
-from .data import default_camera, default_scene
+from .assets import default_camera, default_scene
 from .io.cameras import load_cameras, save_cameras
-from .io.dataset import Dataset, load_dataset
+from .io.datasets import Dataset, load_dataset
 from .io.views import DatasetError
 from .io.ply import PlyError, load_ply, save_ply
 from .render import (BACKENDS, CapacityError, RenderOutput, RenderStats, default_backend,

@@ -177,7 +177,7 @@ def main(argv=None) -> int:
     from benchmarks.common import device_line, median_ms
     from lgs_jax.render import pair_capacity
     from lgs_jax.train import MCMCStrategy, Settings
-    from lgs_jax.train.data import prepare
+    from lgs_jax.train.feed import prepare
     from lgs_jax.train.loop import _pairs
     from lgs_jax.train.settings import Setup
 

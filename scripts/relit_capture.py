@@ -31,7 +31,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import lgs_jax  # noqa: E402
 from lgs_jax import train  # noqa: E402
 from lgs_jax.train import report  # noqa: E402
-from lgs_jax.io.dataset import as_float  # noqa: E402
+from lgs_jax.io.datasets import as_float  # noqa: E402
 from lgs_jax.sh import C0  # noqa: E402
 
 

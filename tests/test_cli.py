@@ -207,12 +207,12 @@ def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
 @pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], False),
                                         (["--compile-ahead-process"], "process")])
 def test_fit_compile_ahead_flags(flags, want):
-    args = cli._parser().parse_args(["fit", "--data", "d", "--out", "o", *flags])
+    args = cli.parser().parse_args(["fit", "--data", "d", "--out", "o", *flags])
     assert cli.ahead_mode(args) == want
 
 
 def test_fit_compile_ahead_flags_exclude_each_other(capsys):
     with pytest.raises(SystemExit):
-        cli._parser().parse_args(["fit", "--data", "d", "--out", "o", "--no-compile-ahead",
+        cli.parser().parse_args(["fit", "--data", "d", "--out", "o", "--no-compile-ahead",
                                   "--compile-ahead-process"])
     assert "not allowed with" in capsys.readouterr().err

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import lgs_jax
-from lgs_jax import data, poses, video
+from lgs_jax import assets as data, poses, video
 from lgs_jax.cli import main
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import lgs_jax
-from lgs_jax import data, viewer
+from lgs_jax import assets as data, viewer
 from lgs_jax.cli import main
 from lgs_jax.video import render_output, to_uint8
 

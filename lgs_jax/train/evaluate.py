@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import RasterConfig
-from ..io.dataset import Dataset, as_float, load_dataset
+from ..io.datasets import Dataset, as_float, load_dataset
 from ..render import default_backend
 from ..scene import Gaussians
 from . import report

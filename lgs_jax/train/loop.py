@@ -39,7 +39,7 @@ from ..render import default_backend, next_pow2, pair_capacity, render
 from . import (appearance, bilateral_grid, camera_opt, checkpoint, color_opt, report,
                view_params)
 from .ahead import Sizes, Stepper, mode_of, signature
-from .data import RunData, TrainViews, nbytes, prepare, streams
+from .feed import RunData, TrainViews, nbytes, prepare, streams
 from .init import start_gaussians
 from .losses import PADDINGS
 from .optim import optimizer

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..io.dataset import Dataset, as_float, load_dataset
+from ..io.datasets import Dataset, as_float, load_dataset
 from ..scene import stack_cameras
 
 
@@ -244,12 +244,12 @@ class TrainViews:
 
 LEVELS = np.arange(256, dtype=np.float32) / np.float32(255)
 """x / 255 in float32 for every 8-bit value x, divided on the host (numpy's IEEE division, as
-`io.dataset.as_float` and the image reader divide): XLA rewrites a division by a constant
+`io.datasets.as_float` and the image reader divide): XLA rewrites a division by a constant
 into a multiplication by its reciprocal, which rounds some values differently."""
 
 
 def _float(images):
-    """`io.dataset.as_float` on the device (a lookup of `LEVELS`: the same bits)."""
+    """`io.datasets.as_float` on the device (a lookup of `LEVELS`: the same bits)."""
     if images.dtype == jnp.uint8:
         return jnp.asarray(LEVELS)[images]
     return images

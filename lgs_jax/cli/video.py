@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from .cli_args import (VIDEO_EXTENSIONS, UsageError, capture_cameras, check_input, check_out,
+from .args import (VIDEO_EXTENSIONS, UsageError, capture_cameras, check_input, check_out,
                        finite_float, int_at_least, number_at_least, raster_config,
                        view_options)
 
@@ -37,7 +37,7 @@ def _cameras(args):
     """The cameras a video's path is fitted to: --cameras, or the default scene's 8 orbit views,
     at --width/--height."""
     import lgs_jax
-    from lgs_jax import data
+    from lgs_jax import assets as data
 
     cams = capture_cameras(args, "for a video of")
     if cams is None:

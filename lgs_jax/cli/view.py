@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cli_args import (capture_cameras, check_input, int_at_least, pick_view, raster_config,
+from .args import (capture_cameras, check_input, int_at_least, pick_view, raster_config,
                        view_options)
 
 
@@ -51,7 +51,7 @@ def _cameras(args):
     """(cameras drawn in the viewer, the one to start at): those of --cameras, or the default
     scene's orbit views (its framing camera first unless --view picks one)."""
     import lgs_jax
-    from lgs_jax import data
+    from lgs_jax import assets as data
 
     cams = capture_cameras(args, "to view")
     chosen = pick_view(args, cams)  # checks --view

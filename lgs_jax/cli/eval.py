@@ -6,13 +6,13 @@ from __future__ import annotations
 import json
 import os
 
-from .cli_args import check_dataset, check_input, int_at_least, raster_config
-from .config import CONVENTIONS
+from .args import check_dataset, check_input, int_at_least, raster_config
+from ..config import CONVENTIONS
 
 
 def parser(sub, common) -> None:
     """The `eval` subcommand's options."""
-    from .render import BACKENDS
+    from ..render import BACKENDS
 
     e = sub.add_parser(
         "eval", parents=[common], help="score a scene on a capture's views (PSNR, SSIM)",

@@ -8,7 +8,7 @@ import argparse
 import math
 import os
 
-from .config import CONVENTIONS
+from ..config import CONVENTIONS
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
 VIDEO_EXTENSIONS = (".mp4",)  # lgs_jax.video.write_video (H.264)
@@ -78,8 +78,8 @@ def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") ->
 def view_options(p, sizes: bool = True) -> None:
     """The options `render`, `video` and `view` share: the scene, its cameras, the image size
     (with `sizes`), the backend (lgs_jax.BACKENDS), the compositing rule and the background."""
-    from .render import BACKENDS
-    from .video import OUTPUTS
+    from ..render import BACKENDS
+    from ..video import OUTPUTS
 
     p.add_argument("scene", nargs="?", help="INRIA PLY file (default: the bundled fruit_drops "
                                             "scene, a label reading MIXED DROPS)")
@@ -132,7 +132,7 @@ def pick_view(args, cams):
     """--view of `cams` (loaded by `capture_cameras`; 0 by default), or where `cams` is None of
     the default scene (its framing camera by default); a usage error out of range."""
     import lgs_jax
-    from lgs_jax import data
+    from lgs_jax import assets as data
 
     if cams is not None:
         view = args.view or 0
@@ -149,7 +149,7 @@ def pick_view(args, cams):
 
 def raster_config(args):
     """The `RasterConfig` of --convention and --antialiased."""
-    from .config import RasterConfig
+    from ..config import RasterConfig
 
     return RasterConfig(args.convention, antialiased=args.antialiased)
 

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 import lgs_jax
 from lgs_jax.io import colmap, undistort
-from lgs_jax.io.dataset import as_float
+from lgs_jax.io.datasets import as_float
 from lgs_jax.io.views import Lens
 from tests.io import colmap_format as cf
 

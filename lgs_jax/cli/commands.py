@@ -21,11 +21,11 @@ import time
 
 import numpy as np
 
-from . import cli_eval, cli_video, cli_view
-from .cli_args import (EXIT_FAILURE, EXIT_USAGE, IMAGE_EXTENSIONS, Parser, UsageError,
+from . import eval as eval_cmd, video as video_cmd, view as view_cmd
+from .args import (EXIT_FAILURE, EXIT_USAGE, IMAGE_EXTENSIONS, Parser, UsageError,
                        check_dataset, check_input, check_out, chosen_camera, int_at_least,
                        number_at_least, raster_config, view_options)
-from .config import CONVENTIONS
+from ..config import CONVENTIONS
 
 
 def _merged_seconds(spans) -> float:
@@ -88,7 +88,7 @@ def _render(args) -> int:
           f"{int(s.pairs_required)} (capacity {int(s.capacity)})")
     import matplotlib.image
 
-    from .video import frame_pixels
+    from ..video import frame_pixels
 
     matplotlib.image.imsave(args.out, frame_pixels(out, args.output))
     print(f"wrote {args.out}")
@@ -117,7 +117,7 @@ def _info(args) -> int:
 
 def _fit(args) -> int:
     """`fit`: check --data and --out (an existing run needs --resume or --overwrite), train."""
-    from . import train
+    from .. import train
 
     check_dataset(args.data)
     problem = train.run_dir_problem(args.out, args.resume, args.overwrite)
@@ -134,7 +134,7 @@ def _fit(args) -> int:
     if args.viewer_port is not None or args.uint8_images:
         data = _dataset(args)
     if args.viewer_port is not None:
-        watch, served = cli_view.training_viewer(args, data)
+        watch, served = view_cmd.training_viewer(args, data)
     if args.strategy == "mcmc":
         strategy = train.MCMCStrategy(cap_max=args.max_gaussians)
     else:
@@ -152,7 +152,7 @@ def _fit(args) -> int:
         raise
     print(json.dumps(result, indent=1))
     if served is not None:
-        from .viewer import wait
+        from ..viewer import wait
 
         print("training done; the viewer shows the trained scene (Ctrl-C stops)", flush=True)
         wait(served)
@@ -162,7 +162,7 @@ def _fit(args) -> int:
 def _dataset(args):
     """The dataset `fit` trains on (`--data`, `--downscale`, `--uint8-images`), loaded here
     for its viewer or its image type."""
-    from .io.dataset import load_dataset
+    from ..io.datasets import load_dataset
 
     return load_dataset(args.data, downscale=args.downscale,
                         dtype=np.uint8 if args.uint8_images else np.float32)
@@ -190,7 +190,7 @@ def _render_parser(sub, common) -> None:
 
 def _fit_parser(sub, common) -> None:
     """The `fit` subcommand's options."""
-    from .train.settings import Settings
+    from ..train.settings import Settings
 
     f = sub.add_parser(
         "fit", parents=[common], help="train Gaussians on a capture (COLMAP, transforms.json, "
@@ -320,7 +320,7 @@ def _fit_run_options(f) -> None:
                        help="delete OUT's previous run (its checkpoint, metrics and renders)")
 
 
-def _parser() -> argparse.ArgumentParser:
+def parser() -> argparse.ArgumentParser:
     """The command line: `render`, `video`, `view`, `info`, `fit` and `eval`, each with
     `--debug`."""
     common = Parser(add_help=False)
@@ -329,14 +329,14 @@ def _parser() -> argparse.ArgumentParser:
                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     _render_parser(sub, common)
-    cli_video.parser(sub, common)
-    cli_view.parser(sub, common)
+    video_cmd.parser(sub, common)
+    view_cmd.parser(sub, common)
     i = sub.add_parser("info", parents=[common],
                        help="print counts, SH degree, bounds and non-finite values")
     i.add_argument("scene")
     i.set_defaults(func=_info)
     _fit_parser(sub, common)
-    cli_eval.parser(sub, common)
+    eval_cmd.parser(sub, common)
     return ap
 
 
@@ -377,7 +377,7 @@ def use_compile_cache() -> str | None:
 
 def main(argv=None) -> int:
     """Run the command line; returns the exit code (0 success, 1 failure, 2 usage error)."""
-    args = _parser().parse_args(argv)
+    args = parser().parse_args(argv)
     use_compile_cache()
     try:
         return args.func(args)

@@ -1,4 +1,4 @@
-"""lgs_jax.data: the bundled default scene and its cameras."""
+"""lgs_jax.assets: the bundled default scene and its cameras."""
 
 import numpy as np
 import pytest
