@@ -12,13 +12,14 @@ from .io.cameras import load_cameras, save_cameras
 from .io.datasets import Dataset, load_dataset
 from .io.views import DatasetError
 from .io.ply import PlyError, load_ply, save_ply
-from .render import (BACKENDS, CapacityError, RenderOutput, RenderStats, default_backend,
-                     pair_capacity, render, render_growing)
+from .render import (BACKENDS, CapacityError, RenderOutput, RenderStats, count_pairs,
+                     default_backend, pair_capacity, render, render_growing)
 from .scene import Camera, Gaussians, stack_cameras
 
 __all__ = [
     "BACKENDS", "Camera", "CapacityError", "Dataset", "DatasetError", "Gaussians",
-    "KernelConfig", "PlyError", "RasterConfig", "RenderOutput", "RenderStats", "default_backend",
+    "KernelConfig", "PlyError", "RasterConfig", "RenderOutput", "RenderStats", "count_pairs",
+    "default_backend",
     "default_camera", "default_scene", "load_cameras", "load_dataset", "load_ply", "pair_capacity",
     "render", "render_growing", "save_cameras", "save_ply", "stack_cameras",
 ]

@@ -164,6 +164,14 @@ def _count(g: Gaussians, cam: Camera, width: int, height: int, antialiased: bool
     return binning.count_pairs(project(g, cam, antialiased, colors), width, height)
 
 
+def count_pairs(gaussians: Gaussians, camera: Camera, *, antialiased: bool = False,
+                colors=None):
+    """The tile–Gaussian pairs `render` of `gaussians` through `camera` needs (an int32 array,
+    saturating at 2^31 − 1): the exact count the pair buffer must hold (`pair_capacity` rounds
+    it up). Works under jit and vmap (the camera's image size is static)."""
+    return _count(gaussians, camera, camera.width, camera.height, antialiased, colors)
+
+
 def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | None,
            result: RasterResult) -> RenderStats:
     i32 = functools.partial(jnp.sum, dtype=jnp.int32)
@@ -330,8 +338,8 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
             raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an "
                              "eager render's stats.capacity), then check stats.overflow and "
                              "stats.pairs_required, or use lgs_jax.render_growing")
-        required = int(_count(gaussians, camera, camera.width, camera.height,
-                              config.antialiased, colors))
+        required = int(count_pairs(gaussians, camera, antialiased=config.antialiased,
+                                   colors=colors))
         if required >= binning.MAX_PAIRS:
             raise CapacityError(required, 0)
         capacity = pair_capacity(required)
