@@ -145,11 +145,6 @@ class TileBins:
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
       n_unbounded: int32 Gaussians binned to every tile because rounding could not bound them.
-      row_capacity: rows of the Pallas backward's buffer of gradient rows for the pairs some
-        pixel of their tile reached (static; backends.gaussian_grads.walked_rows): this many,
-        or None for the pair capacity (never too few).
-      table: the backend's per-Gaussian table built before binning (`Backend.gaussian_table`,
-        not differentiated), or None.
     """
 
     gauss: Any
@@ -163,8 +158,6 @@ class TileBins:
     pairs_required: Any
     overflow: Any
     n_unbounded: Any
-    row_capacity: int | None = dataclasses.field(default=None, metadata=dict(static=True))
-    table: Any = None
 
 
 def total_pairs(counts):
@@ -352,26 +345,24 @@ def sort_pairs(tile, gauss, n_tiles: int):
     return (tile, gauss[slot], slot) + tile_ranges(tile, n_tiles)
 
 
-def bin_gaussians(p: Projected, width: int, height: int, capacity: int,
-                  row_capacity: int | None = None, table=None) -> TileBins:
-    """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
-    pairs are emitted in depth order and the tile sort is stable. `row_capacity`: the
-    backward's row buffer (`TileBins.row_capacity`); `table`: `TileBins.table`.
+def before_emission(p: Projected, values):
+    """(p, values) with `values` (any pytree, e.g. a backend's `prepare`d inputs) ordered before
+    the pair emission of `bin_gaussians(p, ...)`: an optimization barrier with the validity
+    flags, which every per-Gaussian column of the emission reads. XLA would otherwise compute
+    the emission's columns (depth keys, tile rectangles and counts) first and keep them live
+    while `values` are computed, next to their own inputs: at scale, the peak of the
+    temporaries. The same values."""
+    valid, values = lax.optimization_barrier((p.valid, values))
+    return dataclasses.replace(p, valid=valid), values
 
-    A table is ordered before the emission (an optimization barrier with the validity flags,
-    which every per-Gaussian column of the emission reads): XLA would otherwise compute the
-    emission's columns (depth keys, tile rectangles and counts) first and keep them live while
-    the table is written, next to the table's own inputs, the peak of the temporaries at scale
-    (XLA's buffer assignment for the H200, `scripts/gpu_memory_offline.py`: forward + backward
-    at 5.8M Gaussians, 1080p, walked rows 930 → 886 MiB; forward at 10M, 4K 1297 → 1268)."""
+
+def bin_gaussians(p: Projected, width: int, height: int, capacity: int) -> TileBins:
+    """`emit_pairs` then `sort_pairs`: every tile's pairs, sorted by (depth, index) because the
+    pairs are emitted in depth order and the tile sort is stable."""
     tiles_x, tiles_y = tile_grid(width, height)
-    if table is not None:
-        valid, table = lax.optimization_barrier((p.valid, table))
-        p = dataclasses.replace(p, valid=valid)
     e = emit_pairs(p, width, height, capacity)
     tile, gauss, slot, start, end = sort_pairs(e.tile, e.gauss, tiles_x * tiles_y)
     return TileBins(gauss=gauss, tile=tile, slot=slot, tile_start=start, tile_end=end,
                     emitted_tile=sort_key(e.tile, tiles_x * tiles_y),
                     first=e.first, count=e.count, pairs_required=e.total,
-                    overflow=e.total > capacity, n_unbounded=e.n_unbounded,
-                    row_capacity=row_capacity, table=table)
+                    overflow=e.total > capacity, n_unbounded=e.n_unbounded)

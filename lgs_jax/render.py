@@ -14,7 +14,8 @@ at most 12.5% waste). Under
 
 Row capacity: the Pallas backward stores a gradient row per walked pair (a pair some pixel of its
 tile reached) and block, in a buffer of the pair capacity's rows by default; `row_capacity`
-sizes it for `stats.pairs_walked` instead, reported in `stats.row_overflow` the same way.
+sizes it for `stats.backend_stats.pairs_walked` instead, reported in
+`stats.backend_stats.row_overflow` the same way.
 """
 
 from __future__ import annotations
@@ -29,8 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import binning
-from .backends import REGISTRY, RasterResult
-from .backends.interface import pairs_walked
+from .backends import REGISTRY, BackendInputs, RasterResult
 from .composite import PixelState, finish
 from .config import RasterConfig
 from .layout import tile_grid, tiles_to_image
@@ -43,9 +43,8 @@ BACKENDS = tuple(REGISTRY)
 
 def default_backend() -> str:
     """The backend `render` uses when none is given: the fastest exact one for JAX's default
-    platform, as measured (BENCHMARKS.md §2 and §7): `pallas` on a GPU, `tiles` elsewhere.
-    Gradients take the render's backend; `lgs_jax.train`'s `fit` and `evaluate` take it as
-    theirs."""
+    platform (BENCHMARKS.md): `pallas` on a GPU, `tiles` elsewhere. Gradients take the render's
+    backend; `lgs_jax.train`'s `fit` and `evaluate` take it as theirs."""
     return "pallas" if jax.default_backend() == "gpu" else "tiles"
 
 
@@ -73,23 +72,13 @@ class RenderStats:
       n_transparent: valid Gaussians culled because opacity < 1/255.
       n_unbounded: Gaussians whose float rounding could not be bounded, binned to every tile.
       pairs_required: tile–Gaussian pairs the scene needs (saturates at 2^31 − 1).
-      strip_pairs: strip–Gaussian pairs processed (`tiles` and `pallas` backends; 8·pairs
-        without warp culling, so strip_pairs / (8·pairs) is the share of work the strip masks
-        keep; −1 where not counted: `KernelConfig.mosaic_pair_source` "gaussians").
       capacity: size of the pair buffer used.
       overflow: pairs_required > capacity (the image lacks the farthest pairs).
-      pairs_walked: pairs some pixel of their tile reached (each tile's pairs up to its
-        pixels' latest stop; 0 for backends without pairs): the rows the Pallas backward needs
-        with a `row_capacity` (render's argument).
-      row_overflow: pairs_walked > row_capacity (the Pallas backward's gradients lack the
-        rows past it; the image is complete). False without a row_capacity, and for backends
-        that store no pair rows (they ignore it).
       backend: name of the backend that rendered (static).
-      kernel: the Pallas forward kernel that ran ("localgs-triton", "localgs-mosaic",
-        "vanilla-triton", "vanilla-mosaic"; "" for the XLA
-        backends) (static). Under differentiation the forward of the backward's plan runs
-        (`backends.pallas.Plan.for_gradients`), which this does not name where they differ.
-      interpreted: the Pallas kernel ran in interpret mode (no GPU) (static).
+      backend_stats: the backend's own counts, or None: `tiles` a
+        `backends.tiles.TilesStats` (strip pairs), `pallas` and `pallas_vanilla` a
+        `backends.pallas.PallasStats` (strip pairs, walked pairs and the row overflow of
+        render's `row_capacity`, the kernel that ran and whether it was interpreted).
     """
 
     n_valid: Any
@@ -97,14 +86,10 @@ class RenderStats:
     n_transparent: Any
     n_unbounded: Any
     pairs_required: Any
-    strip_pairs: Any
     capacity: Any
     overflow: Any
-    pairs_walked: Any
-    row_overflow: Any
     backend: str = dataclasses.field(metadata=dict(static=True))
-    kernel: str = dataclasses.field(default="", metadata=dict(static=True))
-    interpreted: bool = dataclasses.field(default=False, metadata=dict(static=True))
+    backend_stats: Any = None
 
 
 @jax.tree_util.register_dataclass
@@ -176,19 +161,12 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
            result: RasterResult) -> RenderStats:
     i32 = functools.partial(jnp.sum, dtype=jnp.int32)
     zero = jnp.int32(0)
-    strip_pairs = result.strip_pairs
-    walked = zero
-    if bins is not None and result.stop is not None:
-        walked = pairs_walked(result.stop, bins.tile_start, bins.tile_end)
-    rows = bins.row_capacity if bins is not None else None
     return RenderStats(
-        pairs_walked=walked, row_overflow=jnp.bool_(False) if rows is None else walked > rows,
         n_valid=i32(p.valid), n_invalid=i32(p.invalid), n_transparent=i32(~p.valid & ~p.invalid),
         n_unbounded=bins.n_unbounded if bins else zero,
         pairs_required=bins.pairs_required if bins else zero,
-        strip_pairs=zero if strip_pairs is None else strip_pairs.astype(jnp.int32),
         capacity=jnp.int32(capacity), overflow=bins.overflow if bins else jnp.bool_(False),
-        backend=backend, kernel=result.kernel, interpreted=result.interpreted)
+        backend=backend, backend_stats=result.stats)
 
 
 @functools.partial(jax.jit, static_argnames=("backend", "config", "capacity", "row_capacity"))
@@ -201,17 +179,23 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
     spec = REGISTRY[backend]
     tiles_x, tiles_y = tile_grid(width, height)
-    table = lambda q: (None if spec.gaussian_table is None
-                       else spec.gaussian_table(q, config, tiles_x * tiles_y, capacity))
+    prepare = lambda q: (None if spec.prepare is None
+                         else spec.prepare(q, config, tiles_x * tiles_y, capacity))
+    inputs = lambda prepared: BackendInputs(prepared, row_capacity)
     channels = p.rgb.shape[-1]
     three = channels == 3
-    bins = (binning.bin_gaussians(p, width, height, capacity, row_capacity,
-                                  table(p) if three else None) if spec.binned else None)
+    bins = prepared = None
+    if spec.binned:
+        binned, prepared = p, prepare(p) if three else None
+        if prepared is not None:
+            binned, prepared = binning.before_emission(p, prepared)
+        bins = binning.bin_gaussians(binned, width, height, capacity)
     if three:
-        result = spec.rasterize(p, bins, width, height, config)
+        result = spec.rasterize(p, bins, width, height, config, inputs(prepared))
         color = _image_color(result, width, height)
     else:
-        color, result = _channel_passes(p, bins, table, spec.rasterize, width, height, config)
+        color, result = _channel_passes(p, bins, lambda q: inputs(prepare(q)), spec.rasterize,
+                                        width, height, config)
     state = PixelState(color=color, trans=tiles_to_image(result.trans, width, height),
                        depth=tiles_to_image(result.depth, width, height), done=None)
     image, alpha, depth = finish(state, background)
@@ -222,22 +206,22 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
                         visible=_visible(p, width, height))
 
 
-def _channel_passes(p: Projected, bins, table, rasterize, width: int, height: int,
+def _channel_passes(p: Projected, bins, inputs, rasterize, width: int, height: int,
                     config: RasterConfig):
     """(colour (H·W, C), the first pass's `RasterResult`) of a `p` whose colour has C != 3
     channels: a backend composites three channels a pass, so the channels are padded with
     zeros to a multiple of three and composited three at a time over the same pairs, each
-    pass with its own Gaussian table (`table(q)`), in a `lax.map` (the kernels are traced and
-    compiled once, whatever C). Every pass blends the same α (the same pairs, the same
-    arithmetic), so their transmittance and depth are the same bits."""
+    pass with its own backend inputs (`inputs(q)`: what the backend prepares from that pass's
+    colours), in a `lax.map` (the kernels are traced and compiled once, whatever C). Every
+    pass blends the same α (the same pairs, the same arithmetic), so their transmittance and
+    depth are the same bits."""
     channels = p.rgb.shape[-1]
     rgb = jnp.pad(p.rgb, ((0, 0), (0, -channels % 3)))
     chunks = rgb.reshape(rgb.shape[0], -1, 3).transpose(1, 0, 2)
 
     def one_pass(rgb3):
         q = dataclasses.replace(p, rgb=rgb3)
-        b = None if bins is None else dataclasses.replace(bins, table=table(q))
-        result = rasterize(q, b, width, height, config)
+        result = rasterize(q, bins, width, height, config, inputs(q))
         return _image_color(result, width, height), result
 
     colors, results = jax.lax.map(one_pass, chunks)
@@ -261,12 +245,9 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
                   config: RasterConfig) -> RenderOutput:
     h, w = cam.height, cam.width
     zero = jnp.int32(0)
-    kernel, interpreted = REGISTRY[backend].describe(config)
     stats = RenderStats(n_valid=zero, n_invalid=zero, n_transparent=zero, n_unbounded=zero,
-                        pairs_required=zero, strip_pairs=zero, capacity=zero,
-                        overflow=jnp.bool_(False), pairs_walked=zero,
-                        row_overflow=jnp.bool_(False), backend=backend, kernel=kernel,
-                        interpreted=interpreted)
+                        pairs_required=zero, capacity=zero, overflow=jnp.bool_(False),
+                        backend=backend, backend_stats=REGISTRY[backend].empty_stats(config))
     image = jnp.broadcast_to(background, (h, w, background.shape[0])).astype(dtype)
     return RenderOutput(image=image,
                         alpha=jnp.zeros((h, w), dtype), depth=jnp.zeros((h, w), dtype),
@@ -293,11 +274,11 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         with `pair_capacity`. Under jit/vmap pass an int and check `stats.overflow`.
       row_capacity: rows of the Pallas backends' backward buffer of per-pair gradients (48
         bytes per row and block of a tile; the memory of a gradient at scale), each a pair some
-        pixel reached (`stats.pairs_walked`, typically 15–30% of the pairs at 1M–10M
-        Gaussians). None: as many rows as `capacity` (nothing can overflow). An int: this
-        many; the same gradients to the bit while `stats.row_overflow` is False. Size it
-        from an earlier render's `stats.pairs_walked` (`pair_capacity` of it leaves headroom)
-        and check `stats.row_overflow`. Other backends ignore it.
+        pixel reached (`stats.backend_stats.pairs_walked`, a fraction of the pairs in large
+        scenes). None: as many rows as `capacity` (nothing can overflow). An int: this many;
+        the same gradients to the bit while `stats.backend_stats.row_overflow` is False. Size
+        it from an earlier render's `pairs_walked` (`pair_capacity` of it leaves headroom) and
+        check `row_overflow`. Other backends ignore it.
       screen_offsets: optional (N, 2) added to the projected means (pixels). Pass zeros and
         differentiate with respect to it to get ∂L/∂mean2d per Gaussian, the screen-space
         gradient densification strategies accumulate (with `visible`); binning sees the offset
@@ -346,7 +327,8 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if screen_offsets is not None and np.shape(screen_offsets) != (gaussians.num, 2):
         raise ValueError(f"screen_offsets: expected shape ({gaussians.num}, 2), got "
                          f"{np.shape(screen_offsets)}")
-    rows = int(row_capacity) if row_capacity is not None and REGISTRY[backend].pair_rows else None
+    rows = (int(row_capacity) if row_capacity is not None and REGISTRY[backend].row_capacity
+            else None)
     out = _render(gaussians, camera, background, backend, config, int(capacity), rows,
                   screen_offsets, colors)
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):

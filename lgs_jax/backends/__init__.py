@@ -5,9 +5,9 @@ To add a backend, write its module (a `rasterize` returning `RasterResult`, wrap
 """
 
 from . import brute, pallas, reference, tiles
-from .interface import Backend, RasterResult
+from .interface import Backend, BackendInputs, RasterResult
 
 REGISTRY: dict[str, Backend] = {b.name: b for b in (
     brute.BACKEND, reference.BACKEND, tiles.BACKEND, pallas.LOCALGS, pallas.VANILLA)}
 
-__all__ = ["REGISTRY", "Backend", "RasterResult"]
+__all__ = ["REGISTRY", "Backend", "BackendInputs", "RasterResult"]

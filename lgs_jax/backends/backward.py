@@ -1,5 +1,6 @@
 """Backward of per-pixel compositing: each tile's list walked back to front from the final
-transmittance, as the original 3DGS backward does (the `reference` backend's custom_vjp).
+transmittance, as the original 3DGS backward does (the `reference` and `tiles` backends'
+custom_vjp; the Pallas backward kernels take the same step, `walk_step`).
 
 With w_k = α_k·T_k, a pixel's outputs are C = Σ rgb_k·w_k, D = Σ z_k·w_k and T_N = Π (1 − α_k)
 over the Gaussians blended there. Walking back over them, from T_N:
@@ -30,7 +31,6 @@ import functools
 import jax
 import jax.numpy as jnp
 from jax import lax
-from jax.custom_derivatives import SymbolicZero
 
 from .. import alpha as alpha_model
 from .. import hoist
@@ -227,55 +227,7 @@ def per_gaussian_sum(rows, bins: TileBins, n: int):
     return segment_sums(ids, rows[inv], n)
 
 
-def differentiable(forward, gradients, forward_for_gradients=None):
-    """A rasterizer with a custom backward, from its two halves (both per tile, (n_tiles, 256)):
-
-      forward(p, bins, width, height, config) -> (state, stop_at, extra, saved): the composited
-        PixelState, each pixel's stop pair index, anything else to return (`extra`) and what the
-        backward reuses (`saved`, O(pairs)).
-      gradients(p, bins, width, height, config, trans, stop_at, saved, (ḡ_C, ḡ_T, ḡ_D)) -> (N, 10)
-        per-Gaussian ∂L/∂(mean2d, conic, opacity, rgb, depth) (PAIR_COLUMNS order); ḡ_D is
-        None where the loss does not reach the depth (a symbolic zero: `depth_cotangent`).
-
-    `forward_for_gradients` (same signature; default `forward`) is the forward run when the
-    backward will follow (under `jax.grad` / `jax.vjp`).
-
-    Returns composite(p, bins, width, height, config) -> (color, trans, depth, stop_at, extra),
-    per tile (stop_at: int32, not differentiated).
-    Reverse-mode cannot go through the forward's while loops; this is the only way in.
-    """
-    @functools.partial(jax.custom_vjp, nondiff_argnums=(2, 3, 4))
-    def composite(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
-        state, stop_at, extra, _ = forward(p, bins, width, height, config)
-        return state.color, state.trans, state.depth, stop_at, extra
-
-    def composite_fwd(p, bins, width, height, config):
-        # symbolic_zeros: the leaves come as CustomVJPPrimal(value, perturbed)
-        p, bins = jax.tree.map(lambda x: x.value, (p, bins))
-        state, stop_at, extra, saved = (forward_for_gradients or forward)(p, bins, width, height,
-                                                                          config)
-        return ((state.color, state.trans, state.depth, stop_at, extra),
-                (p, bins, state.trans, stop_at, saved))
-
-    def composite_bwd(width, height, config, residuals, cotangents):
-        p, bins, trans, stop_at, saved = residuals
-        g_color, g_trans, g_depth = cotangents[:3]
-        g_color, g_trans = (jnp.zeros(g.shape, g.dtype) if isinstance(g, SymbolicZero) else g
-                            for g in (g_color, g_trans))
-        g_depth = None if isinstance(g_depth, SymbolicZero) else g_depth
-        per = gradients(p, bins, width, height, config, trans, stop_at, saved,
-                        (g_color, g_trans, g_depth))
-        grad_p = Projected(mean2d=per[:, 0:2], cov2d=None, conic=per[:, 2:5], depth=per[:, 9],
-                           opacity=per[:, 5], rgb=per[:, 6:9], valid=None, invalid=None)
-        return grad_p, None
-
-    # Symbolic zeros: a loss of the image alone leaves the depth's cotangent a symbolic zero,
-    # which the Mosaic GPU backward then neither materialises nor reads (an image-sized plane)
-    # nor multiplies per pair (`walk_step`: 10 of its 240 instructions per pair on the H200).
-    composite.defvjp(composite_fwd, composite_bwd, symbolic_zeros=True)
-    return composite
-
-
 def depth_cotangent(g_depth, trans):
-    """ḡ_D as an array: zeros shaped as `trans` where it is None (`differentiable`)."""
+    """ḡ_D as an array: zeros shaped as `trans` where it is None (a symbolic zero:
+    lgs_jax.backends.custom_vjp)."""
     return jnp.zeros_like(trans) if g_depth is None else g_depth

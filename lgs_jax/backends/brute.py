@@ -13,7 +13,7 @@ from ..composite import PixelState, blend
 from ..config import RasterConfig
 from ..layout import image_to_tiles
 from ..projection import Projected, depth_order
-from .interface import Backend, RasterResult
+from .interface import Backend, BackendInputs, RasterResult
 
 
 def composite_pixels(p: Projected, width: int, height: int, config: RasterConfig) -> PixelState:
@@ -32,8 +32,11 @@ def composite_pixels(p: Projected, width: int, height: int, config: RasterConfig
     return lax.fori_loop(0, order.shape[0], body, PixelState.empty(width * height, dt))
 
 
-def rasterize(p: Projected, bins, width: int, height: int, config: RasterConfig) -> RasterResult:
-    """`composite_pixels` in the per-tile layout every backend returns (`bins` is unused)."""
+def rasterize(p: Projected, bins, width: int, height: int, config: RasterConfig,
+              inputs: BackendInputs = BackendInputs()) -> RasterResult:
+    """`composite_pixels` in the per-tile layout every backend returns (`bins` and `inputs`
+    are unused)."""
+    del bins, inputs
     state = composite_pixels(p, width, height, config)
     tiles = lambda x: image_to_tiles(x, width, height)
     return RasterResult(color=tiles(state.color), trans=tiles(state.trans),

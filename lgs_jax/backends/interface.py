@@ -2,12 +2,14 @@
 
 A backend composites projected Gaussians (lgs_jax.projection) into per-tile pixel state:
 
-    rasterize(p, bins, width, height, config) -> RasterResult
+    rasterize(p, bins, width, height, config, inputs) -> RasterResult
 
 with `bins` the sorted tile–Gaussian pairs (lgs_jax.binning; None for a backend that declares
-`binned=False`). It must compute the rendering contract (conventions.md) and be differentiable
-with respect to `p`'s float fields. Register it in lgs_jax/backends/__init__.py; `render` looks
-it up by name and needs nothing else.
+`binned=False`) and `inputs` the `BackendInputs` render hands over (what the backend's
+`prepare` built before binning, the backward's row capacity). It must compute the rendering
+contract (docs/conventions.md) and be differentiable with respect to `p`'s float fields.
+Register it in lgs_jax/backends/__init__.py; `render` looks it up by name and needs nothing
+else.
 """
 
 from __future__ import annotations
@@ -35,28 +37,34 @@ class RasterResult:
       depth: (n_tiles, 256) Σ z·α·T.
       stop: (n_tiles, 256) int32 pair index at which each pixel stopped (its stop test fired,
         or the first pair its program never processed; the tile's end if it ran through its
-        list), or (n_tiles, m) the latest of each group of a tile's pixels
-        (`KernelConfig.mosaic_block_stops`: m blocks); None for backends without pairs.
-      strip_pairs: int32 strip–Gaussian pairs processed (Local-GS backends; 8·pairs without
-        warp culling), or None.
-      kernel: name of the Pallas forward kernel that ran ("" for the XLA backends) (static).
-      interpreted: the kernel ran in Pallas interpret mode (static).
-      image_color: `color` is laid out as an image (static; `KernelConfig.mosaic_image_layout`).
+        list), or (n_tiles, m) the latest of each of m groups of a tile's pixels; None for
+        backends without pairs.
+      stats: the backend's own counts (a pytree the backend defines, e.g.
+        lgs_jax.backends.pallas.PallasStats), or None; render returns it as
+        `RenderStats.backend_stats`.
+      image_color: `color` is laid out as an image (static).
     """
 
     color: Any
     trans: Any
     depth: Any
     stop: Any = None
-    strip_pairs: Any = None
-    kernel: str = dataclasses.field(default="", metadata=dict(static=True))
-    interpreted: bool = dataclasses.field(default=False, metadata=dict(static=True))
+    stats: Any = None
     image_color: bool = dataclasses.field(default=False, metadata=dict(static=True))
 
 
-def no_kernel(config) -> tuple[str, bool]:
-    """`Backend.describe` of backends that run no Pallas kernel."""
-    return "", False
+@dataclasses.dataclass(frozen=True)
+class BackendInputs:
+    """What `render` hands a backend's `rasterize` besides the projection and the pairs.
+
+    Attributes:
+      prepared: what the backend's `prepare` built before binning, or None.
+      row_capacity: rows of the backward's buffer of per-pair gradient rows (render's
+        `row_capacity`; static), for backends that declare `row_capacity=True`, else None.
+    """
+
+    prepared: Any = None
+    row_capacity: int | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,23 +73,24 @@ class Backend:
 
     Attributes:
       name: the `render(..., backend=name)` string.
-      rasterize: (p, bins, width, height, config) -> RasterResult (module docstring).
+      rasterize: (p, bins, width, height, config, inputs) -> RasterResult (module docstring).
       binned: whether it needs the tile–Gaussian pairs (False: `bins` is None).
-      describe: config -> (kernel name, interpreted), what `rasterize` would report, for renders
-        that run no backend (an empty scene).
-      pair_rows: its backward stores per-pair gradient rows (the Pallas backends), sized by
-        `TileBins.row_capacity`.
-      gaussian_table: (p, config, n_tiles, capacity) -> the per-Gaussian table its forward
-        kernel reads, or None; `render` builds it before binning and hands it over as
-        `TileBins.table` (None: the backend builds what it needs itself).
+      empty_stats: config -> the `RasterResult.stats` of a render with no Gaussians (the same
+        pytree structure as a real render's; None for a backend without stats).
+      prepare: (p, config, n_tiles, capacity) -> per-Gaussian inputs the backend wants built
+        before binning (render orders them before the pair emission, whose temporaries they
+        would otherwise share the memory peak with: `binning.before_emission`), handed back in
+        `BackendInputs.prepared`; None: nothing.
+      row_capacity: it takes render's `row_capacity` (a backward that stores per-pair gradient
+        rows: the Pallas backends).
     """
 
     name: str
     rasterize: Callable[..., RasterResult]
     binned: bool = True
-    describe: Callable[[Any], tuple[str, bool]] = no_kernel
-    pair_rows: bool = False
-    gaussian_table: Callable[..., Any] | None = None
+    empty_stats: Callable[[Any], Any] = lambda config: None
+    prepare: Callable[..., Any] | None = None
+    row_capacity: bool = False
 
 
 def stop_within(stop, tile_end):
@@ -98,5 +107,5 @@ def tile_last(stop, tile_start, tile_end):
 
 def pairs_walked(stop, tile_start, tile_end):
     """Σ over tiles of their walked pairs (`tile_last`): the rows the Pallas backward writes
-    with a `TileBins.row_capacity` (backends.gaussian_grads.walked_rows)."""
+    with a row capacity (lgs_jax.backends.pallas.gaussian_grads.walked_rows)."""
     return jnp.sum(tile_last(stop, tile_start, tile_end) - tile_start, dtype=jnp.int32)

@@ -21,7 +21,8 @@ from ..config import RasterConfig
 from ..layout import TILE_PIXELS, tile_pixels
 from ..projection import Projected
 from . import backward
-from .interface import Backend, RasterResult
+from .custom_vjp import differentiable
+from .interface import Backend, BackendInputs, RasterResult
 
 
 def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
@@ -54,14 +55,17 @@ def _fields(p: Projected):
     return p.mean2d, p.conic, p.opacity, p.rgb, p.depth
 
 
-def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
+def _forward(p: Projected, bins: TileBins, extra, width: int, height: int,
+             config: RasterConfig):
+    del extra
     state, stop_at = composite_tiles(_fields(p), bins, tile_pixels(width, height, p.mean2d.dtype),
                                      config)
     return state, stop_at, None, None
 
 
-def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
-               trans, stop_at, saved, cotangents):
+def _gradients(p: Projected, bins: TileBins, extra, width: int, height: int,
+               config: RasterConfig, trans, stop_at, saved, cotangents):
+    del extra, saved
     g_color, g_trans, g_depth = cotangents
     rows = backward.pair_rows(_fields(p), bins, tile_pixels(width, height, p.mean2d.dtype),
                               config, trans, stop_at, g_color, g_trans,
@@ -69,13 +73,14 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
 
 
-_composite = backward.differentiable(_forward, _gradients)
+_composite = differentiable(_forward, _gradients)
 
 
-def rasterize(p: Projected, bins: TileBins, width: int, height: int,
-              config: RasterConfig) -> RasterResult:
+def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+              inputs: BackendInputs = BackendInputs()) -> RasterResult:
     """Composite every tile (differentiable)."""
-    color, trans, depth, stop, _ = _composite(p, bins, width, height, config)
+    del inputs
+    color, trans, depth, stop, _ = _composite(p, bins, None, width, height, config)
     return RasterResult(color=color, trans=trans, depth=depth, stop=stop)
 
 

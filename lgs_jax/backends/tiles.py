@@ -6,9 +6,9 @@ pairs whose strip-mask bit is set (emitted once by prefix counts and a store to 
 otherwise the tile's whole list.
 
 Work scales with the pairs a scene has, not with its worst tile: strips are sorted by list
-length and processed in groups of `tuning.tiles_group` strips; a group runs only as many
-`tuning.tiles_chunk`-Gaussian steps as its longest list needs (empty strips run none) and stops
-early once all its pixels are done.
+length and processed in groups of GROUP strips; a group runs only as many CHUNK-Gaussian steps
+as its longest list needs (empty strips run none) and stops early once all its pixels are
+done.
 
 Per staged chunk, ln α for group x 32 pixels x chunk Gaussians is the pixel basis times the
 hoisted vectors (Eq. 9–10) as six fused elementwise products (`hoist.dot_basis`: no matrix unit,
@@ -32,14 +32,18 @@ those Gaussians:
 
 i.e. 0.01 (3dgs, cap 0.99) or 0.1 (gsplat, cap 0.999) times the colour range, plus rounding.
 
-Differentiable: `rasterize` is a custom_vjp. The forward records where each pixel stopped (the
-pair whose stop test fired, or the first pair its strip never processed); the backward
-(lgs_jax.backends.backward.walk) walks each tile back to front with the same α model
-(lgs_jax.alpha: V·B clamped at ln o, or the difference form) gated by the same strip masks, and
-chains ∂L/∂V to the Gaussian through Eq. 8 (lgs_jax.pairs.chain_hoisted_rows).
+Differentiable: `rasterize` is a custom_vjp of `forward` and `gradients`. The forward records
+where each pixel stopped (the pair whose stop test fired, or the first pair its strip never
+processed); the backward (lgs_jax.backends.backward.walk) walks each tile back to front with the
+same α model (lgs_jax.alpha: V·B clamped at ln o, or the difference form) gated by the same
+strip masks, and chains ∂L/∂V to the Gaussian through Eq. 8 (lgs_jax.pairs.chain_hoisted_rows).
+They are the plain-jnp counterparts of the Pallas kernels (lgs_jax.backends.pallas).
 """
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -54,7 +58,24 @@ from ..layout import (STRIP_PIXELS, STRIPS, TILE_PIXELS, frame, pixel_centres, s
                       tile_grid)
 from ..projection import Projected
 from . import backward
-from .interface import Backend, RasterResult, stop_within
+from .custom_vjp import differentiable
+from .interface import Backend, BackendInputs, RasterResult, stop_within
+
+GROUP = 256  # strips composited together
+CHUNK = 16  # Gaussians per staged batch (fast blending tests its strip-wide stop once per batch)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass
+class TilesStats:
+    """The `tiles` backend's counts (`RenderStats.backend_stats`).
+
+    Attributes:
+      strip_pairs: strip–Gaussian pairs in the strips' lists (8·pairs without warp culling), so
+        strip_pairs / (8·pairs) is the share of the work the strip masks keep.
+    """
+
+    strip_pairs: Any
 
 
 def pixel_basis(lx, ly, px, py, config: RasterConfig):
@@ -161,7 +182,7 @@ def _run_group(sid, cnt, lookup, p: Projected, bins: TileBins, pair_v, feats, ti
     group's state and stop pairs (capacity where a strip ran through its list)."""
     dt = p.mean2d.dtype
     cap = bins.gauss.shape[0]
-    group, chunk = sid.shape[0], config.tuning.tiles_chunk
+    group, chunk = sid.shape[0], CHUNK
     lx, ly, px, py = strip_pixels(sid, tiles_x, dt)
     basis = pixel_basis(lx, ly, px, py, config)
     n_chunks = (cnt[0] + chunk - 1) // chunk
@@ -200,13 +221,16 @@ def _run_group(sid, cnt, lookup, p: Projected, bins: TileBins, pair_v, feats, ti
     return state, record_strip_stops(c, state, stop_at)
 
 
-def _forward(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig):
+def forward(p: Projected, bins: TileBins, extra, width: int, height: int,
+            config: RasterConfig):
     """Per tile (n_tiles, 256): the state, each pixel's stop pair index (the pair whose stop test
     fired, or the first pair its strip never processed; the tile's end if neither), the number
-    of strip–Gaussian pairs, and (masks, pair vectors) for the backward (None where off)."""
+    of strip–Gaussian pairs, and (masks, pair vectors) for the backward (None where off).
+    `extra` is unused (lgs_jax.backends.custom_vjp's signature)."""
+    del extra
     dt = p.mean2d.dtype
     cap = bins.gauss.shape[0]
-    group = config.tuning.tiles_group
+    group = GROUP
     tiles_x, tiles_y = tile_grid(width, height)
     n_strips = tiles_x * tiles_y * STRIPS
     masks = pair_v = None
@@ -245,10 +269,12 @@ def _forward(p: Projected, bins: TileBins, width: int, height: int, config: Rast
     return state, stop_within(stop_at, bins.tile_end), jnp.sum(counts), (masks, pair_v)
 
 
-def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
-               trans, stop_at, saved, cotangents):
+def gradients(p: Projected, bins: TileBins, extra, width: int, height: int,
+              config: RasterConfig, trans, stop_at, saved, cotangents):
     """(N, 10) per-Gaussian gradients of (mean2d, conic, opacity, rgb, depth): the backward walk
-    with the forward's own arithmetic (hoisted or difference form) and its strip masks."""
+    with the forward's own arithmetic (hoisted or difference form) and its strip masks, from
+    `forward`'s saved (masks, pair vectors), the final T and each pixel's stop pair."""
+    del extra
     masks, pair_v = saved
     dt = p.mean2d.dtype
     tiles_x, tiles_y = tile_grid(width, height)
@@ -273,16 +299,18 @@ def _gradients(p: Projected, bins: TileBins, width: int, height: int, config: Ra
     return backward.per_gaussian_sum(rows, bins, p.mean2d.shape[0])
 
 
-_composite = backward.differentiable(_forward, _gradients)
+_composite = differentiable(forward, gradients)
 
 
-def rasterize(p: Projected, bins: TileBins, width: int, height: int,
-              config: RasterConfig) -> RasterResult:
+def rasterize(p: Projected, bins: TileBins, width: int, height: int, config: RasterConfig,
+              inputs: BackendInputs = BackendInputs()) -> RasterResult:
     """Composite every strip (differentiable: a custom_vjp whose backward walks each tile back
     to front with this backend's own α arithmetic and strip masks)."""
-    color, trans, depth, stop, strip_pairs = _composite(p, bins, width, height, config)
+    del inputs
+    color, trans, depth, stop, strip_pairs = _composite(p, bins, None, width, height, config)
     return RasterResult(color=color, trans=trans, depth=depth, stop=stop,
-                        strip_pairs=strip_pairs)
+                        stats=TilesStats(strip_pairs=strip_pairs))
 
 
-BACKEND = Backend("tiles", rasterize)
+BACKEND = Backend("tiles", rasterize,
+                  empty_stats=lambda config: TilesStats(strip_pairs=jnp.int32(0)))

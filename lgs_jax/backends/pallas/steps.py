@@ -1,10 +1,10 @@
-"""The per-pair arithmetic the Triton and Mosaic GPU kernels share (lgs_jax.backends.pallas_triton,
-lgs_jax.backends.pallas_mosaic): the record layouts, α per record, the blend step and its loop,
-and the backward step. Written on lane vectors (one value per pixel a thread holds) and scalars
-loaded from refs, so both Pallas lowerings compile the same functions.
+"""The per-pair arithmetic the Triton and Mosaic GPU kernels share (lgs_jax.backends.pallas.triton,
+.mosaic_forward, .mosaic_backward): the record layouts, α per record, the blend step and its
+loop, and the backward step. Written on lane vectors (one value per pixel a thread holds) and
+scalars loaded from refs, so both Pallas lowerings compile the same functions.
 
-Record layouts, built in XLA before the kernels run (`pair_records`), or by the Mosaic GPU
-kernels themselves from per-Gaussian rows (lgs_jax.backends.mosaic_staging; the same
+Record layouts, built in XLA before the Triton kernels run (`pair_records`), or by the Mosaic
+GPU kernels themselves from per-Gaussian rows (lgs_jax.backends.pallas.staging; the same
 `pairs.record_columns`):
   pair record (Local-GS kernel, `pair_records`, one row per pair in pair order, no indirection):
     hoisted: V (Eq. 8, 6 values) relative to the pair's tile origin, ln o, rgb, z, strip mask;
@@ -21,14 +21,14 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 from jax import lax
 
-from .. import alpha as alpha_model
-from .. import hoist, pairs
-from ..binning import TileBins
-from ..composite import blend_weights, stops
-from ..config import RasterConfig
-from ..layout import STRIP_PIXELS, frame, pixel_centres
-from ..projection import Projected
-from . import backward
+from ... import alpha as alpha_model
+from ... import hoist, pairs
+from ...binning import TileBins
+from ...composite import blend_weights, stops
+from ...config import RasterConfig
+from ...layout import STRIP_PIXELS, frame, pixel_centres
+from ...projection import Projected
+from .. import backward
 
 ROW = 12  # Gaussian row (vanilla)
 REC = 12  # pair record (Local-GS); the strip mask in the last column (exact as a float: < 2^8)
@@ -122,7 +122,7 @@ def staged_loop(start, end, lanes: int, dt, fetch, pair_alpha, config: RasterCon
     each iteration (before its pairs are evaluated) and `finish(j)` after the loop, with the first
     pair not processed. `checkpoint(j, state)` (optional) runs at the start of each iteration
     with the state before pair j. `more(state)` (optional): `running`'s test, another way (the
-    Mosaic GPU kernels' one reduction, `mosaic_inline.running`). A lane's stop pair is where its
+    Mosaic GPU kernels' one reduction, `inline.running`). A lane's stop pair is where its
     stop test fired (exact), else the first pair the loop did not process (`end` or beyond when
     it ran to the end).
     """
@@ -196,7 +196,7 @@ def backward_lanes(tile, k, tiles_x: int, config: RasterConfig, dt, trans, stop_
 class Scaled(NamedTuple):
     """A gradient term source · factor whose factor is the lane's own and the same at every pair
     of the walk (a pixel's basis value x², xy, y², x, y). The GPU reduction
-    (`mosaic_rows.transposed_row`) then chooses between two terms of one source by their
+    (`rows.transposed_row`) then chooses between two terms of one source by their
     factors, once per walk, instead of between their products at every pair."""
     source: Any
     factor: Any
@@ -205,7 +205,7 @@ class Scaled(NamedTuple):
 class Product(NamedTuple):
     """A gradient term a · b whose factors both change from pair to pair (w · ḡ_r). The GPU
     reduction forms the products in its per-thread sums, as multiply-adds after the first
-    pixel's (`mosaic_rows._own_sum`), where a term passed in formed costs a multiply per pixel
+    pixel's (`rows.transposed_row`), where a term passed in formed costs a multiply per pixel
     and an add; unlike `Scaled` terms, products are never paired by a shared factor."""
     a: Any
     b: Any
@@ -239,9 +239,8 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig, quotient
         d_raw, d_ln_o = alpha_model.hoisted_vjp(d_alpha, alpha, ln_a, raw, rec[6], cap)
         x, y = frame_xy
         # as `Scaled` the basis terms pair up in the GPU reduction's first step without
-        # selects (4 of the pair step's 216 SASS instructions for the H200, at 96 registers,
-        # which keep 5 blocks per SM; d_raw · 1 and the colour terms as Scaled too: 210 at
-        # 103-105, 4 blocks: BENCHMARKS.md §7, Dec 3, eighth session)
+        # selects; d_raw · 1 and the colour terms stay plain (as `Scaled` they cost registers,
+        # and so blocks per SM; docs/design-notes.md)
         model = [Scaled(d_raw, x * x), Scaled(d_raw, x * y), Scaled(d_raw, y * y),
                  Scaled(d_raw, x), Scaled(d_raw, y), d_raw, d_ln_o]
     else:

@@ -3,12 +3,10 @@ in the split backward): longest first, so that the longest lists start early and
 of blocks is short. Only the schedule depends on it: every block writes its own outputs, so any
 order gives the same bits.
 
-`KernelConfig.block_order`: "sort" (a stable argsort of the lengths, exact) or "buckets" (a
-counting sort by buckets of the lengths, four per octave, `longest_first_buckets`). On GPUs XLA
-sorts arrays of 16k keys and more with CUB, whose launches and memsets run outside XLA's command
-buffers, so at 4K (32,400 tiles; 57k segments at 25M pairs) each argsort costs host time every
-call (about 0.1 ms, BENCHMARKS.md §7, Dec 3, fourth session); the buckets take a few fused XLA
-passes instead, and a bucket's lengths are within a factor 1.25 of each other.
+The order is a counting sort by buckets of the lengths, four per octave (`longest_first`): a few
+fused XLA passes and no sort (on GPUs XLA sorts arrays of 16k keys and more with CUB, whose
+launches run outside XLA's command buffers and cost host time every call); a bucket's lengths
+are within a factor 1.25 of each other. `reference` is the exact order it approximates.
 """
 
 from __future__ import annotations
@@ -31,7 +29,7 @@ def bucket(lengths):
     return SUB_OCTAVES * b + s
 
 
-def longest_first_buckets(lengths):
+def longest_first(lengths):
     """A permutation (int32) of the indices of `lengths` from the highest bucket to the lowest
     (`bucket`), in index order within a bucket: a stable counting sort (the buckets' sizes,
     their prefix sum, each index's rank in its bucket from a prefix sum of the bucket one-hot
@@ -47,8 +45,7 @@ def longest_first_buckets(lengths):
     return jnp.zeros(n, jnp.int32).at[position].set(index, unique_indices=True)
 
 
-def longest_first(lengths, how: str):
-    """The blocks' order for `lengths` (module docstring): "sort" or "buckets"."""
-    if how == "buckets":
-        return longest_first_buckets(lengths)
+def reference(lengths):
+    """The exact longest-first order (a stable argsort of the lengths, decreasing), which
+    `longest_first` approximates within a bucket."""
     return jnp.argsort(-lengths, stable=True).astype(jnp.int32)

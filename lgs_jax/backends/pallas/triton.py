@@ -1,13 +1,15 @@
-"""The Local-GS and vanilla forward kernels and the backward kernel on Pallas Triton.
+"""The Local-GS and vanilla forward kernels and the backward kernel on Pallas Triton: the
+interpret-mode (CPU) path of the `pallas` backends, and their kernels on GPUs Mosaic GPU does
+not target. Their inputs are built in XLA (`records`: a pair record per pair, in pair order).
 
 Local-GS forward (`localgs_kernel`, Sec. III): one program per 16x2 strip, `num_warps=1`, so a
 program is one warp and its 32 lanes are the strip's pixels. It walks its tile's pairs in order,
-reading one record per pair (`kernel_steps.pair_records`) and evaluating ln α as a 6-term sum in
+reading one record per pair (`steps.pair_records`) and evaluating ln α as a 6-term sum in
 its local coordinates (Eq. 10). With `warp_cull` a pair whose strip-mask bit is clear does not
 blend, and a staged group of pairs with no bit set is skipped by one warp-uniform branch (Sec.
 III-C). The strip stops as a unit once every lane is done (`exact`: each pixel's stop test
 fired; `fast`: every T below 1e-4, the paper's coherent blending). Pairs are staged
-`tuning.triton_unroll_localgs` at a time: their mask bits are fetched one iteration ahead, the
+`UNROLL_LOCALGS` at a time: their mask bits are fetched one iteration ahead, the
 group's α are computed together (independent work that overlaps), then blended in order, so the
 serial chain per pair is the blend alone.
 
@@ -16,7 +18,7 @@ Vanilla forward (`vanilla_kernel`, the original 3DGS rasterizer): one program pe
 every pixel is done.
 
 Backward (`backward_kernel`): one program per tile, 256 lanes (8 warps), walking the tile's pairs
-back to front from the last pair any pixel blended (`kernel_steps.backward_step`). Per pair, the
+back to front from the last pair any pixel blended (`steps.backward_step`). Per pair, the
 per-pixel gradient terms are reduced over the tile in one (256, 16) column reduction and stored with
 the tile at the pair's walked row (gaussian_grads.RowLayout; backends.gaussian_grads sums them
 per Gaussian there): each pair belongs to one tile, so every row has one writer (no atomics;
@@ -33,11 +35,34 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from ..config import RasterConfig
-from ..layout import STRIP_PIXELS, STRIPS, TILE_PIXELS
-from . import kernel_steps as ks
+from ... import pairs
+from ...binning import TileBins
+from ...config import RasterConfig
+from ...layout import STRIP_PIXELS, STRIPS, TILE_PIXELS
+from ...projection import Projected
+from . import steps as ks
 
 GRAD_COLUMNS = 16  # the backward's reduction width: GRAD_VALUES padded to a power of two
+UNROLL_LOCALGS = 2  # pairs the Local-GS forward stages per loop iteration
+UNROLL_VANILLA = 8  # pairs the vanilla forward stages per loop iteration
+
+
+def every_strip(bins: TileBins):
+    """Strip–Gaussian pairs without warp culling: every strip of every real pair's tile."""
+    return STRIPS * jnp.sum(bins.tile < bins.tile_start.shape[0], dtype=jnp.int32)
+
+
+def records(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """(strip masks, pair records, strip–Gaussian pairs) the Local-GS kernels read, built in
+    XLA (`pairs.gather`, `steps.pair_records`); the masks are a (1,) placeholder without warp
+    culling, and the strip pairs then count every strip of every pair."""
+    pg = pairs.gather(p, bins.gauss)
+    if not config.warp_cull:
+        return (jnp.zeros((1,), jnp.int32), ks.pair_records(pg, bins, tiles_x, config),
+                every_strip(bins))
+    masks = pairs.strip_masks(pg, bins, tiles_x, config)
+    strip_pairs = jnp.sum(lax.population_count(masks), dtype=jnp.int32)
+    return masks, ks.pair_records(pg, bins, tiles_x, config, masks), strip_pairs
 
 
 def _store(refs, row, outputs):
@@ -68,7 +93,7 @@ def localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
     take = (lambda fetched: fetched[1]) if config.warp_cull else None
     _store(out_refs, tile * STRIPS + s,
            ks.staged_loop(start_ref[tile], end_ref[tile], STRIP_PIXELS, dt, fetch, pair_alpha,
-                          config, config.tuning.triton_unroll_localgs, take))
+                          config, UNROLL_LOCALGS, take))
 
 
 def vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs,
@@ -78,8 +103,7 @@ def vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs
     _, pixel = ks.lane_coordinates(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt)
     fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
     _store(out_refs, tile, ks.staged_loop(start_ref[tile], end_ref[tile], TILE_PIXELS, dt, fetch,
-                                          pair_alpha, config,
-                                          config.tuning.triton_unroll_vanilla))
+                                          pair_alpha, config, UNROLL_VANILLA))
 
 
 def _compiler_params(num_warps: int):
@@ -107,7 +131,7 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, tiles_x: int, 
 
 
 def _columns(values, lanes: int, dt):
-    """Σ over lanes of each of `values` (`kernel_steps.term`s), as one (lanes, GRAD_COLUMNS) column
+    """Σ over lanes of each of `values` (`steps.term`s), as one (lanes, GRAD_COLUMNS) column
     reduction (one cross-warp reduction per pair instead of one per value)."""
     col = lax.broadcasted_iota(jnp.int32, (lanes, GRAD_COLUMNS), 1)
     m = jnp.zeros((lanes, GRAD_COLUMNS), dt)
@@ -120,7 +144,7 @@ def _columns(values, lanes: int, dt):
 def backward_kernel(order_ref, start_ref, end_ref, mask_ref, row_ref, rec_ref, trans_ref,
                     stop_ref, g_r_ref, g_g_ref, g_b_ref, g_t_ref, g_d_ref, _zeros_ref, rows_ref,
                     *, config: RasterConfig, tiles_x: int):
-    """One tile's backward walk (`kernel_steps.backward_step`): rows_ref[row_ref[j]] = (pair
+    """One tile's backward walk (`steps.backward_step`): rows_ref[row_ref[j]] = (pair
     j's gradient summed over the tile's pixels, its tile) at the pair's row
     (`gaussian_grads.RowLayout.at`), for every pair some pixel blended (the others keep their
     zero row)."""

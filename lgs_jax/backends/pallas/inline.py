@@ -13,8 +13,8 @@ from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, vector
 
-from ..config import RasterConfig
-from . import kernel_steps as ks
+from ...config import RasterConfig
+from . import steps as ks
 
 LANES = 128  # threads of a warpgroup (a block): one staged pair each
 WARP = 32
@@ -46,7 +46,7 @@ def any_equal(x, value: int):
     per thread) equals `value`, as an int32 0/1 the whole warpgroup holds: each
     thread ors its own elements' tests, then one `bar.red.or.pred` over the warpgroup's named
     barrier (the one Mosaic GPU's `warpgroup_barrier` uses) reduces the 128 threads'
-    predicates. jnp.any(x == value)'s value (`kernel_steps.running`'s test) without the
+    predicates. jnp.any(x == value)'s value (`steps.running`'s test) without the
     butterfly of shuffles, the shared-memory exchange and the two barriers its lowering
     takes."""
     n = x.shape[0]  # thread t holds elements [t·v, (t + 1)·v): the layout iota's lanes take
@@ -72,9 +72,9 @@ def any_equal(x, value: int):
 
 
 def running(config: RasterConfig, interpret: bool):
-    """The blend loops' condition (`kernel_steps.running`: some pixel of the warpgroup not done)
+    """The blend loops' condition (`steps.running`: some pixel of the warpgroup not done)
     as a function of the blend state: on the GPU in exact blending `any_equal` on the stop
-    pairs (one `bar.red` per iteration), the same value; else kernel_steps' (interpret mode
+    pairs (one `bar.red` per iteration), the same value; else `steps.running` (interpret mode
     runs no inline code)."""
     if interpret or config.blend != "exact":
         return lambda st: ks.running(st, config)

@@ -1,13 +1,11 @@
-"""`pairs.gaussian_table` written by a Pallas Triton kernel (the GPU kernels' Gaussian table).
+"""The Mosaic GPU kernels' per-Gaussian table (`pairs.gaussian_table`) written by a Pallas
+Triton kernel (`gaussian_table`), beside its plain-jnp reference (`reference`).
 
 XLA writes the table, a concatenate along the minor axis, one column at a time: a warp's 32
-stores of a column land a row apart, one memory sector each. At 10M Gaussians on an H200
-that pass took 0.69 ms (rows of 14 columns then), the forward's largest XLA pass after the
-kernels (BENCHMARKS.md §7 "Dec 2, late evening"). Here each program reads `lanes` Gaussians'
-fields as (N,) columns (`pairs.table_columns`) and stores their rows as one (lanes, 16) block
-masked to the TABLE_COLUMNS (10), whose consecutive lanes write consecutive bytes.
-Every value is a copy: the table equals `pairs.gaussian_table`'s bit for bit (a test checks it
-in interpret mode).
+stores of a column land a row apart, one memory sector each. Here each program reads `lanes`
+Gaussians' fields as (N,) columns (`pairs.table_columns`) and stores their rows as one
+(lanes, 16) block masked to the TABLE_COLUMNS (10), whose consecutive lanes write consecutive
+bytes. Every value is a copy: the table equals `reference`'s bit for bit.
 """
 
 from __future__ import annotations
@@ -20,8 +18,8 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as plt
 
-from .. import pairs
-from ..projection import Projected
+from ... import pairs
+from ...projection import Projected
 
 LANES = 256  # Gaussians per program (eight warps)
 WIDTH = 16  # the stored block's columns: TABLE_COLUMNS rounded up to a power of two
@@ -39,9 +37,14 @@ def _kernel(*refs, n: int, lanes: int):
     plt.store(table_ref.at[g[:, None], c], block, mask=c < pairs.TABLE_COLUMNS)
 
 
+def reference(p: Projected):
+    """The table in jnp: `pairs.gaussian_table(p)`, (N, TABLE_COLUMNS)."""
+    return pairs.gaussian_table(p)
+
+
 def gaussian_table(p: Projected, interpret: bool = False, lanes: int = LANES):
-    """`pairs.gaussian_table(p)` by the kernel (`interpret`: Pallas' interpreter, for tests;
-    `lanes`: a multiple of 32)."""
+    """`reference(p)` by the kernel (`interpret`: Pallas' interpreter; `lanes`: a multiple of
+    32)."""
     if lanes % 32:
         raise ValueError(f"lanes: expected a multiple of 32, got {lanes}")
     columns = pairs.table_columns(p)

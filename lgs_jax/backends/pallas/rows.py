@@ -1,4 +1,4 @@
-"""How the Mosaic GPU backward kernel (lgs_jax.backends.pallas_mosaic) writes a pair's row: its
+"""How the Mosaic GPU backward kernel (lgs_jax.backends.pallas.mosaic_backward) writes a pair's row: its
 gradient terms summed over the block's pixels, then the pair's tile, at the pair's row
 (`gaussian_grads.RowLayout`, which reads the rows there).
 
@@ -9,7 +9,7 @@ Two reductions (`REDUCTIONS`, `writers`):
     `zero_row`, one coalesced store; `plgpu.inline_mgpu` code does not run in interpret mode;
   "terms" (interpret mode): one warpgroup `jnp.sum` per term, each stored from every thread.
 The two agree to float rounding (a different summation order); each is deterministic (a fixed
-order, no atomics). BENCHMARKS.md §7 has the measurements.
+order, no atomics). `reference` is the row in plain jnp.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, memref, scf, vector
 from jaxlib.mlir.dialects import math as math_dialect
 
-from . import kernel_steps as ks
-from .mosaic_inline import element, threads
+from . import steps as ks
+from .inline import element, threads
 
 REDUCTIONS = ("terms", "transposed")
 
@@ -46,13 +46,23 @@ def scratch(reduction: str, dt) -> tuple:
     return (plgpu.SMEM((2, EXCHANGE), dt),) if reduction == "transposed" else ()
 
 
+def reference(terms, tile, width: int):
+    """One pair's row in jnp: the per-pixel `terms` (`steps.backward_step`'s: arrays,
+    `steps.Scaled`, `steps.Product` or None) summed over the pixels, None as 0, then the tile,
+    in a row of `width` columns (`steps.row_width`); what both reductions store, up to the
+    order of the float summation."""
+    dt = tile.dtype
+    values = [jnp.zeros((), dt) if v is None else jnp.sum(ks.term(v)) for v in terms]
+    return jnp.stack(values[:width - 1] + [tile])
+
+
 def writers(reduction: str, rows_ref, wg, tile, pixels: int, exchange=None):
     """(store, zero) for block `wg`'s rows rows_ref[wg] (capacity, width) of tile `tile`
     (a row's ref is taken as rows_ref.at[wg, s], one subview, as the GPU runs tested it):
     store(values, s, parity) reduces a pair's width − 1 per-pixel terms (None: zero) and
     writes them and the tile at slot s, returning the next exchange buffer's index; zero(s)
     writes a zero row with the tile (a tile's other block may have a row there). The tile is
-    the row's last column (`kernel_steps.row_width`); values past width − 1 (∂L/∂z where the
+    the row's last column (`steps.row_width`); values past width − 1 (∂L/∂z where the
     loss does not reach the depth) must be None and are not stored."""
     dt = rows_ref.dtype
     tile_value = tile.astype(dt)
@@ -119,7 +129,7 @@ def butterfly_plan(rows: int):
 def term_order(sources) -> tuple[int, ...]:
     """The order in which `transposed_row` lays out its m present terms for `butterfly_plan(m)`
     (positions k and k + h, h = ceil(m / 2), meet at its first step), given each term's source
-    (`sources[i]`: equal for `kernel_steps.Scaled` terms of one source, None for a term of its
+    (`sources[i]`: equal for `steps.Scaled` terms of one source, None for a term of its
     own): terms of one source paired at positions (k, k + h) as far as they go, then the rest.
     A pair of one source needs no per-pair select at that step (`_butterfly`)."""
     m = len(sources)
@@ -159,9 +169,9 @@ def row_slots(terms) -> tuple[tuple[int, ...], tuple, tuple[int, ...]]:
 
 def transposed_row(terms, pixels: int, exchange, row, tile):
     """Store one pair's row: row[c] = Σ over the block's pixels of terms[c] (c < len(terms)),
-    then row[len(terms)] = tile, from `kernel_steps.backward_step`'s terms: block-wide
+    then row[len(terms)] = tile, from `steps.backward_step`'s terms: block-wide
     (pixels,) lane vectors (Mosaic GPU strided layout: each thread holds pixels/128 of them),
-    `kernel_steps.Scaled` or `kernel_steps.Product` products of two (formed here, the pixels
+    `steps.Scaled` or `steps.Product` products of two (formed here, the pixels
     after a thread's first added by multiply-adds), or None for a zero term, left out of the
     butterfly (a zero array passed in fails the GPU compiler's LLVM translation with an
     unrealized layout cast).
@@ -236,7 +246,7 @@ def _own_sum(element):
 
 def _first_step(elements, scaled, h: int, upper, zero):
     """The butterfly's first step's (send, keep) per k < h, from the terms' per-pixel values
-    (`_own_sum`'s elements; `scaled[i]`: whether term i is a `kernel_steps.Scaled`): for two
+    (`_own_sum`'s elements; `scaled[i]`: whether term i is a `steps.Scaled`): for two
     `Scaled` terms of one source, the source times the selected factors (selects of per-walk
     values, which the compiler takes out of the pair loop)."""
     out = []

@@ -1,12 +1,12 @@
 """The Pallas backward's last step: each Gaussian's pair rows chained to its screen-space
 parameters and summed, one lane per Gaussian, in a fixed order.
 
-The backward kernels (lgs_jax.backends.pallas_mosaic, pallas_triton) store each walked pair's
+The backward kernels (lgs_jax.backends.pallas.mosaic_backward, .triton) store each walked pair's
 row at its row in emission-slot order (`RowLayout`; a Gaussian's pairs are the consecutive slots
 [first, first + count) in ascending tile order, `TileBins.first`, `TileBins.count`). A row
-holds the pair's gradient summed over one block's pixels (`kernel_steps.GRAD_VALUES` values:
+holds the pair's gradient summed over one block's pixels (`steps.GRAD_VALUES` values:
 the α model's 7 columns, ∂L/∂rgb, ∂L/∂z; the Mosaic GPU kernel leaves ∂L/∂z out where the loss
-does not reach the depth, `kernel_steps.row_width`) and then its tile index as a float (exact:
+does not reach the depth, `steps.row_width`) and then its tile index as a float (exact:
 images have fewer than 2^24 tiles, lgs_jax.scene checks); a block's row of a pair none of its
 pixels reached is zero. For Gaussian g this computes, walking its
 rows in order,
@@ -23,12 +23,11 @@ pairs.chain_hoisted_rows then backends.backward.per_gaussian_sum: the same value
 another association).
 
 Where the rows are (`RowLayout`, `walked_rows`): only the pairs some pixel of their tile
-reached get rows (73–85% of the pairs are not, at 1.5M–10M Gaussians, BENCHMARKS.md §7),
-numbered in emission-slot order, so a Gaussian's rows are consecutive and summed in slot order.
-A row per pair at its emission slot (a zero row for a pair no pixel reached, which adds +0)
-would give the same gradients to the bit; skipping those rows makes the backward 4–13% faster
-at 1.5M–10M Gaussians (H200, BENCHMARKS.md §7). The buffer holds `TileBins.row_capacity` rows,
-or the pair capacity's (never too few) without one.
+reached get rows (most pairs of a large scene are behind opaque ones), numbered in emission-slot
+order, so a Gaussian's rows are consecutive and summed in slot order. A row per pair at its
+emission slot (a zero row for a pair no pixel reached, which adds +0) would give the same
+gradients to the bit. The buffer holds render's `row_capacity` rows, or the pair capacity's
+(never too few) without one.
 
 `sums` is the Pallas Triton kernel (one program per `LANES` Gaussians, looping to the longest
 count among them; per-lane gathers of rows, which Mosaic GPU's Pallas cannot express);
@@ -47,16 +46,15 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as plt
 
-from .. import hoist
-from ..binning import TileBins
-from ..config import RasterConfig
-from ..layout import tile_origin_axis
-from ..projection import Projected
-from . import kernel_steps as ks
-from .interface import tile_last
+from ... import hoist
+from ...binning import TileBins
+from ...config import RasterConfig
+from ...layout import tile_origin_axis
+from ...projection import Projected
+from ..interface import tile_last
+from . import steps as ks
 
-LANES = 32  # Gaussians per program (one warp): a program loops to its lanes' longest count;
-# 128 lanes took 2.70 ms at 10M/4K, 32 lanes 1.53 (BENCHMARKS.md §7)
+LANES = 32  # Gaussians per program (one warp): a program loops to its lanes' longest count
 COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
 
@@ -85,40 +83,41 @@ def walked_rows(bins: TileBins, stop, row_capacity: int) -> RowLayout:
     numbered by an exclusive running count over emission slots (a Gaussian's walked slots get
     consecutive rows), `row_capacity` of them and a spare: rows from row_capacity on (more
     walked pairs than rows, which the render's `stats.row_overflow` reports) go to the spare,
-    and `count` stops at row_capacity, so nothing is written or read out of bounds."""
+    and `count` stops at row_capacity, so nothing is written or read out of bounds (the
+    render's stats report the overflow)."""
     capacity, n_tiles = bins.gauss.shape[0], bins.tile_start.shape[0]
     last = tile_last(stop, bins.tile_start, bins.tile_end)
     real = bins.tile < n_tiles
     index = jnp.arange(capacity, dtype=jnp.int32)
     walked = real & (index < last[jnp.where(real, bins.tile, 0)])  # by list index
-    # The same flags by slot, without permuting them (a scatter of 25M at random slots took
-    # 0.76 ms on an H200, 10M Gaussians at 4K): a tile's pairs are its slots in ascending
-    # order (`TileBins.emitted_tile`), so a slot is walked iff it is at most the slot of its
-    # tile's last walked pair (−1 where the tile walked none).
+    # The same flags by slot, without permuting them (a scatter at random slots): a tile's
+    # pairs are its slots in ascending order (`TileBins.emitted_tile`), so a slot is walked
+    # iff it is at most the slot of its tile's last walked pair (−1 where the tile walked
+    # none).
     last_slot = jnp.where(last > bins.tile_start, bins.slot[jnp.maximum(last - 1, 0)], -1)
     tile_of_slot = bins.emitted_tile.astype(jnp.int32)
     emitted = tile_of_slot < n_tiles
     by_slot = emitted & (index <= last_slot[jnp.where(emitted, tile_of_slot, 0)])
     before = jnp.concatenate([jnp.zeros((1,), jnp.int32),
                               jnp.cumsum(by_slot, dtype=jnp.int32)])  # (capacity + 1,)
-    # Unwalked pairs (70-85% at 1M-10M Gaussians) read entry 0, which stays cached, instead of
-    # a random one (H200, 10M Gaussians at 4K: forward + backward 12.19 against 12.52 ms).
+    # Unwalked pairs (most of them at scale) read entry 0, which stays cached, instead of a
+    # random one.
     at = jnp.where(walked, jnp.minimum(before[jnp.where(walked, bins.slot, 0)], row_capacity),
                    row_capacity)
     # first + count <= capacity (`TileBins.first`, `count`: the pairs within the capacity)
     row_first = jnp.minimum(before[bins.first], row_capacity)
     row_end = jnp.minimum(before[bins.first + bins.count], row_capacity)
     # Together: XLA would otherwise compute first and count (which only `sums` reads) after
-    # the backward kernel, keeping `before`, `bins.first` and what that is made of (230 MiB at
-    # 10M Gaussians) live through it, where the peak is.
+    # the backward kernel, keeping `before`, `bins.first` and what that is made of live
+    # through it, where the memory peaks.
     at, row_first, count = lax.optimization_barrier((at, row_first, row_end - row_first))
     return RowLayout(at=at, end=last, first=row_first, count=count, size=row_capacity + 1)
 
 
-def rows_of(bins: TileBins, stop) -> RowLayout:
-    """`walked_rows` in `bins.row_capacity` rows, or the pair capacity's without one."""
+def rows_of(bins: TileBins, stop, rows: int | None) -> RowLayout:
+    """`walked_rows` in `rows` rows, or the pair capacity's where `rows` is None."""
     capacity = bins.gauss.shape[0]
-    return walked_rows(bins, stop, capacity if bins.row_capacity is None else bins.row_capacity)
+    return walked_rows(bins, stop, capacity if rows is None else rows)
 
 
 def _pair_terms(vals, tile, fields, tiles_x: int, config: RasterConfig):
@@ -150,7 +149,7 @@ def _sources(fields):
     (i, col) in spec (arrays[i][g] where col is None): from a `Projected`, or from a table
     (N, >= 6) whose first six columns are these (`pairs.gaussian_table`, which the Mosaic GPU
     backward reads anyway: reading it here keeps the separate (N, 2), (N, 3) and (N,) fields
-    from living through the backward kernel, 229 MiB at 10M Gaussians)."""
+    from living through the backward kernel)."""
     if isinstance(fields, Projected):
         return ((fields.mean2d, fields.conic, fields.opacity),
                 ((0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, None)))
@@ -168,7 +167,7 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
     first + count): each slot's blocks added in block order, chained (`_pair_terms`), summed in
     slot order; `rows` is the (blocks, capacity, >= n + 1) ref (kernel) or array
     (`reference`), indexed alike: n = GRAD_VALUES values, then the tile in column n; rows of
-    `kernel_steps.row_width(False)` columns have no ∂L/∂z (n = GRAD_VALUES − 1, the depth's
+    `steps.row_width(False)` columns have no ∂L/∂z (n = GRAD_VALUES − 1, the depth's
     sums zero). fields = (μx, μy, a, b, c), opacity: of those Gaussians."""
     n = ks.GRAD_VALUES if rows.shape[-1] > ks.row_width(False) else ks.GRAD_VALUES - 1
 
@@ -192,7 +191,7 @@ def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: in
     field_refs, rows_ref, out_refs = refs[:-COLUMNS - 1], refs[-COLUMNS - 1], refs[-COLUMNS:]
     # Lanes past the last Gaussian walk the last one again and store the same bits at its
     # index: the outputs need no padding (a padded output's slice is a copy XLA cannot fuse
-    # away: 0.6 ms at 10M Gaussians on an H200, BENCHMARKS.md §7).
+    # away).
     g = jnp.minimum(pl.program_id(0) * lanes + lax.iota(jnp.int32, lanes), n - 1)
     *fields, opacity = _take(field_refs, spec, g)
     # Read before any store: the first two outputs may be these inputs' buffers (`sums`).
@@ -205,7 +204,7 @@ def _kernel(first_ref, count_ref, *refs, spec, config: RasterConfig, tiles_x: in
 def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
          interpret: bool, lanes: int = LANES):
     """(N, COLUMNS) per-Gaussian gradients from the backward kernels' rows (blocks,
-    layout.size, >= TILE_COLUMN + 1; or `kernel_steps.row_width(False)`: without ∂L/∂z, the
+    layout.size, >= TILE_COLUMN + 1; or `steps.row_width(False)`: without ∂L/∂z, the
     tile in column TILE_COLUMN − 1) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
     its lanes' longest count, so fewer lanes idle less where counts vary). `fields`: the
@@ -214,8 +213,8 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     In float32 the kernel takes `layout.first` and `count` as float32 bits and writes its
     first two columns into their buffers (aliased outputs: a lane reads its Gaussian's first
     and count before it stores), so two of the ten (N,) columns take no memory of their own
-    where nothing reads the layout afterwards (at 10M Gaussians the walked-rows backward's
-    peak is this kernel); XLA copies them first where something does."""
+    where nothing reads the layout afterwards (at scale the walked-rows backward's memory
+    peaks in this kernel); XLA copies them first where something does."""
     if lanes % 32:
         raise ValueError(f"lanes: expected a multiple of 32, got {lanes}")
     arrays, spec = _sources(fields)

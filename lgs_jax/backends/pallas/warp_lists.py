@@ -1,18 +1,16 @@
-"""Per-warp pair lists of the compacted Local-GS forward (`KernelConfig.mosaic_warp_lists`): the
+"""Per-warp pair lists of the compacted Local-GS forward (`mosaic_forward.compact_loop`): the
 paper's warp-level culling (Sec. III-C) at the granularity of a hardware warp, inside one
 Mosaic GPU warpgroup program.
 
 A half-tile block is four hardware warps, warp w the 32 pixels of the block's strip w (lane l
-of the block is tile pixel 128·wg + l, lgs_jax.backends.pallas_mosaic). Of each staged chunk
-of LANES = 128 pairs (lane t: pair base + t, its record built as `mosaic_staging.stage` builds
+of the block is tile pixel 128·wg + l, lgs_jax.backends.pallas.mosaic_forward). Of each staged
+chunk of LANES = 128 pairs (lane t: pair base + t, its record built as `staging.stage` builds
 it), `partition` stores every record at row t of a shared-memory buffer and, per warp w, the
 rows of the pairs whose strip mask has warp w's bit, in pair order, as list w; `reads` then
 gives lane l, at list position v, the record of row lists[l // 32][v]: one record per warp,
-each warp stepping through its own list, where the block-compacted walk
-(`mosaic_staging._partition`) steps every warp through the pairs of any of its four strips.
-The warpgroup's loop still runs to the busiest warp's count (one control flow per warpgroup),
-so per chunk it takes max_w n_w / unroll iterations instead of |∪_w list w| / unroll
-(scripts/strip_occupancy.py --chunks counts both over whole scenes).
+each warp stepping through its own list. The warpgroup's loop still runs to the busiest warp's
+count (one control flow per warpgroup), so per chunk it takes max_w n_w / unroll iterations
+(scripts/strip_occupancy.py --chunks counts them over whole scenes).
 
 Same outputs as the full walk: a pair outside warp w's list has its bit clear, so no pixel of
 strip w passes its α test for it (the masks are conservative), and each list keeps pair order,
@@ -38,8 +36,8 @@ from jaxlib.mlir import ir
 from jaxlib.mlir.dialects import arith, memref, nvvm, scf, vector
 from jaxlib.mlir.dialects import math as math_dialect
 
-from . import kernel_steps as ks
-from .mosaic_inline import LANES, STRIDED, WARP, element, lane_vector, threads
+from . import steps as ks
+from .inline import LANES, STRIDED, WARP, element, lane_vector, threads
 
 WARPS = LANES // WARP
 TOTALS = WARPS * WARPS  # sync_ref: counts[source warp, target warp] at 0..15, then n_w
