@@ -45,7 +45,8 @@ def _cameras_file(tmp_path, cameras):
 
 @pytest.mark.parametrize("change,match", [
     (dict(fx=None), "camera 0: missing 'fx'"), (dict(rotation=None), "camera 0: missing 'rotation'"),
-    (dict(fx="abc"), "camera 0: fx must be a finite number, got 'abc'"),
+    (dict(fx="abc"), "camera 0: fx must be a finite number > 0, got 'abc'"),
+    (dict(fx=0.0), "camera 0: fx must be a finite number > 0, got 0.0"),
     (dict(width="640"), "camera 0: width must be a finite number, got '640'"),
     (dict(width=1280.7), "camera 0: width must be a positive whole number of pixels"),
     (dict(height=0), "camera 0: height must be a positive whole number"),
@@ -53,7 +54,7 @@ def _cameras_file(tmp_path, cameras):
     (dict(rotation=[[1.0, 0, 0], [0, 1.2, 0], [0, 0, 1.0]]), "rotation is not orthonormal"),
     (dict(rotation=[[-1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]), "rotation is a reflection"),
     (dict(position=[0.0, 1.0]), "camera 0: position must be 3 finite numbers"),
-    (dict(fy=True), "camera 0: fy must be a finite number, got True"),
+    (dict(fy=True), "camera 0: fy must be a finite number > 0, got True"),
 ])
 def test_bad_inria_camera_field_names_file_camera_and_field(tmp_path, change, match):
     cam = {k: v for k, v in {**INRIA, **change}.items() if v is not None}
