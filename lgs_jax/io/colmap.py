@@ -31,7 +31,9 @@ import struct
 
 import numpy as np
 
-from .views import DatasetError, Lens, Source, View
+from ..scene import rotation_problem
+from .fields import number, positive
+from .views import DISTORTION, DatasetError, Lens, Source, View
 
 # model id: (name, number of parameters), as in COLMAP's sensor/models.h.
 MODELS = {0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5),
@@ -39,7 +41,16 @@ MODELS = {0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 
           8: ("SIMPLE_RADIAL_FISHEYE", 4), 9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12),
           11: ("RAD_TAN_THIN_PRISM_FISHEYE", 16)}
 NUM_PARAMS = {name: n for name, n in MODELS.values()}
-SUPPORTED = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV")
+# parameter names of the supported models (COLMAP's radial terms are OpenCV's k1, k2 on the same
+# normalised coordinates; f is both focal lengths)
+PARAMS = {"SIMPLE_PINHOLE": ("f", "cx", "cy"), "PINHOLE": ("fx", "fy", "cx", "cy"),
+          "SIMPLE_RADIAL": ("f", "cx", "cy", "k1"), "RADIAL": ("f", "cx", "cy", "k1", "k2"),
+          "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")}
+SUPPORTED = tuple(PARAMS)
+# smallest record of each binary file (cameras: 3 parameters; images: empty name, no keypoints;
+# points: empty track), to check a declared count against the file size before reading
+MIN_RECORD = {"cameras": 4 + 4 + 8 + 8 + 3 * 8, "images": 4 + 7 * 8 + 4 + 1 + 8,
+              "points": 8 + 3 * 8 + 3 + 8 + 8}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,6 +104,16 @@ class _Bytes:
             raise DatasetError(f"{self.path}: truncated (needs {size} bytes at offset {self.pos},"
                                f" has {len(self.buf) - self.pos})")
 
+    def count(self, what: str) -> int:
+        """The uint64 record count at the cursor, checked against the bytes left for records
+        of at least `MIN_RECORD[what]` bytes each."""
+        n = self.take("Q")[0]
+        have = len(self.buf) - self.pos
+        if n * MIN_RECORD[what] > have:
+            raise DatasetError(f"{self.path}: declares {n} {what}, which need at least "
+                               f"{n * MIN_RECORD[what]} bytes; the file has {have} after its count")
+        return n
+
     def skip(self, size: int) -> None:
         self.need(size)
         self.pos += size
@@ -112,7 +133,7 @@ class _Bytes:
 
 def _cameras_bin(path: str) -> dict[int, ColmapCamera]:
     f, out = _Bytes(path), {}
-    for _ in range(f.take("Q")[0]):
+    for _ in range(f.count("cameras")):
         cid, model_id, w, h = f.take("IiQQ")
         if model_id not in MODELS:
             raise DatasetError(f"{path}: camera {cid} has unknown camera model id {model_id}")
@@ -124,7 +145,7 @@ def _cameras_bin(path: str) -> dict[int, ColmapCamera]:
 
 def _images_bin(path: str) -> dict[int, ColmapImage]:
     f, out = _Bytes(path), {}
-    for _ in range(f.take("Q")[0]):
+    for _ in range(f.count("images")):
         iid, *pose, cid = f.take("I7dI")
         name = f.cstring()
         f.skip(24 * f.take("Q")[0])
@@ -135,7 +156,7 @@ def _images_bin(path: str) -> dict[int, ColmapImage]:
 
 def _points_bin(path: str):
     f = _Bytes(path)
-    n = f.take("Q")[0]
+    n = f.count("points")
     ids, xyz, rgb, err = np.zeros(n, np.int64), np.zeros((n, 3)), np.zeros((n, 3), np.uint8), \
         np.zeros(n)
     for i in range(n):
@@ -246,22 +267,37 @@ def quat_to_rotation(q) -> np.ndarray:
 
 
 def camera_lens(cam: ColmapCamera, where: str) -> Lens:
-    """`Lens` of a camera of one of the `SUPPORTED` models (COLMAP's radial terms are OpenCV's
-    k1, k2 on the same normalised coordinates)."""
-    p = cam.params
-    if cam.model == "SIMPLE_PINHOLE":
-        fx = fy = p[0]
-        cx, cy, dist = p[1], p[2], ()
-    elif cam.model in ("SIMPLE_RADIAL", "RADIAL"):
-        fx = fy = p[0]
-        cx, cy, dist = p[1], p[2], p[3:]
-    elif cam.model in ("PINHOLE", "OPENCV"):
-        fx, fy, cx, cy, dist = *p[:4], p[4:]
-    else:
+    """`Lens` of a camera of one of the `SUPPORTED` models; raises `DatasetError` naming `where`,
+    the camera and the parameter for a focal length that is not finite and > 0, another
+    parameter that is not finite, or an empty image size."""
+    if cam.model not in PARAMS:
         raise DatasetError(f"{where}: camera {cam.id} has the unsupported camera model "
                            f"{cam.model} (supported: {', '.join(SUPPORTED)})")
-    dist = tuple(float(d) for d in dist) + (0.0,) * (5 - len(dist))
-    return Lens(float(fx), float(fy), float(cx), float(cy), int(cam.width), int(cam.height), dist)
+    at = f"{where}: camera {cam.id} ({cam.model})"
+    p = dict(zip(PARAMS[cam.model], cam.params))
+    f = {k: positive(p, k, at) for k in ("f", "fx", "fy") if k in p}
+    cx, cy = number(p, "cx", at), number(p, "cy", at)
+    dist = tuple(number(p, k, at) if k in p else 0.0 for k in DISTORTION)
+    if cam.width < 1 or cam.height < 1:
+        raise DatasetError(f"{at}: image size {cam.width}x{cam.height} is empty")
+    return Lens(f.get("fx", f.get("f")), f.get("fy", f.get("f")), cx, cy, int(cam.width),
+                int(cam.height), dist)
+
+
+def _pose(im: ColmapImage, where: str) -> np.ndarray:
+    """World-to-camera matrix of an image; a quaternion that is zero or not finite, or a
+    translation that is not finite, raises `DatasetError` naming `where` and the image."""
+    at = f"{where}: image {im.name!r} (id {im.id})"
+    norm = np.linalg.norm(im.qvec)
+    rotation = quat_to_rotation(im.qvec) if np.isfinite(norm) and norm > 0 else None
+    if rotation is None or rotation_problem(rotation):
+        raise DatasetError(f"{at}: qvec {tuple(im.qvec)} is not a rotation (a zero or non-finite "
+                           "quaternion)")
+    if not np.all(np.isfinite(im.tvec)):
+        raise DatasetError(f"{at}: tvec {tuple(im.tvec)} must be finite")
+    view = np.eye(4)
+    view[:3, :3], view[:3, 3] = rotation, im.tvec
+    return view
 
 
 def model_folder(root: str) -> str | None:
@@ -274,11 +310,13 @@ def model_folder(root: str) -> str | None:
 
 
 def colmap_source(root: str) -> Source:
-    """Views of a COLMAP dataset: the model in `model_folder(root)`, images in root/images."""
+    """Views of a COLMAP dataset: the model in `model_folder(root)`, images in root/images.
+    Cameras, poses and points are checked (`camera_lens`, `_pose`, finite points)."""
     folder = model_folder(root)
     model = read_model(folder)
     ext = model_format(folder)
-    cams_file, images_file = (os.path.join(folder, n + ext) for n in ("cameras", "images"))
+    cams_file, images_file, points_file = (os.path.join(folder, n + ext)
+                                           for n in ("cameras", "images", "points3D"))
     if not model.images:
         raise DatasetError(f"{images_file}: the model has no images (empty model)")
     lenses, views = {}, []
@@ -288,8 +326,11 @@ def colmap_source(root: str) -> Source:
                                f"which {cams_file} does not define")
         if im.camera_id not in lenses:
             lenses[im.camera_id] = camera_lens(model.cameras[im.camera_id], cams_file)
-        view = np.eye(4)
-        view[:3, :3], view[:3, 3] = quat_to_rotation(im.qvec), im.tvec
         views.append(View(im.name.replace(os.sep, "/"), os.path.join(root, "images", im.name),
-                          view, lenses[im.camera_id]))
+                          _pose(im, images_file), lenses[im.camera_id]))
+    bad = ~np.all(np.isfinite(model.points), axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise DatasetError(f"{points_file}: point {model.point_ids[i]}: position "
+                           f"{tuple(model.points[i].tolist())} is not finite")
     return Source(images_file, cams_file, views, model.points, model.colors)

@@ -5,12 +5,16 @@ Formats, detected in this order in the folder given (or given as the json file i
   `transforms_train.json`  NeRF-synthetic (white background; RGBA images);
   `sparse/0/` or `sparse/` a COLMAP model, binary or text (`colmap.py`), images in `images/`.
 
-Each image is read as 8-bit RGB(A) / 255, checked against its camera's size, composited over the
-dataset's background where it has alpha (image = rgb·a + background·(1 − a)), undistorted to a
-pinhole camera with no invalid pixel where its lens has distortion (`undistort.py`, OpenCV), and
-downscaled by an integer k with an area filter: the last width % k columns and height % k rows are
-dropped and each k x k block is averaged, so that every intrinsic is divided by k exactly
-(`views.Lens.downscaled`).
+Each image is read as RGB(A) at its bit depth (8-bit values / 255, 16-bit / 65535;
+`views.read_image`), checked against its camera's size, composited over the dataset's background
+where it has alpha (image = rgb·a + background·(1 − a)), undistorted to a pinhole camera with no
+invalid pixel where its lens has distortion (`undistort.py`, OpenCV), and downscaled by an integer
+k with an area filter: the last width % k columns and height % k rows are dropped and each k x k
+block is averaged, so that every intrinsic is divided by k exactly (`views.Lens.downscaled`).
+
+Every camera, pose and SfM point is checked as it is read (`transforms.py`, `colmap.py`), and the
+downscale against each image's size before any image is read: a `DatasetError` names the file,
+the frame, image or point, and the field.
 
 Split: NeRF-synthetic holds out the frames whose id (the last number in the file name) is a
 multiple of 10 (lego_train: r_0, r_10, ..., r_90); every other dataset holds out every 8th image in
@@ -135,10 +139,15 @@ def _prepare(view: View, source: Source, background, undistorters, k,
     return image, lens.downscaled(k)
 
 
-def _camera(view: View, lens: Lens) -> Camera:
-    f32 = np.float32
-    return Camera(viewmat=view.viewmat.astype(f32), fx=f32(lens.fx), fy=f32(lens.fy),
-                  cx=f32(lens.cx), cy=f32(lens.cy), width=lens.width, height=lens.height)
+def _check_downscale(views: list[View], undistorters: dict, k: int) -> None:
+    """Refuse a downscale that leaves an image (undistorted where its lens has distortion) with
+    no pixel."""
+    for v in views:
+        lens = undistorters[v.lens][0] if v.lens.distorted else v.lens
+        if lens.width < k or lens.height < k:
+            after = " after undistortion" if v.lens.distorted else ""
+            raise DatasetError(f"{v.path}: downscale {k} is larger than the image ({lens.width}x"
+                               f"{lens.height} pixels{after})")
 
 
 def _stack(images: list[np.ndarray]) -> np.ndarray | list:
@@ -190,12 +199,13 @@ def load_dataset(path, *, downscale: int = 1, dtype=np.float32) -> Dataset:
     background = WHITE if source.nerf_synthetic else BLACK
     undistorters = {v.lens: undistorter(v.lens, source.lens_file) for v in views
                     if v.lens.distorted}
+    _check_downscale(views, undistorters, int(downscale))
     with concurrent.futures.ThreadPoolExecutor(min(8, os.cpu_count() or 1)) as pool:
         done = list(pool.map(lambda v: _prepare(v, source, background, undistorters,
                                                 int(downscale), dtype), views))
     held = _held_out(names, source.nerf_synthetic, source.file)
     return Dataset(path=path, names=tuple(names), images=_stack([im for im, _ in done]),
-                   cameras=tuple(_camera(v, lens) for v, (_, lens) in zip(views, done)),
+                   cameras=tuple(lens.camera(v.viewmat) for v, (_, lens) in zip(views, done)),
                    points=source.points.astype(np.float32),
                    colors=source.colors.astype(np.float32) / np.float32(255),
                    train=np.flatnonzero(~held), test=np.flatnonzero(held), background=background)

@@ -26,16 +26,7 @@ from typing import Callable
 
 import numpy as np
 
-from .views import DatasetError, Lens
-
-
-def _cv2(where: str):
-    try:
-        import cv2
-    except ImportError:
-        raise ImportError(f"{where}: the camera has lens distortion and undistorting it needs "
-                          "OpenCV: pip install 'lgs_jax[data]' (opencv-python-headless)") from None
-    return cv2
+from .views import DatasetError, Lens, opencv
 
 
 def _matrix(lens: Lens) -> np.ndarray:
@@ -63,7 +54,7 @@ def undistorter(lens: Lens, where: str) -> tuple[Lens, Callable[[np.ndarray], np
     `where` names the file the camera comes from (for messages). Raises `DatasetError` if the
     distortion is too strong to give a valid rectangle, `ImportError` if OpenCV is missing.
     """
-    cv2 = _cv2(where)
+    cv2 = opencv(where, "the camera has lens distortion and undistorting it")
     x0, x1, y0, y1 = _valid_rectangle(cv2, lens)
     w, h = int(np.floor(lens.fx * (x1 - x0))), int(np.floor(lens.fy * (y1 - y0)))
     if not (np.all(np.isfinite([x0, x1, y0, y1])) and w > 0 and h > 0):

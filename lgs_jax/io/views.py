@@ -1,8 +1,8 @@
 """What the dataset format readers produce: views (image file, pose, lens) and image helpers.
 
 Every format (COLMAP, transforms.json) is read into a `Source`: one `View` per image, with the
-world-to-camera pose in OpenCV axes (x right, y down, z forward) and a `Lens`. `dataset.py` turns a
-`Source` into a `Dataset` (images read, undistorted, downscaled).
+world-to-camera pose in OpenCV axes (x right, y down, z forward) and a `Lens`. `datasets.py` turns
+a `Source` into a `Dataset` (images read, undistorted, downscaled).
 """
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+
+from ..scene import Camera
 
 DISTORTION = ("k1", "k2", "p1", "p2", "k3")
 
@@ -54,6 +56,15 @@ class Lens:
                                    cy=self.cy / k, width=self.width // k,
                                    height=self.height // k)
 
+    def camera(self, viewmat) -> Camera:
+        """The pinhole `Camera` of this lens at world-to-camera `viewmat` (float32 leaves). A
+        distorted lens has no pinhole camera: undistort it first (`undistort.undistorted_lens`)."""
+        if self.distorted:
+            raise ValueError(f"lens: distortion {self.dist} has no pinhole camera; undistort it")
+        f32 = np.float32
+        return Camera(viewmat=np.asarray(viewmat).astype(f32), fx=f32(self.fx), fy=f32(self.fy),
+                      cx=f32(self.cx), cy=f32(self.cy), width=self.width, height=self.height)
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class View:
@@ -84,6 +95,16 @@ class Source:
     nerf_synthetic: bool = False
 
 
+def opencv(where: str, need: str):
+    """The cv2 module; `ImportError` naming `where` and what `need`s it if OpenCV is missing."""
+    try:
+        import cv2
+    except ImportError:
+        raise ImportError(f"{where}: {need} needs OpenCV: pip install 'lgs_jax[data]' "
+                          "(opencv-python-headless)") from None
+    return cv2
+
+
 def _open(path: str, listed_in: str):
     from PIL import Image, UnidentifiedImageError
 
@@ -101,12 +122,47 @@ def image_size(path: str, listed_in: str) -> tuple[int, int]:
         return im.size
 
 
+def _png_bit_depth(path: str) -> int | None:
+    """The bit depth in a PNG file's IHDR chunk (None if `path` is not a PNG file)."""
+    with open(path, "rb") as f:
+        head = f.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return head[24]
+
+
+def _png16(path: str) -> np.ndarray:
+    """(H, W, 3|4) uint16 RGB(A) of a 16-bit PNG, read by OpenCV (Pillow reads 16-bit colour
+    as 8 bits)."""
+    cv2 = opencv(path, "reading a 16-bit colour PNG image")
+    pixels = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    if pixels is None or pixels.dtype != np.uint16:
+        raise DatasetError(f"{path}: cannot read the 16-bit PNG image")
+    if pixels.ndim == 2:
+        return np.repeat(pixels[..., None], 3, -1)
+    return pixels[..., [2, 1, 0, 3][:pixels.shape[2]]]  # BGR(A) -> RGB(A)
+
+
+def _pixels(im, path: str) -> np.ndarray:
+    """(H, W, 3 or 4) uint8 or uint16 pixels of an open Pillow image, at the file's bit depth."""
+    if im.mode.startswith("I;16") and "transparency" not in im.info:
+        return np.repeat(np.asarray(im).astype(np.uint16)[..., None], 3, -1)  # 16-bit grey
+    if im.format == "PNG" and _png_bit_depth(path) == 16:
+        return _png16(path)
+    if im.mode in ("I", "F") or im.mode.startswith("I;16"):
+        raise DatasetError(f"{path}: unsupported pixel format (Pillow mode {im.mode}); use 8- or "
+                           "16-bit images")
+    has_alpha = im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info
+    return np.asarray(im.convert("RGBA" if has_alpha else "RGB"))
+
+
 def read_image(path: str, listed_in: str) -> np.ndarray:
-    """(H, W, 3) or, where the file has alpha, (H, W, 4) float32 in [0, 1]."""
+    """(H, W, 3) or, where the file has alpha, (H, W, 4) float32 in [0, 1]: 8-bit values / 255,
+    16-bit ones / 65535 (each the nearest float32 of the quotient)."""
     with _open(path, listed_in) as im:
         try:
-            has_alpha = im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info
-            rgb = np.asarray(im.convert("RGBA" if has_alpha else "RGB"))
+            pixels = _pixels(im, path)
         except OSError as e:
             raise DatasetError(f"{path}: cannot read the image ({e})") from None
-    return rgb.astype(np.float32) / np.float32(255)
+    scale = np.float32(65535 if pixels.dtype == np.uint16 else 255)
+    return pixels.astype(np.float32) / scale

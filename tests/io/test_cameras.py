@@ -45,7 +45,8 @@ def _cameras_file(tmp_path, cameras):
 
 @pytest.mark.parametrize("change,match", [
     (dict(fx=None), "camera 0: missing 'fx'"), (dict(rotation=None), "camera 0: missing 'rotation'"),
-    (dict(fx="abc"), "camera 0: fx must be a finite number, got 'abc'"),
+    (dict(fx="abc"), "camera 0: fx must be a finite number > 0, got 'abc'"),
+    (dict(fx=0.0), "camera 0: fx must be a finite number > 0, got 0.0"),
     (dict(width="640"), "camera 0: width must be a finite number, got '640'"),
     (dict(width=1280.7), "camera 0: width must be a positive whole number of pixels"),
     (dict(height=0), "camera 0: height must be a positive whole number"),
@@ -53,7 +54,7 @@ def _cameras_file(tmp_path, cameras):
     (dict(rotation=[[1.0, 0, 0], [0, 1.2, 0], [0, 0, 1.0]]), "rotation is not orthonormal"),
     (dict(rotation=[[-1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]), "rotation is a reflection"),
     (dict(position=[0.0, 1.0]), "camera 0: position must be 3 finite numbers"),
-    (dict(fy=True), "camera 0: fy must be a finite number, got True"),
+    (dict(fy=True), "camera 0: fy must be a finite number > 0, got True"),
 ])
 def test_bad_inria_camera_field_names_file_camera_and_field(tmp_path, change, match):
     cam = {k: v for k, v in {**INRIA, **change}.items() if v is not None}
@@ -115,7 +116,7 @@ def test_nerf_width_alone_keeps_the_image_aspect(tmp_path):
 
 
 @pytest.mark.parametrize("matrix,match", [
-    (np.eye(3).tolist(), "frame 0: transform_matrix must be 4x4"),
+    (np.eye(3).tolist(), r"frame 0 \(r_0\): transform_matrix must be 4x4"),
     ([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]], "last row must be"),
     (np.diag([1, 2, 1, 1]).tolist(), "not orthonormal"),
 ])
@@ -137,3 +138,43 @@ def test_saved_cameras_load_back(tmp_path):
         assert (a.width, a.height) == (b.width, b.height)
         for name in ("fx", "fy", "cx", "cy"):
             assert float(getattr(b, name)) == float(getattr(a, name))
+
+
+def _same_camera(a, b):
+    assert (a.width, a.height) == (b.width, b.height)
+    for name in ("viewmat", "fx", "fy", "cx", "cy"):
+        assert np.asarray(getattr(a, name)).tobytes() == np.asarray(getattr(b, name)).tobytes(), \
+            name
+
+
+def test_transforms_cameras_are_the_dataset_cameras(tmp_path):
+    """load_cameras reads transforms.json with the dataset loader's parser: fl_x, fl_y, cx, cy,
+    w, h and per-frame overrides."""
+    from tests.io.captures import write_frames
+
+    c2w = np.eye(4)
+    c2w[:3, 3] = [1.0, 2.0, 3.0]
+    frames = [dict(file_path="images/a.png", transform_matrix=c2w.tolist()),
+              dict(file_path="images/b.png", transform_matrix=np.eye(4).tolist(), fl_x=60.0,
+                   cx=21.5)]
+    path = write_frames(tmp_path, dict(fl_x=50.0, fl_y=55.0, cx=19.0, cy=16.0), frames)
+    cams = lgs_jax.load_cameras(path)
+    assert [(c.fx, c.fy, c.cx, c.cy, c.width, c.height) for c in cams] == \
+        [(50.0, 55.0, 19.0, 16.0, 40, 30), (60.0, 55.0, 21.5, 16.0, 40, 30)]
+    for a, b in zip(cams, lgs_jax.load_dataset(tmp_path).cameras):
+        _same_camera(a, b)
+    (half,) = lgs_jax.load_cameras(path, width=20)[:1]  # Camera.resized, as for cameras.json
+    _same_camera(half, cams[0].resized(20))
+
+
+@pytest.mark.parametrize("content,says", [
+    (b"ply\nformat binary_little_endian 1.0\nelement vertex 1\n\x00\xff\xfe",
+     "is a PLY file, not a cameras file"),
+    (b"\x89PNG\r\n\x1a\n\x00\x00\xff", "not a cameras file: not UTF-8 text"),
+])
+def test_a_binary_file_as_cameras_says_it_is_not_a_cameras_file(tmp_path, content, says):
+    path = tmp_path / "scene.ply"
+    path.write_bytes(content)
+    with pytest.raises(lgs_jax.DatasetError, match=says) as e:
+        lgs_jax.load_cameras(path)
+    assert str(e.value).startswith(str(path))

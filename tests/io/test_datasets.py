@@ -16,6 +16,7 @@ from lgs_jax.io import colmap, undistort
 from lgs_jax.io.datasets import as_float
 from lgs_jax.io.views import Lens
 from tests.io import colmap_format as cf
+from tests.io.captures import tiny_colmap, tiny_transforms, write_frames
 
 
 # --- an independent transcription of the lens model (views.Lens's docstring) ---------------------
@@ -216,6 +217,9 @@ def test_undistortion_straightens_the_lines_of_a_checkerboard(tmp_path):
     (tmp_path / "transforms.json").write_text(json.dumps(meta))
     d = lgs_jax.load_dataset(tmp_path)
     cam, img = d.cameras[0], d.images[0][..., 0]
+    (same,) = lgs_jax.load_cameras(tmp_path / "transforms.json")  # the undistorted camera
+    assert (same.width, same.height, same.fx, same.cx, same.cy) == \
+        (cam.width, cam.height, cam.fx, cam.cx, cam.cy)
     half, bent = PERIOD / 2, []
     for axis in (0, 1):  # 0: vertical lines, crossed along rows; 1: horizontal, along columns
         f, c = (cam.fx, cam.cx) if axis == 0 else (cam.fy, cam.cy)
@@ -239,18 +243,6 @@ def test_undistortion_straightens_the_lines_of_a_checkerboard(tmp_path):
 
 
 # --- transforms.json ------------------------------------------------------------------------------
-
-def write_frames(root, meta, frames, size=(40, 30), alpha=False):
-    os.makedirs(os.path.join(root, "images"), exist_ok=True)
-    for fr in frames:
-        mode = "RGBA" if alpha else "RGB"
-        Image.new(mode, size, (10, 20, 30, 0) if alpha else (10, 20, 30)).save(
-            os.path.join(root, fr["file_path"]))
-    path = os.path.join(root, "transforms.json")
-    with open(path, "w") as f:
-        json.dump(dict(meta, frames=frames), f)
-    return path
-
 
 def test_transforms_camera_projects_a_point_where_computed_by_hand(tmp_path):
     """Camera 5 units up the world z axis, looking down at the origin (OpenGL axes: camera y is
@@ -309,21 +301,6 @@ def test_downscale_averages_blocks_and_divides_intrinsics(tmp_path):
 
 # --- bad datasets --------------------------------------------------------------------------------
 
-def tiny_colmap(root, model=(1, (8.0, 8.0, 4.0, 3.0)), images=("a.png", "b.png"), camera_id=1):
-    os.makedirs(os.path.join(root, "images"), exist_ok=True)
-    for name in images:
-        Image.new("RGB", (8, 6)).save(os.path.join(root, "images", name))
-    ims = [(i + 1, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 1.0), camera_id, n, [])
-           for i, n in enumerate(images)]
-    cf.write_bin(os.path.join(root, "sparse", "0"), [(1, model[0], 8, 6, model[1])], ims,
-                 [(1, (0.0, 0.0, 0.0), (1, 2, 3), 0.5, [])])
-
-
-def tiny_transforms(root, **meta):
-    frames = [dict(file_path="images/a.png", transform_matrix=np.eye(4).tolist())]
-    return write_frames(root, dict(dict(fl_x=40.0), **meta), frames)
-
-
 def _truncate(path):
     data = open(path, "rb").read()
     open(path, "wb").write(data[:-5])
@@ -369,11 +346,11 @@ BAD = {  # case: (make the dataset in root, file the message names, what it says
                        "image 'a.png' uses camera 9, which .*cameras.bin does not define"),
     "no frames": (lambda r: write_frames(r, {}, []), "transforms.json", "no frames"),
     "frame without pose": (lambda r: write_frames(r, dict(fl_x=1.0), [dict(file_path="a.png")]),
-                           "transforms.json", "frame 0 is malformed .*transform_matrix"),
+                           "transforms.json", r"frame 0 \(a.png\): missing 'transform_matrix'"),
     "truncated model": (lambda r: (tiny_colmap(r), _truncate(f"{r}/sparse/0/images.bin")),
                         "sparse/0/images.bin", "truncated"),
     "unreadable json": (lambda r: open(f"{r}/transforms.json", "w").write("{"),
-                        "transforms.json", "cannot read"),
+                        "transforms.json", "not valid JSON: .* line 1"),
     "unreadable image": (lambda r: (tiny_colmap(r), _garbage(f"{r}/images/a.png")),
                          "images/a.png", "cannot read the image"),
     "not a dataset": (lambda r: None, "", "not a dataset folder"),
@@ -467,6 +444,17 @@ def test_fox_is_undistorted_with_its_split(data_dir):
     c2w = np.linalg.inv(np.asarray(cam.viewmat, np.float64))
     c2w[:3, 1:3] *= -1
     np.testing.assert_allclose(c2w, meta["frames"][0]["transform_matrix"], atol=1e-5)
+    # load_cameras gives the cameras training uses: undistorted, at full size (the dataset's
+    # intrinsics are these divided by 4 exactly, the sizes rounded down)
+    cams = lgs_jax.load_cameras(os.path.join(path, "transforms.json"))
+    by_name = {os.path.normpath(f["file_path"]): c for f, c in zip(meta["frames"], cams)}
+    assert len(by_name) == len(d.names)
+    for name, mine in zip(d.names, d.cameras):
+        full = by_name[os.path.normpath(name)]
+        assert np.asarray(full.viewmat).tobytes() == np.asarray(mine.viewmat).tobytes()
+        assert (full.fx / 4, full.fy / 4, full.cx / 4, full.cy / 4) == \
+            (mine.fx, mine.fy, mine.cx, mine.cy)
+        assert (full.width // 4, full.height // 4) == (mine.width, mine.height)
 
 
 def test_lego_train_matches_an_independent_reading_with_ids_0_to_90_held_out(data_dir):
