@@ -77,7 +77,8 @@ def run(args) -> None:
     g, cam = jax.device_put(case.scene), jax.device_put(case.camera)
     cap = lgs_jax.pair_capacity(scale.count_pairs(g, cam))
     w = jax.random.normal(jax.random.key(0), (cam.height, cam.width, 3), jnp.float32)
-    walked = int(lgs_jax.render(g, cam, backend="pallas", capacity=cap).stats.pairs_walked)
+    walked = int(lgs_jax.render(g, cam, backend="pallas",
+                                capacity=cap).stats.backend_stats.pairs_walked)
     fns, mem, out = {}, {}, {}
     for pkg in packages:
         gp = pkg.Gaussians(**{k: getattr(g, k) for k in g.__dataclass_fields__})

@@ -65,7 +65,7 @@ def run_case(case: Case, rows, repeat: int, with_error: bool):
         row = dict(scene=case.name, width=cam.width, height=cam.height, gaussians=g.num,
                    row=name, median_ms=times[name],
                    compile_s=compile_s[name], pairs=int(out.stats.pairs_required),
-                   strip_pairs=int(out.stats.strip_pairs))
+                   strip_pairs=int(getattr(out.stats.backend_stats, "strip_pairs", 0)))
         if truth is not None:
             err = np.abs(np.asarray(out.image, np.float64) - truth)
             row.update(max_abs_err=float(err.max()), psnr_db=psnr(out.image, truth))

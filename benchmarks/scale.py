@@ -54,7 +54,8 @@ import numpy as np
 
 import lgs_jax
 from lgs_jax import binning, pairs
-from lgs_jax.backends import REGISTRY, kernel_steps, pallas
+from lgs_jax.backends import REGISTRY, pallas
+from lgs_jax.backends.pallas import steps as kernel_steps
 from lgs_jax.layout import tile_grid
 from lgs_jax.projection import project
 from lgs_jax.render import next_pow2
@@ -65,67 +66,29 @@ from .common import (SCENES, add_data_argument, compiled_mib, load_scene, median
 C = lgs_jax.RasterConfig
 QUEUED = 8  # calls issued before one block, for the e2e_queued column
 K = lgs_jax.KernelConfig
-LOCAL = K(vanilla_from_pairs=None)  # the Local-GS kernel at every size (no routing)
-# row -> (backend, config); "auto" rows run what KernelConfig's auto_* picks on this device
+# row -> (backend, config); "auto" is what users get (Mosaic GPU on a GPU)
 ROWS = {
-    "auto": ("pallas", C("gsplat")),  # what users get (KernelConfig's defaults)
-    "localgs": ("pallas", C("gsplat", tuning=LOCAL)),
-    # every forward block walks its tile's whole list (KernelConfig.mosaic_compact off: the
-    # default before Dec 2, afternoon)
-    "localgs:full": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                    mosaic_compact=False))),
-    "localgs:fast": ("pallas", C("gsplat", blend="fast", tuning=LOCAL)),
-    # the Mosaic GPU kernels reading pair records XLA built (KernelConfig.mosaic_pair_source;
-    # "localgs" builds them in the kernels, the default since Dec 1)
-    "localgs:records": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                       mosaic_pair_source="records"))),
+    "auto": ("pallas", C("gsplat")),
+    "localgs": ("pallas", C("gsplat")),
+    "localgs:fast": ("pallas", C("gsplat", blend="fast")),
     "localgs:triton": ("pallas", C("gsplat", kernel="triton")),
-    # the colour as per-tile planes XLA interleaves and every pixel's stops (the default before
-    # Dec 3, seventh session: KernelConfig.mosaic_image_layout and mosaic_block_stops off)
-    "localgs:planes": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                      mosaic_image_layout=False,
-                                                      mosaic_block_stops=False))),
-    # every warp of a compacted forward block steps through the pairs of any of its strips
-    # (KernelConfig.mosaic_warp_lists off: the default before Dec 4, sixth session)
-    "localgs:blocks": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                      mosaic_warp_lists=False))),
-    # blocks take tiles and segments in a stable argsort of their lengths (CUB on a GPU), not
-    # by buckets of length (KernelConfig.block_order "sort": the default before Dec 5)
-    "localgs:sort": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                    block_order="sort"))),
     "vanilla": ("pallas_vanilla", C("gsplat")),
     "vanilla:triton": ("pallas_vanilla", C("gsplat", kernel="triton")),
-    # the Local-GS forward's pair loop unrolled 4 times instead of 8: 95 registers for the H200
-    # (5 blocks per SM) instead of 116 (4), 49.5 SASS instructions per pair instead of 46.5
-    # (scripts/kernel_sass.py, Dec 3, seventh session)
-    "localgs:unroll4": ("pallas", C("gsplat", tuning=K(vanilla_from_pairs=None,
-                                                       mosaic_unroll_localgs=4))),
-    # block-size variants of the Mosaic GPU kernels (KernelConfig)
-    "localgs:px128": ("pallas", C("gsplat", tuning=K(
-        mosaic_forward_pixels=128, mosaic_backward_pixels=128, vanilla_from_pairs=None))),
-    "localgs:px256": ("pallas", C("gsplat", tuning=K(
-        mosaic_forward_pixels=256, mosaic_backward_pixels=256, vanilla_from_pairs=None))),
-    "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(mosaic_forward_pixels=128))),
-    # half-tile backward blocks (the default was by tile count, half tiles below 8192, until
-    # Dec 3: whole tiles halve the backward's rows; BENCHMARKS.md §7)
-    "localgs:bwd128": ("pallas", C("gsplat", tuning=K(mosaic_backward_pixels=128,
-                                                      vanilla_from_pairs=None))),
-    # the backward's walks whole (one block per tile, the default before Dec 2), or split into
-    # segments of 512 / 1024 (the default) / 2048 pairs
-    "localgs:whole": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=None,
-                                                     vanilla_from_pairs=None))),
-    "localgs:seg512": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=512,
-                                                      vanilla_from_pairs=None))),
-    "localgs:seg1024": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=1024,
-                                                       vanilla_from_pairs=None))),
-    "localgs:seg2048": ("pallas", C("gsplat", tuning=K(mosaic_backward_segment=2048,
-                                                       vanilla_from_pairs=None))),
+    # the KernelConfig settings: the pair loop unrolled 4 times instead of 8; block sizes;
+    # the backward's walks whole (one block per tile) or in segments of 512 / 2048 pairs
+    "localgs:unroll4": ("pallas", C("gsplat", tuning=K(unroll=4))),
+    "localgs:px256": ("pallas", C("gsplat", tuning=K(forward_pixels=256, backward_pixels=256))),
+    "vanilla:px128": ("pallas_vanilla", C("gsplat", tuning=K(forward_pixels=128))),
+    "localgs:bwd128": ("pallas", C("gsplat", tuning=K(backward_pixels=128))),
+    "localgs:whole": ("pallas", C("gsplat", tuning=K(backward_segment=None))),
+    "localgs:seg512": ("pallas", C("gsplat", tuning=K(backward_segment=512))),
+    "localgs:seg2048": ("pallas", C("gsplat", tuning=K(backward_segment=2048))),
 }
 POW2 = "@pow2"
 """Row-name suffix: the row's pair capacity is the power of two above the pairs."""
 WALKED = "@walked"
 """Row-name suffix (--grad): the backward's rows for the walked pairs only, `render`'s
-`row_capacity` = `pair_capacity` of an eager forward's `stats.pairs_walked` (as the pair
+`row_capacity` = `pair_capacity` of an eager forward's walked pairs (as the pair
 capacity is sized from a count of the pairs)."""
 
 
@@ -144,11 +107,10 @@ def row_setup(name: str, n_pairs: int):
 
 def builds_records_in_xla(backend: str, config, n_tiles: int, cap: int) -> bool:
     """Whether the row's raster includes the XLA per-pair preparation `pair_prep` times: a
-    Local-GS forward on Triton, or on Mosaic GPU reading XLA's records
-    (`KernelConfig.mosaic_pair_source`)."""
-    plan = pallas.plan(config, backend == "pallas_vanilla", n_tiles, cap)
-    return not plan.vanilla and (plan.forward == "triton"
-                                 or config.tuning.mosaic_pair_source == "records")
+    Local-GS forward on Triton (the Mosaic GPU kernels build their records themselves)."""
+    del cap
+    plan = pallas.plan(config, backend == "pallas_vanilla", n_tiles)
+    return not plan.vanilla and plan.kernel == "triton"
 
 
 def count_pairs(g, cam) -> int:
@@ -318,13 +280,13 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
         row_cap = walked = None
         if name.endswith(WALKED):
             walked = int(lgs_jax.render(g, cam, backend=backend, config=config,
-                                        capacity=cap).stats.pairs_walked)
+                                        capacity=cap).stats.backend_stats.pairs_walked)
             row_cap = lgs_jax.pair_capacity(walked)
         # w is an argument: closed over, XLA would constant-fold the image-sized weights into
         # the backward (minutes of compilation at 4K).
         def loss(g, w, b=backend, cf=config, cap=cap, rc=row_cap):
             out = lgs_jax.render(g, cam, backend=b, config=cf, capacity=cap, row_capacity=rc)
-            return jnp.sum(out.image * w), out.stats.row_overflow
+            return jnp.sum(out.image * w), out.stats.backend_stats.row_overflow
 
         f = jax.jit(jax.value_and_grad(loss, has_aux=True))
         (_, overflow), first = f(g, weights)

@@ -2,8 +2,9 @@
 
 Public API: `Gaussians`, `Camera`, `RasterConfig` (with its `KernelConfig`), `render`
 (-> `RenderOutput`), `render_growing`, `pair_capacity` (the pair-buffer size for a pair count),
-`load_ply`, `save_ply`, `load_cameras`, `save_cameras`, `stack_cameras`, `default_scene`, `load_dataset`
-(-> `Dataset`: COLMAP / transforms.json captures).
+`count_pairs` (the pairs a render needs), `load_ply`, `save_ply`, `load_cameras`,
+`save_cameras`, `stack_cameras`, `default_scene`, `load_dataset` (-> `Dataset`: COLMAP /
+transforms.json captures).
 """
 
 from .config import KernelConfig, RasterConfig

@@ -1,10 +1,11 @@
 """Exact tile binning: which 16x16 tiles can a Gaussian's alpha test pass in?
 
 A Gaussian passes the alpha test only inside the ellipse q(d) = dᵀ Q d <= τ, τ = 2 ln(255·o)
-(conventions.md, "What binning may and may not do"), where d = mean2d − pixel centre and Q is the
-conic. The test itself runs in floating point, so a pixel just outside that ellipse can pass. This
-module bounds that rounding and pads the box so that the tile rectangle holds **every** pixel
-whose rounded alpha test passes; nothing is truncated (no 3σ radius, no 0.95 shrink).
+(docs/conventions.md, "What binning may and may not do"), where d = mean2d − pixel centre and Q
+is the conic. The test itself runs in floating point, so a pixel just outside that ellipse can
+pass. This module bounds that rounding and pads the box so that the tile rectangle holds
+**every** pixel whose rounded alpha test passes; nothing is truncated (no 3σ radius, no 0.95
+shrink).
 
 Rounding bound (u = unit roundoff of the dtype, 2^-24 for float32). The difference form
 p̂ = −½(a·dx² + c·dy²) − b·dx·dy evaluated in floating point obeys |p̂ − p| <= γ·S with
@@ -138,10 +139,10 @@ class TileBins:
       emitted_tile: (capacity,) the tile of each emission slot, the tile sort's key
         (`sort_key`: uint16 up to `SORT16_TILES` tiles, else int32). A tile's pairs are its
         slots in ascending order (the sort is stable), so whether a pair is among its tile's
-        first m follows from its slot alone (backends.gaussian_grads.walked_rows).
+        first m follows from its slot alone (backends.pallas.gaussian_grads.walked_rows).
       first, count: (N,) int32 per Gaussian: its pairs fill emission slots [first, first + count)
         (count = 0 for a Gaussian with no pair within the capacity), in ascending tile order.
-        The Pallas backward sums each Gaussian's pair rows there (backends.gaussian_grads).
+        The Pallas backward sums each Gaussian's pair rows there (backends.pallas.gaussian_grads).
       pairs_required: int32 number of pairs the scene needs (saturates at 2^31 − 1).
       overflow: bool, pairs_required > capacity: the tail (farthest Gaussians) was dropped.
       n_unbounded: int32 Gaussians binned to every tile because rounding could not bound them.

@@ -1,4 +1,4 @@
-"""Per-pixel front-to-back compositing, exactly as conventions.md "Compositing" defines it.
+"""Per-pixel front-to-back compositing, exactly as docs/conventions.md "Compositing" defines it.
 
 For each pixel, over Gaussians in (depth, index) order:
     d = mean2d − pixel_centre;  power = −½(a·dx² + c·dy²) − b·dx·dy

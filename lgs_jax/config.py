@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-# Per-convention compositing constants (conventions.md, "Conventions").
+# Per-convention compositing constants (docs/conventions.md, "Conventions").
 ALPHA_MIN = 1.0 / 255.0
 T_STOP = 1e-4
 _ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}

@@ -5,7 +5,8 @@ a tile, pixel k (0..255) is row k // 16, column k % 16; strip s (0..7, one 32-la
 paper's kernel) holds rows 2s and 2s + 1, i.e. pixels 32s .. 32s + 31, so a strip's pixels are
 consecutive k and (n_tiles·8, 32) strip arrays are (n_tiles, 256) tile arrays.
 
-Pixel (i, j) of the image (row i, column j) has its centre at (j + 0.5, i + 0.5) (conventions.md).
+Pixel (i, j) of the image (row i, column j) has its centre at (j + 0.5, i + 0.5)
+(docs/conventions.md).
 Hoisting (Local-GS Eq. 1) evaluates ln α in a tile-local frame x' = pixel centre − origin, the
 origin being the tile's top-left corner or its centre (`RasterConfig.origin`), or in global
 coordinates (`local_coords=False`: x' = the pixel centre). Every coordinate here is an integer
@@ -52,7 +53,7 @@ def image_to_tiles(x, width: int, height: int):
 
 def tiled_image_to_tiles(image):
     """A (tiles_y·16, tiles_x·16, C) image (the whole tiles' pixels, as the Local-GS forward
-    writes its colour: `KernelConfig.mosaic_image_layout`) -> (n_tiles, 256, C) per tile."""
+    writes its colour: lgs_jax.backends.pallas.plan.Plan.image) -> (n_tiles, 256, C) per tile."""
     rows, cols = image.shape[:2]
     return image_to_tiles(image.reshape((rows * cols,) + image.shape[2:]), cols, rows)
 

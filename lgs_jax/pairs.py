@@ -61,7 +61,7 @@ def gaussian_table(p: Projected):
     """(N, TABLE_COLUMNS) per-Gaussian rows of every field a pair needs (`table_columns`),
     materialised once: fused into the per-pair consumers, XLA would recompute the rows (and
     read every field separately) for every pair. On GPUs the kernels take the same values from
-    lgs_jax.backends.table_kernel, which writes them faster."""
+    lgs_jax.backends.pallas.table, which writes them faster."""
     return lax.optimization_barrier(jnp.stack(table_columns(p), -1))
 
 
@@ -87,7 +87,7 @@ def strip_mask_columns(cols, tx, ty, config: RasterConfig):
     """Strip masks (int32) of Gaussians `cols` (`gaussian_table` columns) in tiles (tx, ty),
     FULL_MASK for those the binning could not bound. Written on columns, so that the XLA path
     (`strip_masks`) and the Mosaic GPU kernels' in-kernel staging (lane vectors, a scalar tile;
-    lgs_jax.backends.mosaic_staging) compute the same bits."""
+    lgs_jax.backends.pallas.staging) compute the same bits."""
     mx, my, a, b, c, o = cols[:6]
     dt = mx.dtype
     u = jnp.finfo(dt).eps / 2
@@ -117,7 +117,7 @@ def strip_masks(pg: PairGaussians, bins: TileBins, tiles_x: int, config: RasterC
 
 def record_columns(cols, tx, ty, config: RasterConfig, mask=None):
     """The 12 columns of the Local-GS kernels' pair record of Gaussians `cols` in tiles (tx, ty)
-    (lgs_jax.backends.kernel_steps): hoisted, V (Eq. 8) relative to the tile's origin and ln o;
+    (lgs_jax.backends.pallas.steps): hoisted, V (Eq. 8) relative to the tile's origin and ln o;
     the difference form, μ, the conic, o and 0; then rgb, z and the strip mask as a float
     (`mask`: int32, None for 0). On columns, as `strip_mask_columns`. The zeros (the difference
     form's o · 0, no mask's z · 0) are products of the lanes' own data: a constant

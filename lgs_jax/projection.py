@@ -1,6 +1,6 @@
 """EWA projection of 3D Gaussians to screen space, as gsplat 1.5.3's pinhole model.
 
-Implements conventions.md, "Camera and projection":
+Implements docs/conventions.md, "Camera and projection":
   t = R·μ + T (camera space), valid iff near < t_z < far;
   Σ = R(q) S Sᵀ R(q)ᵀ,  Σc = W Σ Wᵀ;
   J = [[fx/tz, 0, −fx·tx'/tz²], [0, fy/tz, −fy·ty'/tz²]] at the clamped point
@@ -279,7 +279,8 @@ def float_sort_key(x):
 
 
 def depth_order(p: Projected):
-    """Gaussian indices sorted by (depth, index), valid ones first (conventions.md, "Order")."""
+    """Gaussian indices sorted by (depth, index), valid ones first (docs/conventions.md,
+    "Order")."""
     idx = jnp.arange(p.depth.shape[0], dtype=jnp.int32)
     key = float_sort_key(jnp.where(p.valid, p.depth, jnp.inf))
     return jax.lax.sort((key, idx), num_keys=1, is_stable=True)[1]  # stable: ties by index

@@ -173,10 +173,22 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
 def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
             capacity: int, row_capacity: int | None, screen_offsets=None,
             colors=None) -> RenderOutput:
-    width, height = cam.width, cam.height
     p = project(g, cam, config.antialiased, colors)
     if screen_offsets is not None:
         p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
+    return composite_projected(p, cam.width, cam.height, background, backend, config, capacity,
+                               row_capacity)
+
+
+def composite_projected(p: Projected, width: int, height: int, background, backend: str,
+                        config: RasterConfig, capacity: int,
+                        row_capacity: int | None = None) -> RenderOutput:
+    """`render` from projected Gaussians on (traceable; every argument after `background`
+    static): bin `p` into a `capacity`-pair buffer, rasterize with `backend`, composite over
+    `background` ((C,) for C colour channels of `p.rgb`). `render` projects and calls it; code
+    that projects elsewhere (another device's shard, a cropped view) calls it directly.
+    Differentiable with respect to `p`'s float fields (mean2d, conic, opacity, rgb, depth) and
+    `background`; nothing is validated here (`render` does that)."""
     spec = REGISTRY[backend]
     tiles_x, tiles_y = tile_grid(width, height)
     prepare = lambda q: (None if spec.prepare is None
@@ -257,7 +269,8 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
 def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: str | None = None,
            config: RasterConfig | None = None, capacity: int | None = None,
            row_capacity: int | None = None, screen_offsets=None, colors=None) -> RenderOutput:
-    """Render `gaussians` through `camera` (conventions.md is the contract every backend meets).
+    """Render `gaussians` through `camera` (docs/conventions.md is the contract every backend
+    meets).
 
     Args:
       gaussians: the scene; its dtype (float32 or float64) is the precision of the whole render.
@@ -267,8 +280,8 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         Pallas kernel, same switches), "pallas_vanilla" (the original 3DGS kernel in Pallas),
         "reference" (16x16 tiles, per-pixel semantics) or "brute" (all Gaussians for every
         pixel, no tiles: for small scenes). The Pallas backends run in interpret mode without a
-        GPU (slow; `stats.interpreted`). None: `default_backend()`, the fastest exact backend
-        for the platform (`stats.backend` says which ran).
+        GPU (slow; `stats.backend_stats.interpreted`). None: `default_backend()`, the fastest
+        exact backend for the platform (`stats.backend` says which ran).
       config: a `RasterConfig` (static), default `RasterConfig()`.
       capacity: size of the tile–Gaussian pair buffer. None (eager only): count, then round up
         with `pair_capacity`. Under jit/vmap pass an int and check `stats.overflow`.

@@ -1,4 +1,4 @@
-"""Scene and camera pytrees (the rendering contract's parameters, `conventions.md`).
+"""Scene and camera pytrees (the rendering contract's parameters, `docs/conventions.md`).
 
 Both are registered dataclass pytrees: every array field is a leaf, so scenes and cameras pass
 through `jit`, `vmap` and `grad`. `Camera.width` / `Camera.height` are static (pytree metadata):

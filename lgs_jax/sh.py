@@ -19,7 +19,7 @@ C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.37317633259
 def sh_basis_terms(x, y, z, num_bases: int):
     """The first `num_bases` real SH basis functions at unit directions (x, y, z) (arrays of
     any one shape), as a list ordered as the INRIA coefficients (degree-major). The colour is
-    max(Σ_k basis_k·sh_k + 0.5, 0) per channel (conventions.md, "Colour";
+    max(Σ_k basis_k·sh_k + 0.5, 0) per channel (docs/conventions.md, "Colour";
     lgs_jax.projection)."""
     out = [C0 * jnp.ones_like(x)]
     if num_bases > 1:

@@ -3,14 +3,14 @@ H200? Checked on a machine without a GPU, before a device call is spent on it.
 
     build/gpu-offline/bin/python scripts/gpu_build_offline.py [--only NAME ...] [--n 300]
 
-Each case (`CASES`: the kernel variants of tests/backends/test_gradients.py,
-test_mosaic_staging.py and test_backward_segments.py, float32 and float64) compiles the value and
+Each case (`cases`: the kernel variants of tests/backends/test_gradients.py and
+tests/backends/pallas/, float32 and float64) compiles the value and
 gradient of Σ image·w of a small random scene for the H200 (deviceless, as
 `scripts/gpu_memory_offline.py`: `interpret` forced False), with the process's stderr caught
 per case: the GPU compiler's errors (e.g. "LLVM Translation failed") are printed there, not
 raised, and the kernel is left out of the program. On the GPU such a kernel then fails at run
-time, or, as on Dec 3 (eighth session) for a record column that was a constant splat, the
-test waits forever. Interpret mode (the CPU tests) and `test_in_kernel_staging_lowers_for_the_gpu`
+time, or (a record column that was a constant splat) the test waits forever. Interpret mode
+(the CPU tests) and `test_in_kernel_staging_lowers_for_the_gpu`
 (lowering to MLIR only) cannot see these errors. Exit status 1 when a case has any.
 """
 
@@ -44,8 +44,8 @@ def cases():
         "global": ("pallas", C(local_coords=False, **mosaic)),
         "center": ("pallas", C(origin="center", **mosaic)),
         "gsplat": ("pallas", C("gsplat", **mosaic)),
-        "full_walks": ("pallas", C(tuning=K(mosaic_compact=False), **mosaic)),
-        "records": ("pallas", C(tuning=K(mosaic_pair_source="records"), **mosaic)),
+        "full_walks": ("pallas", C(tuning=K(backward_segment=64), **mosaic)),
+        "fast": ("pallas", C(blend="fast", **mosaic)),
         "vanilla": ("pallas_vanilla", C(**mosaic)),
         "triton": ("pallas", C(kernel="triton")),
     }

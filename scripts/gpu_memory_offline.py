@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     ap.add_argument("--top", type=int, default=30)
     ap.add_argument("--temp", action="store_true", help="hlo_peak.py --temp")
     ap.add_argument("--tuning", action="append", default=[], metavar="NAME=VALUE",
-                    help="a KernelConfig field for the row, e.g. mosaic_image_layout=True")
+                    help="a KernelConfig field for the row, e.g. backward_segment=2048")
     args = ap.parse_args(argv)
     os.environ.setdefault("CUDA_VISIBLE_DEVICES", "-1")
     dump = os.path.abspath(args.dump or os.path.join(ROOT, "build", "gpu-offline-dump"))

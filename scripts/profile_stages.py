@@ -30,9 +30,11 @@ sys.path.insert(0, ROOT)
 import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene, median_ms  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
-from lgs_jax.backends import (backward, backward_segments, gaussian_grads,  # noqa: E402
-                              kernel_steps, pallas, pallas_mosaic)
-from lgs_jax.layout import tile_grid  # noqa: E402
+from lgs_jax.backends import backward, pallas  # noqa: E402
+from lgs_jax.backends.pallas import (gaussian_grads, mosaic_backward,  # noqa: E402
+                                     segments, table)
+from lgs_jax.backends.pallas import steps as kernel_steps  # noqa: E402
+from lgs_jax.layout import tile_grid, tiled_image_to_tiles  # noqa: E402
 from lgs_jax.projection import depth_order, project  # noqa: E402
 
 
@@ -42,10 +44,7 @@ def _time(fns: dict, repeat: int) -> dict:
 
 
 def profile(g, cam, repeat: int):
-    # the colour as per-tile planes and each pixel's stops (the default writes an image and
-    # returns block stops), which `rows_of` below hands the backward kernel as its lane rows
-    C = lgs_jax.RasterConfig(tuning=lgs_jax.KernelConfig(mosaic_image_layout=False,
-                                                         mosaic_block_stops=False))
+    C = lgs_jax.RasterConfig()
     w, h = cam.width, cam.height
     tiles_x, tiles_y = tile_grid(w, h)
     cap = int(lgs_jax.render(g, cam, backend="pallas").stats.capacity)
@@ -62,24 +61,25 @@ def profile(g, cam, repeat: int):
     masks = j(lambda pg, b: pairs.strip_masks(pg, b, tiles_x, C))(pg, bins)
     records = j(lambda pg, b, m: kernel_steps.pair_records(pg, b, tiles_x, C, m))(pg, bins, masks)
     plan = pallas.plan(C, False, tiles_x * tiles_y)
-    fwd = j(lambda p, b: pallas._forward(p, b, w, h, plan))
-    state, stop, _, saved = fwd(p, bins)
+    gtable = j(lambda p: table.gaussian_table(p, plan.interpret))(p)
+    fwd = j(lambda p, b, t: pallas.forward(p, b, t, w, h, plan))
+    state, stop, _, saved = fwd(p, bins, gtable)
     rng = np.random.default_rng(0)
     cot = tuple(jnp.asarray(rng.normal(size=x.shape).astype(np.float32))
                 for x in (state.color, state.trans, state.depth))
-    grads = j(lambda p, b, t, s, sv, c: pallas._gradients(p, b, w, h, plan, t, s, sv, c))
-    bplan = plan.for_gradients()
+    grads = j(lambda p, b, t, s, sv, c: pallas.gradients(p, b, None, w, h, plan, t, s, sv, c))
 
-    def rows_of(b, t, s, sv, c):
-        lane_rows = (t, s, c[0][..., 0], c[0][..., 1], c[0][..., 2], c[1], c[2])
-        layout = gaussian_grads.rows_of(b, s)
-        segments = backward_segments.whole_tiles(sv[2], b, layout.end)
-        return pallas_mosaic.backward_rows(C, bplan.interpret, bplan.backward_pixels, tiles_x,
-                                           segments, b, layout, sv[0], sv[1], lane_rows,
-                                           jnp.float32)
+    def rows_of(b, t, sv, c):  # the whole walks (segments: none)
+        stop_at = sv[4]
+        color = tiled_image_to_tiles(c[0]) if plan.image else c[0]
+        lane_rows = (t, stop_at, color[..., 0], color[..., 1], color[..., 2], c[1], c[2])
+        layout = gaussian_grads.rows_of(b, stop_at, None)
+        segs = segments.whole_tiles(sv[2], b, layout.end)
+        return mosaic_backward.backward_rows(C, plan.interpret, plan.backward_pixels, tiles_x,
+                                             segs, b, layout, sv[1], lane_rows, jnp.float32)
 
     kernel_rows = j(rows_of)
-    emission_rows = kernel_rows(bins, state.trans, stop, saved, cot)
+    emission_rows = kernel_rows(bins, state.trans, saved, cot)
     rows11 = jnp.asarray(rng.normal(size=(cap, 11)).astype(np.float32))
     rows10 = jnp.asarray(rng.normal(size=(cap, 10)).astype(np.float32))
     _, proj_vjp = jax.vjp(lambda g: project(g, cam), g)
@@ -95,13 +95,14 @@ def profile(g, cam, repeat: int):
         "strip_masks": (j(lambda pg, b: pairs.strip_masks(pg, b, tiles_x, C)), (pg, bins)),
         "pair_records": (j(lambda pg, b, m: kernel_steps.pair_records(pg, b, tiles_x, C, m)),
                          (pg, bins, masks)),
-        "forward (prep + kernel)": (fwd, (p, bins)),
+        "Gaussian table": (j(lambda p: table.gaussian_table(p, plan.interpret)), (p,)),
+        "forward (kernel)": (fwd, (p, bins, gtable)),
         "backward (kernel + chain + sum)": (grads, (p, bins, state.trans, stop, saved, cot)),
-        "backward kernel (rows)": (kernel_rows, (bins, state.trans, stop, saved, cot)),
+        "backward kernel (rows)": (kernel_rows, (bins, state.trans, saved, cot)),
         **{f"gaussian_grads (chain + sum), {n} lanes": (
-            j(lambda r, b, s, p, n=n: gaussian_grads.sums(r, gaussian_grads.rows_of(b, s), p,
-                                                          tiles_x, C, False, lanes=n)),
-            (emission_rows, bins, stop, p)) for n in (32, 64, 128)},
+            j(lambda r, b, s, p, n=n: gaussian_grads.sums(
+                r, gaussian_grads.rows_of(b, s, None), p, tiles_x, C, False, lanes=n)),
+            (emission_rows, bins, saved[4], p)) for n in (32, 64, 128)},
         "XLA: chain_hoisted_rows": (j(lambda p, b, r: pairs.chain_hoisted_rows(
             pairs.gather(p, b.gauss), b, r, tiles_x, C)), (p, bins, rows11)),
         "XLA: per_gaussian_sum": (j(backward.per_gaussian_sum, static_argnums=2),

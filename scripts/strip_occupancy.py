@@ -1,4 +1,4 @@
-"""How much the Local-GS warp culling can skip per scene (issue 17), on a CPU:
+"""How much the Local-GS warp culling can skip per scene, on a CPU:
 
     python scripts/strip_occupancy.py [--data DIR] [--scenes synthetic4M_1080p,...]
 
@@ -9,21 +9,17 @@ bits bounds the blending work the culling leaves: the Local-GS kernel's lead ove
 kernel (which blends every pair in all eight strips) from culling alone is at most
 8 / (mean set bits), less where staging, list walking and the per-pair setup do not shrink.
 Printed per scene: Gaussians, pairs, pairs per valid Gaussian, mean set bits of 8, the share
-of pairs with 0, 1, ..., 8 bits, and the share of pairs a half-tile block's compact walk skips
-(no bit in its four strips: `KernelConfig.mosaic_compact`). All emitted pairs count, walked or
+of pairs with 0, 1, ..., 8 bits, and the share of pairs a half-tile block could skip (no bit in
+its four strips). All emitted pairs count, walked or
 not (early termination is not modelled: it needs the forward, too slow at 10M on a CPU).
 
-With --chunks, the Mosaic GPU Local-GS forward's blend iterations compacted per block
-(`mosaic_staging.compact_loop` with `KernelConfig.mosaic_warp_lists` off: per chunk of 128
-pairs of a tile's sorted list, a block of four warps packs the pairs with a bit in any of its
-strips and every warp steps through all of them, `mosaic_unroll_localgs` = 8 per iteration, a
-pair of another warp's strip only masked), against per-warp lists (the default,
-lgs_jax.backends.mosaic_warp_lists: each warp only the pairs of its own strips; the block still
+With --chunks, the blend iterations of a forward compacted per block (per chunk of 128 pairs of
+a tile's sorted list, a block of four warps packs the pairs with a bit in any of its strips and
+every warp steps through all of them, `KernelConfig.unroll` = 8 per iteration: the walk the
+per-warp lists replaced, docs/design-notes.md) against per-warp lists (the Mosaic GPU forward,
+lgs_jax.backends.pallas.warp_lists: each warp only the pairs of its own strip; the block still
 loops to its busiest warp's count, as a warpgroup program must): the blend iterations summed
-over every chunk and block, and their ratio, the blending the per-warp lists save. Blocks are
-those the forward runs (`pallas.plan`: half tiles of four strips, a warp each, wherever the walk
-compacts, at every size; whole tiles, a warp holding two adjacent strips, only where it does
-not).
+over every chunk and block, and their ratio, the blending the per-warp lists save.
 """
 
 from __future__ import annotations
@@ -42,7 +38,7 @@ import lgs_jax  # noqa: E402
 from benchmarks.common import add_data_argument, load_scene  # noqa: E402
 from lgs_jax import binning, pairs  # noqa: E402
 from lgs_jax.backends import pallas  # noqa: E402
-from lgs_jax.backends.mosaic_staging import LANES  # noqa: E402
+from lgs_jax.backends.pallas.inline import LANES  # noqa: E402
 from lgs_jax.layout import tile_grid  # noqa: E402
 from lgs_jax.projection import project  # noqa: E402
 
@@ -91,7 +87,7 @@ def chunk_walks(name: str, data: str) -> dict:
     gpu = lgs_jax.RasterConfig(kernel="mosaic", tuning=lgs_jax.KernelConfig(interpret=False))
     tuning = gpu.tuning
     whole = pallas.plan(gpu, False, tiles_x * tiles_y).forward_pixels == 256
-    unroll, lanes = tuning.mosaic_unroll_localgs, LANES
+    unroll, lanes = tuning.unroll, LANES
     # (blocks of a tile, warps of a block, strips of a warp) as bit groups of the 8-bit mask
     blocks = [[0b11 << 2 * w for w in range(4)]] if whole else \
         [[1 << 4 * b + w for w in range(4)] for b in range(2)]

@@ -26,7 +26,7 @@ import numpy as np
 
 from benchmarks.common import psnr  # noqa: F401 - one PSNR for tests and benchmarks
 
-ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}  # conventions.md: the cap on α per convention
+ALPHA_CAP = {"3dgs": 0.99, "gsplat": 0.999}  # docs/conventions.md: the cap on α per convention
 STOP_INCLUSIVE = {"3dgs": False, "gsplat": True}  # whether T·(1 − α) == 1e-4 already stops
 F64_ATOL = 1e-9
 F32_ATOL = 1e-4
@@ -55,7 +55,7 @@ def assert_render_close(got, want, atol, max_flip_share=0.0, flip_atol=np.inf, w
 def assert_composites_equal(got, want):
     """Two renders' images whose kernels produced the same colour, T and depth bits, but the
     colour in different layouts (the Local-GS Mosaic GPU forward's (H, W, 3) image,
-    `KernelConfig.mosaic_image_layout`, against per-tile planes): equal to COMPOSITE_ULPS units
+    `pallas.Plan.image`, against per-tile planes): equal to COMPOSITE_ULPS units
     in the last place. `render` composites C + T·background in XLA after the kernel, and XLA's
     CPU compiler contracts that multiply-add into a fused one in some iterations of its
     vectorised loop and not in others; the layouts split the pixels into those iterations

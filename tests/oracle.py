@@ -1,4 +1,4 @@
-"""Independent float64 numpy implementation of conventions.md, for tests only.
+"""Independent float64 numpy implementation of docs/conventions.md, for tests only.
 
 Written from the contract text, not from lgs_jax: projection (gsplat 1.5.3 pinhole EWA) and
 brute-force per-pixel compositing over all Gaussians in (depth, index) order.

@@ -193,7 +193,7 @@ def _kernel_forward(g, cam, config):
     p = project(g, cam)
     bins = binning.bin_gaussians(p, cam.width, cam.height, CAPACITY)
     plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
-    state, stop_at, _, saved = pallas._forward(p, bins, cam.width, cam.height, plan)
+    state, stop_at, _, saved = pallas.forward(p, bins, None, cam.width, cam.height, plan)
     return p, bins, state, stop_at, saved
 
 
@@ -201,25 +201,28 @@ def _kernel_forward(g, cam, config):
 def _kernel_and_walk_rows(p, bins, cam, state, stop_at, saved, cot, config):
     """The backward kernel's pair rows and the plain-jnp walk's, from the same residuals."""
     from lgs_jax.backends import pallas, tiles
+    from lgs_jax.backends.pallas import triton
     from lgs_jax.layout import tile_grid, tiled_image_to_tiles
 
     plan = pallas.plan(config, vanilla=False, n_tiles=bins.tile_start.shape[0])
-    got = pallas._gradients(p, bins, cam.width, cam.height, plan, state.trans, stop_at, saved, cot)
-    # The walk reads XLA's masks and records (the kernel's `saved` may be the Gaussian ids and
-    # table it builds them from: KernelConfig.mosaic_pair_source), each pixel's stop pair (the
-    # forward may return each block's: Plan.block_stops) and the colour's cotangent per tile
-    # (the forward may write an image: Plan.image).
-    masks, records, _ = pallas._records(p, bins, tile_grid(cam.width, cam.height)[0], config)
+    got = pallas.gradients(p, bins, None, cam.width, cam.height, plan, state.trans, stop_at,
+                           saved, cot)
+    # The walk reads XLA's masks and records (the Mosaic GPU kernels' `saved` are the Gaussian
+    # ids and table they build them from), each pixel's stop pair (the forward may return each
+    # block's: Plan.block_stops) and the colour's cotangent per tile (the forward may write an
+    # image: Plan.image).
+    masks, records, _ = triton.records(p, bins, tile_grid(cam.width, cam.height)[0], config)
     g_color = tiled_image_to_tiles(cot[0]) if plan.image else cot[0]
-    want = tiles._gradients(p, bins, cam.width, cam.height, config, state.trans, saved[-1],
-                            (masks, records[:, :7] if config.hoist else None),
-                            (g_color,) + tuple(cot[1:]))
+    want = tiles.gradients(p, bins, None, cam.width, cam.height, config, state.trans, saved[-1],
+                           (masks if config.warp_cull else None,
+                            records[:, :7] if config.hoist else None),
+                           (g_color,) + tuple(cot[1:]))
     return got, want
 
 
 def backward_kernel_and_walk(seed: int, config, dtype):
-    """The Local-GS backward kernel's pair rows (`pallas._gradients`) and those of its plain-jnp
-    counterpart (`tiles._gradients`) on one test scene, from the same residuals (the kernel's
+    """The Local-GS backward kernel's gradients (`pallas.gradients`) and those of its plain-jnp
+    counterpart (`tiles.gradients`) on one test scene, from the same residuals (the kernel's
     forward: final T, stop pairs, masks, records) and random cotangents; numpy arrays. Both
     stages are jitted with the scene as an argument: one compile per (config, dtype)."""
     g = cast(scene(seed), dtype)

@@ -26,9 +26,7 @@ nothing per pixel per Gaussian.
 
 from __future__ import annotations
 
-import functools
 
-import jax
 import jax.numpy as jnp
 from jax import lax
 
@@ -36,7 +34,6 @@ from .. import alpha as alpha_model
 from .. import hoist
 from ..binning import TileBins
 from ..config import RasterConfig
-from ..projection import Projected
 
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
 
@@ -52,7 +49,7 @@ def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents, quotients=None):
     the sums including this pair). A miss is a pair with α = 0 (T_{k+1}/1 and 0·T_k are exact),
     one select where three took the cases apart (`hit`, the GPU kernels' pair step 204 -> 198
     SASS instructions for the H200; the same bits). `quotients(1 − α, (x, y))` gives the two
-    divisions by 1 − α (the Mosaic GPU kernel's own, `mosaic_quotients.quotients`), `/` if None.
+    divisions by 1 − α (the Mosaic GPU kernel's own, `pallas.quotients.quotients`), `/` if None.
     """
     g_r, g_g, g_b, g_d, g_bg = cotangents
     s_r, s_g, s_b, s_z = sums

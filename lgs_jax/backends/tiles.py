@@ -178,7 +178,7 @@ def _strip_order(counts, group: int):
 def _run_group(sid, cnt, lookup, p: Projected, bins: TileBins, pair_v, feats, tiles_x: int,
                config: RasterConfig):
     """Composite one group of strips `sid` with list lengths `cnt` (sorted, longest first):
-    chunks of `tiles_chunk` pairs while any strip of the group still blends. Returns the
+    chunks of CHUNK pairs while any strip of the group still blends. Returns the
     group's state and stop pairs (capacity where a strip ran through its list)."""
     dt = p.mean2d.dtype
     cap = bins.gauss.shape[0]

@@ -81,7 +81,7 @@ def _render(args) -> int:
           f"{cam.height}; backend {s.backend}; device {jax.devices()[0].platform}")
     print(f"time: {seconds:.3f} s, of which {compiling:.3f} s compiling (a first call at a new "
           f"size compiles) and {seconds - compiling:.3f} s rendering")
-    if s.interpreted:
+    if getattr(s.backend_stats, "interpreted", False):
         print("note: the Pallas kernel ran in interpret mode (no GPU): exact but slow")
     print(f"valid {int(s.n_valid)}, invalid {int(s.n_invalid)}, below 1/255 "
           f"{int(s.n_transparent)}, unbounded {int(s.n_unbounded)}; tile-Gaussian pairs "

@@ -1,6 +1,6 @@
 """INRIA 3DGS PLY files, read and written by property name.
 
-Layout (conventions.md, "INRIA PLY fields"): x y z [nx ny nz] f_dc_0..2 f_rest_0..3(K−1)−1
+Layout (docs/conventions.md, "INRIA PLY fields"): x y z [nx ny nz] f_dc_0..2 f_rest_0..3(K−1)−1
 opacity scale_0..2 rot_0..3, with f_rest channel-major (all red coefficients of bases 1..K−1,
 then green, then blue). Other properties are ignored; order does not matter.
 

@@ -45,7 +45,7 @@ from .losses import PADDINGS
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
 from .settings import Settings, Setup
-from .step import refine, render_views, replicated, train_step
+from .step import refine, render_views, replicated, row_stats, train_step
 from .strategy import DefaultStrategy, Strategy
 
 @dataclasses.dataclass
@@ -117,7 +117,7 @@ def _walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
     out = render(render_gaussians(pool.params, pool.active), cam, background=background,
                  backend=setup.backend, capacity=capacity,
                  config=setup.settings.raster)
-    return int(out.stats.pairs_walked)
+    return int(row_stats(out.stats)[1])
 
 
 def _resumed(out: str, setup: Setup, rd: RunData, seed: int, log) -> _State:

@@ -141,6 +141,15 @@ def step_keys(key, step):
     return jax.random.split(jax.random.fold_in(key, step))
 
 
+def row_stats(stats):
+    """(row_overflow, pairs_walked) of a render's stats: the backward's rows of the Pallas
+    backends (`PallasStats`), (False, 0) for backends that store no pair rows."""
+    own = stats.backend_stats
+    if not hasattr(own, "pairs_walked"):
+        return jnp.zeros(stats.overflow.shape, bool), jnp.zeros(stats.overflow.shape, jnp.int32)
+    return own.row_overflow, own.pairs_walked
+
+
 @functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows"),
                    compiler_options=COMPILER_OPTIONS)
 def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, idx,
@@ -181,10 +190,10 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     if setup.devices > 1:
         pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
             (pool, opt_state, strategy_state, views), replicated(setup.devices))
+    row_overflow, walked = row_stats(stats)
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
-                   pairs=jnp.max(stats.pairs_required),
-                   row_overflow=jnp.any(stats.row_overflow), walked=jnp.max(stats.pairs_walked),
-                   count=jnp.sum(pool.active, dtype=jnp.int32))
+                   pairs=jnp.max(stats.pairs_required), row_overflow=jnp.any(row_overflow),
+                   walked=jnp.max(walked), count=jnp.sum(pool.active, dtype=jnp.int32))
     return pool, opt_state, strategy_state, views, metrics
 
 

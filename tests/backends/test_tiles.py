@@ -159,5 +159,6 @@ def test_strip_pairs_report_culling():
     cam = scenes.camera()
     culled = scenes.render(g, cam, "tiles", C())
     full = scenes.render(g, cam, "tiles", C(warp_cull=False))
-    assert int(full.stats.strip_pairs) == 8 * int(full.stats.pairs_required)
-    assert 0 < int(culled.stats.strip_pairs) < int(full.stats.strip_pairs)
+    full_pairs = int(full.stats.backend_stats.strip_pairs)
+    assert full_pairs == 8 * int(full.stats.pairs_required)
+    assert 0 < int(culled.stats.backend_stats.strip_pairs) < full_pairs

@@ -29,13 +29,13 @@ from ...config import RasterConfig
 from ...layout import TILE_PIXELS
 from . import quotients, rows, segments, staging
 from . import steps as ks
-from .mosaic_forward import interpret_params, lanes, strip_bits
+from .mosaic_forward import block_index, grid, guarded, interpret_params, lanes, strip_bits
 
 
 def backward_kernel(seg_ref, gauss_ref, row_ref, table_ref, trans_ref, stop_ref, *refs,
                     config: RasterConfig, tiles_x: int, pixels: int, reduction: str,
                     last_pair: int, interpret: bool, from_checkpoints: bool,
-                    depth_cotangent: bool = True):
+                    depth_cotangent: bool = True, rows_per_fold: int | None = None):
     """The backward walk (`steps.backward_step`) for one warpgroup over segment
     seg_ref[s] = (tile, lo, hi, checkpoint) (lgs_jax.backends.pallas.segments: a tile's whole
     list by default): rows_ref[wg, r] = (pair j's gradient summed over this block's pixels, its
@@ -56,7 +56,7 @@ def backward_kernel(seg_ref, gauss_ref, row_ref, table_ref, trans_ref, stop_ref,
     n_in = n_cot * (2 if from_checkpoints else 1)  # cotangents, entering carries alike
     cot_refs, entry_refs, rows_ref, scratch = (refs[:n_cot], refs[n_cot:n_in], refs[n_in],
                                                refs[n_in + 1:])
-    sid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    sid, wg = block_index(rows_per_fold), lax.axis_index("wg")
     tile, lo, hi, check = (seg_ref[sid, c] for c in range(segments.COLUMNS))
     k, _, half = lanes(wg, pixels)
     trans, stop_at = trans_ref[tile, half], stop_ref[tile, half]
@@ -123,13 +123,15 @@ def backward_rows(config: RasterConfig, interpret: bool, pixels: int, tiles_x: i
     reduction = rows.resolve(reduction, interpret)
     capacity = bins.gauss.shape[0]
     n = TILE_PIXELS // pixels
+    launch, names, fold = grid(segs.shape[0], n)
     kernel = functools.partial(backward_kernel, config=config, tiles_x=tiles_x, pixels=pixels,
                                reduction=reduction, last_pair=capacity - 1, interpret=interpret,
-                               from_checkpoints=bool(entry), depth_cotangent=len(lane_rows) == 7)
+                               from_checkpoints=bool(entry), depth_cotangent=len(lane_rows) == 7,
+                               rows_per_fold=fold)
     out = jax.ShapeDtypeStruct((n, layout.size, ks.row_width(len(lane_rows) == 7)), dt)
     scratch = staging.scratch(dt) + rows.scratch(reduction, dt)
-    return plgpu.kernel(kernel, out_type=out, scratch_types=scratch,
-                        grid=(segs.shape[0], n), grid_names=("tile", "wg"),
+    return plgpu.kernel(guarded(kernel, segs.shape[0], fold), out_type=out,
+                        scratch_types=scratch, grid=launch, grid_names=names,
                         interpret=interpret_params(interpret),
                         kernel_name="localgs_backward_mosaic")(
         segs, bins.gauss, layout.at, table, *lane_rows, *entry)

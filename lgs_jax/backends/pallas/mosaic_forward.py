@@ -48,6 +48,45 @@ from . import steps as ks
 from .inline import LANES
 
 UNROLL_VANILLA = 8  # pairs the vanilla kernel stages per loop iteration
+MAX_GRID_YZ = 65535  # CUDA's limit on a launch's gridDim.y and gridDim.z (x: 2^31 − 1)
+
+
+def grid(blocks: int, per_block: int):
+    """(grid, names, rows) of a launch of `blocks` × `per_block` warpgroups: Mosaic GPU maps a
+    Pallas grid (a, b) to CUDA's (x, y) = (b, a), so the long axis `blocks` (tiles, or the
+    split backward's segments) lands on y, limited to MAX_GRID_YZ. Up to that limit the grid is
+    (blocks, per_block) named ("tile", "wg"); beyond it `blocks` is folded as (hi, rows) onto z
+    and y (block i = hi·rows + lo, launched in the same order), blocks past the last doing
+    nothing (`block_index`). Every dimension then stays within CUDA's limits for any int32
+    count of blocks."""
+    if blocks <= MAX_GRID_YZ:
+        return (blocks, per_block), ("tile", "wg"), None
+    rows = MAX_GRID_YZ
+    hi = -(-blocks // rows)
+    if hi > MAX_GRID_YZ:
+        raise ValueError(f"{blocks} blocks exceed CUDA's grid ({MAX_GRID_YZ}^2 on y and z)")
+    return (hi, rows, per_block), ("hi", "tile", "wg"), rows
+
+
+def block_index(rows: int | None):
+    """This warpgroup's block along `grid`'s long axis (its folded row index, where `rows`)."""
+    if rows is None:
+        return lax.axis_index("tile")
+    return lax.axis_index("hi") * rows + lax.axis_index("tile")
+
+
+def guarded(kernel, blocks: int, rows: int | None):
+    """`kernel` run only for block indices below `blocks` (a folded grid's tail does nothing);
+    `kernel` itself where the grid is not folded."""
+    if rows is None:
+        return kernel
+
+    def run(*refs, **kwargs):
+        @pl.when(block_index(rows) < blocks)
+        def _():
+            kernel(*refs, **kwargs)
+
+    return functools.wraps(kernel)(run)
 
 
 def ranges(*columns):
@@ -181,8 +220,8 @@ def compact_loop(gauss_ref, table_ref, scratch, start, end, tile, tiles_x: int, 
 
 def localgs_kernel(order_ref, ranges_ref, gauss_ref, table_ref, *refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
-                   interpret: bool, segment: int | None = None, image: bool = False,
-                   block_stops: bool = False):
+                   interpret: bool, rows: int | None = None, segment: int | None = None,
+                   image: bool = False, block_stops: bool = False):
     """The Local-GS forward for one warpgroup; `refs` = the six outputs (four with `image`:
     the colour image, T, D, the stop pairs; `_forward_store`), then, with a `segment`, the five
     checkpoint outputs (r, g, b, T, D before every pair start + m·segment, m >= 1, at row
@@ -193,7 +232,7 @@ def localgs_kernel(order_ref, ranges_ref, gauss_ref, table_ref, *refs,
     n_out = n_plain if segment is None else n_plain + 5
     out_refs, check_refs, scratch = refs[:n_plain], refs[n_plain:n_out], refs[n_out:]
     dt = table_ref.dtype
-    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tid, wg = block_index(rows), lax.axis_index("wg")
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
     k, strip, cols = lanes(wg, pixels)
@@ -240,10 +279,10 @@ def _checkpoint(refs, base, start, cols, segment: int):
 
 def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
                    config: RasterConfig, tiles_x: int, last_pair: int, pixels: int,
-                   interpret: bool):
+                   interpret: bool, rows: int | None = None):
     """The original 3DGS forward for one warpgroup (difference form, Gaussian rows by id)."""
     dt = rows_ref.dtype
-    tid, wg = lax.axis_index("tile"), lax.axis_index("wg")
+    tid, wg = block_index(rows), lax.axis_index("wg")
     tile = order_ref[tid]
     k, _, cols = lanes(wg, pixels)
     _, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
@@ -269,8 +308,9 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
     if not vanilla and compacts(config) and pixels != LANES:
         raise ValueError(f"pixels: the compacted Local-GS forward runs blocks of {LANES}")
     n_tiles = bins.tile_start.shape[0]
+    launch, names, fold = grid(n_tiles, TILE_PIXELS // pixels)
     common = dict(config=config, tiles_x=tiles_x, last_pair=bins.gauss.shape[0] - 1,
-                  pixels=pixels, interpret=interpret)
+                  pixels=pixels, interpret=interpret, rows=fold)
     kernel = (functools.partial(vanilla_kernel, **common) if vanilla else
               functools.partial(localgs_kernel, **common, segment=segment, image=image,
                                 block_stops=block_stops))
@@ -290,7 +330,8 @@ def forward(vanilla: bool, config: RasterConfig, interpret: bool, pixels: int, t
     if image:
         shape = (n_tiles // tiles_x * TILE, tiles_x * TILE, 3)
         planes = [jax.ShapeDtypeStruct(shape, dt), out, out]
-    return plgpu.kernel(kernel, out_type=planes + [stop] + checks, scratch_types=scratch,
-                        grid=(n_tiles, TILE_PIXELS // pixels), grid_names=("tile", "wg"),
+    name = kernel.func.__name__
+    return plgpu.kernel(guarded(kernel, n_tiles, fold), out_type=planes + [stop] + checks,
+                        scratch_types=scratch, grid=launch, grid_names=names,
                         interpret=interpret_params(interpret),
-                        kernel_name=kernel.func.__name__)(order, ranges(*columns), *data)
+                        kernel_name=name)(order, ranges(*columns), *data)

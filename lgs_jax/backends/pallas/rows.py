@@ -1,5 +1,5 @@
-"""How the Mosaic GPU backward kernel (lgs_jax.backends.pallas.mosaic_backward) writes a pair's row: its
-gradient terms summed over the block's pixels, then the pair's tile, at the pair's row
+"""How the Mosaic GPU backward kernel (lgs_jax.backends.pallas.mosaic_backward) writes a pair's
+row: its gradient terms summed over the block's pixels, then the pair's tile, at the pair's row
 (`gaussian_grads.RowLayout`, which reads the rows there).
 
 Two reductions (`REDUCTIONS`, `writers`):

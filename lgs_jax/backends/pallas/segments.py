@@ -134,8 +134,9 @@ def split(bins: TileBins, last, segment: int, rows: int | None = None):
 
 def enter(trans, stop_at, hi, entry_refs, check, inside, half):
     """The carry (T, S_r, S_g, S_b, S_Z) with which a block of the Mosaic GPU backward kernel
-    (lgs_jax.backends.pallas.mosaic_backward) enters its segment [lo, hi), for its pixels (`half`, their
-    columns of a tile's row; final `trans`, `stop_at`): at the tile's end (T, 0, 0, 0, 0);
+    (lgs_jax.backends.pallas.mosaic_backward) enters its segment [lo, hi), for its pixels
+    (`half`, their columns of a tile's row; final `trans`, `stop_at`): at the tile's end
+    (T, 0, 0, 0, 0);
     inside the block's walk, from checkpoint `check` (`entries`' rows `entry_refs`: the
     forward's T there and C − C_hi, D − D_hi; without D − D_hi where the loss does not reach
     the depth, S_Z enters as 0, which the walk then carries unread). Only for a pixel that

@@ -35,8 +35,7 @@ from jax.experimental.mosaic.gpu import fragmented_array as mgpu_fa
 from jax.experimental.mosaic.gpu import utils as mgpu_utils
 from jax.experimental.pallas import mosaic_gpu as plgpu
 from jaxlib.mlir import ir
-from jaxlib.mlir.dialects import arith, memref, nvvm, scf, vector
-from jaxlib.mlir.dialects import math as math_dialect
+from jaxlib.mlir.dialects import arith, memref
 
 from ... import pairs
 from ...config import RasterConfig

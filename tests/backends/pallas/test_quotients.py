@@ -1,6 +1,6 @@
-"""lgs_jax.backends.mosaic_quotients: the backward's quotients by 1 − α on the GPU are the
+"""lgs_jax.backends.pallas.quotients: the backward's quotients by 1 − α on the GPU are the
 kernel's division to the bit (GPU only: inline Mosaic GPU code does not run in interpret
-mode; test_mosaic_staging's lowering test builds it on the CPU)."""
+mode; test_mosaic_forward's lowering test builds it on the CPU)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import mosaic_gpu as plgpu
 
-from lgs_jax.backends import mosaic_quotients
+from lgs_jax.backends.pallas import quotients as mosaic_quotients
 from tests.devices import gpu_only
 
 GPU_ONLY = gpu_only("inline Mosaic GPU code runs on a GPU only")

@@ -1,15 +1,14 @@
-"""lgs_jax.backends.block_order: the exact longest-first order and the bucketed one (a
-permutation, buckets from the longest down, index order within a bucket, empty lengths last),
-on lengths drawn where it matters (ties, zeros, powers of two and their neighbours, the int32
-top)."""
+"""lgs_jax.backends.pallas.order: the bucketed longest-first order (a permutation, buckets from
+the longest down, index order within a bucket, empty lengths last) and the exact order it
+approximates, on lengths drawn where it matters (ties, zeros, powers of two and their
+neighbours, the int32 top)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pytest
 from hypothesis import given, settings, strategies as st
 
-from lgs_jax.backends import block_order
+from lgs_jax.backends.pallas import order as block_order
 
 EDGES = [2 ** k + d for k in range(1, 30) for d in (-1, 0, 1)]  # powers of two and neighbours
 LENGTHS = st.lists(st.one_of(st.integers(0, 3), st.integers(0, 5000), st.sampled_from(EDGES),
@@ -20,7 +19,7 @@ LENGTHS = st.lists(st.one_of(st.integers(0, 3), st.integers(0, 5000), st.sampled
 @given(values=LENGTHS)
 def test_bucket_order_is_a_stable_counting_sort_by_bucket(values):
     lengths = np.array(values, np.int32)
-    order = np.asarray(jax.jit(block_order.longest_first_buckets)(jnp.asarray(lengths)))
+    order = np.asarray(jax.jit(block_order.longest_first)(jnp.asarray(lengths)))
     assert sorted(order.tolist()) == list(range(len(values)))
     key = np.asarray(block_order.bucket(jnp.asarray(lengths)))
     assert np.all(np.diff(key[order]) <= 0)
@@ -32,10 +31,13 @@ def test_bucket_order_is_a_stable_counting_sort_by_bucket(values):
 
 @settings(max_examples=50)
 @given(values=LENGTHS)
-def test_sort_order_is_the_stable_argsort(values):
+def test_reference_is_the_stable_argsort_and_agrees_by_bucket(values):
     lengths = np.array(values, np.int32)
-    order = np.asarray(block_order.longest_first(jnp.asarray(lengths), "sort"))
-    np.testing.assert_array_equal(order, np.argsort(-lengths.astype(np.int64), kind="stable"))
+    exact = np.asarray(block_order.reference(jnp.asarray(lengths)))
+    np.testing.assert_array_equal(exact, np.argsort(-lengths.astype(np.int64), kind="stable"))
+    key = np.asarray(block_order.bucket(jnp.asarray(lengths)))
+    bucketed = np.asarray(block_order.longest_first(jnp.asarray(lengths)))
+    np.testing.assert_array_equal(key[exact], key[bucketed])  # the same buckets in turn
 
 
 def test_buckets_are_quarters_of_each_octave_of_length_plus_one():
@@ -49,8 +51,7 @@ def test_buckets_are_quarters_of_each_octave_of_length_plus_one():
         assert members.max() / members.min() < 1.25
 
 
-@pytest.mark.parametrize("how", ["sort", "buckets"])
-def test_one_block_and_all_empty(how):
+def test_one_block_and_all_empty():
     for lengths in ([7], [0, 0, 0]):
-        order = block_order.longest_first(jnp.array(lengths, jnp.int32), how)
+        order = block_order.longest_first(jnp.array(lengths, jnp.int32))
         np.testing.assert_array_equal(np.asarray(order), np.arange(len(lengths)))

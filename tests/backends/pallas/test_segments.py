@@ -1,10 +1,9 @@
-"""lgs_jax.backends.backward_segments: the Mosaic GPU backward with each tile's walk split into
-segments (`KernelConfig.mosaic_backward_segment`), entering from the forward's checkpoints. The
+"""lgs_jax.backends.pallas.segments: the Mosaic GPU backward with each tile's walk split into
+segments (`KernelConfig.backward_segment`), entering from the forward's checkpoints. The
 segment table against numpy; gradients against the whole walk's (float64 to 1e-12 of their
 scale: the sums behind a segment are C − C_hi instead of a running sum, so the float32 bits
 differ); the split kernels lower for the GPU."""
 
-import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +13,8 @@ from hypothesis import given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax import binning
-from lgs_jax.backends import REGISTRY, backward_segments, block_order, pallas_mosaic
+from lgs_jax.backends import REGISTRY
+from lgs_jax.backends.pallas import mosaic_forward, order as block_order, segments
 from lgs_jax.projection import project
 from tests import scenes
 from tests.devices import gpu_only
@@ -35,20 +35,19 @@ def _random_walks(g, seed: int, share: float):
 
 
 @settings(max_examples=10)
-@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]),
-       order=st.sampled_from(["sort", "buckets"]))
-def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment, order):
+@given(seed=st.integers(0, 2**32 - 1), share=st.floats(0, 1), segment=st.sampled_from([8, 16, 64]))
+def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, segment):
     """Random walks: each tile's real segments tile its walked pairs [start, last) in order,
     every one but the last exactly `segment` pairs with checkpoint base + m (the forward's row
     for pair lo + segment), the last one the rest, no checkpoint; the table's other rows are
-    empty; segments come longest first (exactly, or by `block_order.bucket`)."""
+    empty; segments come longest first (by `order.bucket`)."""
     g = scenes.cast(scenes.scene(seed), np.float64)
     bins, start, last, rng = _random_walks(g, seed, share)
-    table = np.asarray(jax.jit(backward_segments.split, static_argnums=(2, 3, 4))(
-        bins, jnp.asarray(last), segment, False, order))
-    base, n_rows = jax.jit(backward_segments.checkpoints, static_argnums=1)(bins, segment)
+    table = np.asarray(jax.jit(segments.split, static_argnums=(2,))(
+        bins, jnp.asarray(last), segment))
+    base, n_rows = jax.jit(segments.checkpoints, static_argnums=1)(bins, segment)
     base = np.asarray(base)
-    assert table.shape == (start.size + 1024 // segment, backward_segments.COLUMNS)
+    assert table.shape == (start.size + 1024 // segment, segments.COLUMNS)
     real = np.zeros(len(table), bool)
     for t in range(start.size):
         mine = np.flatnonzero((table[:, 0] == t) & (table[:, 2] > table[:, 1]))
@@ -64,7 +63,7 @@ def test_split_covers_each_tiles_rows_once_in_segments_of_its_walk(seed, share, 
         assert np.all(segs[:-1, 3] < n_rows)
     assert np.all(table[~real, 1] == table[~real, 2])  # the rest: empty
     length = table[:, 2] - table[:, 1]
-    key = length if order == "sort" else np.asarray(block_order.bucket(jnp.asarray(length)))
+    key = np.asarray(block_order.bucket(jnp.asarray(length)))
     assert np.all(np.diff(key) <= 0)
 
 
@@ -78,8 +77,8 @@ def test_entries_hold_each_segments_carry_where_split_reads_it(seed, share, segm
     (tiles of tens of pairs: some segments enter from checkpoints, asserted)."""
     g = scenes.saturating(seed, 200, np.float64)
     bins, start, last, rng = _random_walks(g, seed, share)
-    bins = dataclasses.replace(bins, row_capacity=max(int(np.sum(last - start)), 1))
-    _, n_full = backward_segments.checkpoints(bins, segment)
+    rows = max(int(np.sum(last - start)), 1)
+    _, n_full = segments.checkpoints(bins, segment)
     n_tiles = bins.tile_start.shape[0]
     final = tuple(rng.normal(size=(n_tiles, 256)) for _ in range(4))
     full = tuple(rng.normal(size=(n_full, 256)) for _ in range(5))
@@ -87,13 +86,13 @@ def test_entries_hold_each_segments_carry_where_split_reads_it(seed, share, segm
     @jax.jit
     def run(bins, last, final, full):
         final_at = lambda tile: tuple(x[tile] for x in final)
-        return (backward_segments.entries(final_at, full, bins, segment),
-                backward_segments.entries(final_at, full, bins, segment, last),
-                backward_segments.split(bins, last, segment),
-                backward_segments.split(bins, last, segment, compacted=True))
+        return (segments.entries(final_at, full, bins, segment),
+                segments.entries(final_at, full, bins, segment, last, rows),
+                segments.split(bins, last, segment),
+                segments.split(bins, last, segment, rows))
 
     in_place, compacted, table, table_c = run(bins, jnp.asarray(last), final, full)
-    assert compacted[0].shape == (bins.row_capacity // segment + 1, 256)
+    assert compacted[0].shape == (rows // segment + 1, 256)
     np.testing.assert_array_equal(np.asarray(table)[:, :3], np.asarray(table_c)[:, :3])
     src, dst = np.asarray(table)[:, 3], np.asarray(table_c)[:, 3]
     np.testing.assert_array_equal(src >= 0, dst >= 0)
@@ -140,15 +139,14 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
     w = np.random.default_rng(seed).normal(size=(size, size, 3)).astype(dtype)
     forward, backward = pixels if isinstance(pixels, tuple) else (pixels, pixels)
     config = lambda segment: C(kernel="mosaic", tuning=K(
-        mosaic_forward_pixels=forward, mosaic_backward_pixels=backward,
-        mosaic_backward_segment=segment))
+        forward_pixels=forward, backward_pixels=backward, backward_segment=segment))
     whole, stats = _grads(g, cam, w, config(None), depth=depth)
-    walked = int(stats.pairs_walked)
+    walked = int(stats.backend_stats.pairs_walked)
     assert walked > 2 * 16 * (size // 16) ** 2  # more than two segments per tile on average
     split, _ = _grads(g, cam, w, config(16), walked if rows else None, depth)
     if rows:
         short, short_stats = _grads(g, cam, w, config(16), walked - 1, depth)
-        assert bool(short_stats.row_overflow)
+        assert bool(short_stats.backend_stats.row_overflow)
         assert all(np.all(np.isfinite(x)) for x in jax.tree.leaves(short))
     tol = 1e-12 if dtype == np.float64 else 5e-5
     for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
@@ -158,46 +156,28 @@ def test_split_backward_gives_the_whole_walks_gradients(dtype, pixels, rows, siz
                                    err_msg=name)
 
 
-def test_the_block_order_changes_no_bit():
-    """Tiles and segments taken by buckets of length (`KernelConfig.block_order` "buckets")
-    instead of the exact longest first, which differs here (asserted): the same gradients and
-    stats, bit for bit (every block writes its own outputs)."""
-    size, dtype = 32, np.float32
-    g, cam = scenes.saturating(3, 200, dtype), scenes.camera(size, size, dtype=dtype)
-    w = np.random.default_rng(3).normal(size=(size, size, 3)).astype(dtype)
-    bins = binning.bin_gaussians(project(g, cam), size, size, 2048)
-    lengths = bins.tile_end - bins.tile_start
-    assert np.any(np.asarray(block_order.longest_first(lengths, "sort"))
-                  != np.asarray(block_order.longest_first(lengths, "buckets")))
-    config = lambda order: C(kernel="mosaic", tuning=K(mosaic_backward_segment=16,
-                                                       block_order=order))
-    exact, buckets = _grads(g, cam, w, config("sort")), _grads(g, cam, w, config("buckets"))
-    for a, b in zip(jax.tree.leaves(exact), jax.tree.leaves(buckets)):
-        np.testing.assert_array_equal(np.asarray(b), np.asarray(a))
-
-
 @pytest.mark.slow  # interpret mode, 700 pairs: about a minute
 def test_compacted_forward_under_whole_tile_backward_blocks_gives_the_whole_walks_gradients():
     """Segments of 128 pairs, where the forward walks each chunk's own pairs
-    (`pallas_mosaic.compacts`), half-tile forward blocks under a whole-tile backward block:
+    (`mosaic_forward.compacts`), half-tile forward blocks under a whole-tile backward block:
     the top half stops after 281-455 pairs, so its forward block stores no checkpoint past
     them while pixels of it stop inside (384, 512] (asserted). With the walked rows (the
-    checkpoints compacted too) the gradients equal the whole walk's to 1e-12 of their scale;
-    before Dec 3's fix (a checkpoint for stop > lo) they were NaN here."""
+    checkpoints compacted too) the gradients equal the whole walk's to 1e-12 of their scale
+    (with a checkpoint read for stop > lo instead of stop > hi they were NaN here)."""
     size, dtype = 16, np.float64
     g, cam = scenes.half_walled(0, 700, dtype), scenes.camera(size, size, dtype=dtype)
     w = np.random.default_rng(0).normal(size=(size, size, 3)).astype(dtype)
-    config = lambda segment: C(kernel="mosaic", tuning=K(
-        mosaic_forward_pixels=128, mosaic_backward_pixels=256, mosaic_backward_segment=segment))
-    assert pallas_mosaic.compacts(config(128))
+    config = lambda segment: C(kernel="mosaic", tuning=K(backward_pixels=256,
+                                                         backward_segment=segment))
+    assert mosaic_forward.compacts(config(128))
     p = project(g, cam)
     bins = binning.bin_gaussians(p, size, size, 2048)
-    # each forward block's latest stop pair (KernelConfig.mosaic_block_stops): block 0 is the
+    # each forward block's latest stop pair (Plan.block_stops): block 0 is the
     # top half, whose latest pixel stops inside (384, 512) iff some stop there and none after
     stop = np.asarray(REGISTRY["pallas"].rasterize(p, bins, size, size, config(None)).stop)
     assert stop.shape == (1, 2) and 384 < stop[0, 0] < 512
     whole, stats = _grads(g, cam, w, config(None))
-    split, _ = _grads(g, cam, w, config(128), int(stats.pairs_walked))
+    split, _ = _grads(g, cam, w, config(128), int(stats.backend_stats.pairs_walked))
     for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(whole), jax.tree.leaves(split)):
         a, b = np.asarray(a), np.asarray(b)
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.max(np.abs(a)), err_msg=name)
@@ -209,7 +189,7 @@ def test_split_kernels_lower_for_the_gpu(monkeypatch):
 
     monkeypatch.setattr(gpu_info, "get_gpu_info",
                         lambda: gpu_info.get_gpu_info_from_version(gpu_info.GpuVersion.H100))
-    config = C(kernel="mosaic", tuning=K(interpret=False, mosaic_backward_segment=64))
+    config = C(kernel="mosaic", tuning=K(interpret=False, backward_segment=64))
     g = scenes.cast(scenes.scene(0), np.float32)
     image = lambda g, c: lgs_jax.render(g, c, backend="pallas", config=config,
                                         capacity=scenes.CAPACITY).image
@@ -218,14 +198,7 @@ def test_split_kernels_lower_for_the_gpu(monkeypatch):
     assert text.count("mosaic_gpu") >= 2
 
 
-@pytest.mark.parametrize("segment", [0, 12, 2.0])
-def test_bad_segment_raises(segment):
-    with pytest.raises(ValueError, match="tuning.mosaic_backward_segment"):
-        K(mosaic_backward_segment=segment)
-
-
-def test_default_segment_names_itself_when_the_unroll_does_not_divide_it():
-    """The segment is on by default, so an unroll it is no multiple of says how to fix it."""
-    with pytest.raises(ValueError, match="mosaic_backward_segment: 1024 .* or to None"):
-        K(mosaic_pair_source="records", mosaic_unroll_localgs=3, mosaic_chunk=96)
+def test_a_segment_the_unroll_does_not_divide_says_how_to_fix_it():
+    with pytest.raises(ValueError, match="backward_segment: 100 .* or to None"):
+        K(unroll=8, backward_segment=100)
 

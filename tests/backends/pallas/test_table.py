@@ -1,4 +1,4 @@
-"""lgs_jax.backends.table_kernel: the Triton kernel's Gaussian table equals
+"""lgs_jax.backends.pallas.table: the Triton kernel's Gaussian table equals its `reference`,
 `pairs.gaussian_table` bit for bit (copies only), adversarial Gaussians included (invalid rows,
 unbounded ellipses, opacity near 1/255), for any N against the program's lanes."""
 
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from lgs_jax import pairs
-from lgs_jax.backends import table_kernel
+from lgs_jax.backends.pallas import table as table_kernel
 from lgs_jax.projection import project
 from tests import scenes
 from tests.devices import ON_GPU
@@ -21,7 +21,7 @@ from tests.devices import ON_GPU
 def test_kernel_table_equals_the_xla_table(dtype, lanes, n, seed):
     g = scenes.scene(seed, n=n, dtype=dtype)
     p = jax.jit(project)(g, scenes.camera(dtype=dtype))
-    want = np.asarray(jax.jit(pairs.gaussian_table)(p))
+    want = np.asarray(jax.jit(table_kernel.reference)(p))
     got = np.asarray(table_kernel.gaussian_table(p, interpret=not ON_GPU, lanes=lanes))
     assert got.shape == (n, pairs.TABLE_COLUMNS) and got.dtype == dtype
     np.testing.assert_array_equal(got, want)  # NaN rows (invalid Gaussians) compare as equal

@@ -1,4 +1,4 @@
-"""lgs_jax.backends.gaussian_grads: the Pallas backward's per-Gaussian chain and sum of the
+"""lgs_jax.backends.pallas.gaussian_grads: the Pallas backward's per-Gaussian chain and sum of the
 emission-order pair rows, against its jnp twin (bit for bit, interpret mode) and against the
 XLA path of the `tiles` backend (pairs.chain_hoisted_rows + backward.per_gaussian_sum); the
 walked-rows layout (`walked_rows`) against numpy, and gradients with `render`'s `row_capacity`
@@ -15,7 +15,8 @@ from hypothesis import given, settings, strategies as st
 
 import lgs_jax
 from lgs_jax import binning, pairs
-from lgs_jax.backends import backward, gaussian_grads, kernel_steps as ks
+from lgs_jax.backends import backward
+from lgs_jax.backends.pallas import gaussian_grads, steps as ks
 from lgs_jax.config import RasterConfig as C
 from lgs_jax.layout import tile_grid
 from lgs_jax.projection import project
@@ -186,19 +187,19 @@ def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, shar
 
 
 @pytest.mark.parametrize("kernel,pixels", [("triton", None), pytest.param("mosaic", 128, marks=[
-    pytest.mark.slow, gpu_only("CI time: in interpret mode test_backward_segments.py runs walked "
+    pytest.mark.slow, gpu_only("CI time: in interpret mode test_segments.py runs walked "
                                "rows through the Mosaic GPU backward (whole tiles)")])])
 @settings(max_examples=1)  # interpret mode
 @given(seed=st.integers(0, 2**32 - 1))
 def test_a_row_capacity_at_the_walked_pairs_gives_the_defaults_gradients(kernel, pixels, seed):
-    """`render(row_capacity=stats.pairs_walked)`: the Pallas backward with a buffer of exactly
-    the walked pairs' rows gives the gradients of the default buffer (the pair capacity's rows),
-    bit for bit, on a scene where most pairs are not walked (asserted); one row fewer is
-    reported (`stats.row_overflow`), never NaN, and leaves the image unchanged."""
+    """`render(row_capacity=stats.backend_stats.pairs_walked)`: the Pallas backward with a buffer
+    of exactly the walked pairs' rows gives the gradients of the default buffer (the pair
+    capacity's rows), bit for bit, on a scene where most pairs are not walked (asserted); one row fewer is
+    reported (`row_overflow`), never NaN, and leaves the image unchanged."""
     g, cam = scenes.saturating(seed, 200, np.float32), scenes.camera(32, 32)
     w = np.random.default_rng(seed).normal(size=(32, 32, 3)).astype(np.float32)
-    config = C(kernel=kernel, tuning=lgs_jax.KernelConfig(mosaic_forward_pixels=pixels,
-                                                          mosaic_backward_pixels=pixels))
+    config = C(kernel=kernel, tuning=lgs_jax.KernelConfig(forward_pixels=pixels,
+                                                          backward_pixels=pixels))
 
     @functools.partial(jax.jit, static_argnums=1)
     def grads(g, rows):
@@ -209,14 +210,14 @@ def test_a_row_capacity_at_the_walked_pairs_gives_the_defaults_gradients(kernel,
         return jax.grad(loss, has_aux=True)(g)
 
     every, out = grads(g, None)
-    walked = int(out.stats.pairs_walked)
+    walked = int(out.stats.backend_stats.pairs_walked)
     assert 0 < walked < int(out.stats.pairs_required) / 2  # the layout has pairs to leave out
-    assert not bool(out.stats.row_overflow)
+    assert not bool(out.stats.backend_stats.row_overflow)
     got, out_walked = grads(g, walked)
-    assert not bool(out_walked.stats.row_overflow)
+    assert not bool(out_walked.stats.backend_stats.row_overflow)
     for name, a, b in zip(scenes.FIELDS, jax.tree.leaves(got), jax.tree.leaves(every)):
         np.testing.assert_array_equal(a, b, err_msg=name)
     short, out_short = grads(g, walked - 1)
-    assert bool(out_short.stats.row_overflow)
+    assert bool(out_short.stats.backend_stats.row_overflow)
     np.testing.assert_array_equal(out_short.image, out.image)
     assert all(np.all(np.isfinite(x)) for x in jax.tree.leaves(short))

@@ -1,4 +1,4 @@
-"""lgs_jax.backends.mosaic_inline.any_equal, the blend loops' test as one `bar.red` over the
+"""lgs_jax.backends.pallas.inline.any_equal, the blend loops' test as one `bar.red` over the
 warpgroup: it builds for both block sizes' layouts (one or two pixels per lane) and, on a GPU,
 is jnp.any(x == value) wherever the value sits (GPU only: inline Mosaic GPU code does not run in
 interpret mode)."""
@@ -15,7 +15,7 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import mosaic_gpu as plgpu
 
-from lgs_jax.backends import mosaic_inline
+from lgs_jax.backends.pallas import inline as mosaic_inline
 from tests.devices import gpu_only
 
 GPU_ONLY = gpu_only("inline Mosaic GPU code runs on a GPU only")
