@@ -1,8 +1,13 @@
 """Run time against error: every backend and Local-GS ablation on the same scene and camera.
 
     python -m benchmarks.ablation [--scene SPEC ...] [--data DIR] [--repeat N] [--csv FILE]
-        [--no-error]
-    python -m benchmarks.ablation --preset cpu --csv bench_results/cpu-YYYY-MM/bench.csv
+        [--no-error] [--rows ROW ...]
+    python -m benchmarks.ablation --preset cpu --csv bench_results/ablation/cpu.csv
+    python -m benchmarks.ablation --preset gpu --csv bench_results/ablation/gpu.csv  # Table IV
+
+The `cpu` preset runs the `tiles` rows (`common.TILES_ROWS`), the `gpu` preset the Pallas
+kernels' cumulative ablation (`common.ABLATION_ROWS` without `brute`: vanilla, baseline,
++hoisting, +warp culling, +coherent blending, and local coordinates off).
 
 Scene SPECs: benchmarks.common (e.g. `guitar@640x360`, `default@640x360`,
 `synthetic:100000@640x360`). Every row (`common.TILES_ROWS`) is compiled first (compile time
@@ -24,17 +29,35 @@ import numpy as np
 
 import lgs_jax
 from lgs_jax.binning import bin_gaussians
+from lgs_jax.layout import tile_grid
+from lgs_jax.pairs import strip_pair_count
 from lgs_jax.projection import project
 
-from .common import (TILES_ROWS, Case, add_data_argument, device_line, median_ms, parse_scene,
-                     psnr, timed)
+from .common import (ABLATION_ROWS, TILES_ROWS, Case, add_data_argument, device_line,
+                     median_ms, parse_scene, psnr, timed)
 
-ROWS = TILES_ROWS
-PRESETS = {"cpu": ["guitar@640x360", "lego_sh3@400x400", "synthetic:100000@640x360"]}
+ROWS = {**TILES_ROWS, **ABLATION_ROWS}
+PRESETS = {"cpu": ["guitar@640x360", "lego_sh3@400x400", "synthetic:100000@640x360"],
+           "gpu": ["guitar_720p", "guitar_x16_1080p", "synthetic4M_1080p", "synthetic10M_4k"]}
+PRESET_ROWS = {"cpu": list(TILES_ROWS),
+               "gpu": ["reference"] + [r for r in ABLATION_ROWS if r != "brute"]}
 
 
 def _prep(cap: int):
     return jax.jit(lambda g, c: bin_gaussians(project(g, c), c.width, c.height, cap).tile_start)
+
+
+def _strip_pairs(out, g, cam, config, cap: int) -> int:
+    """The row's strip–Gaussian pairs: as its backend reports them, or counted in XLA
+    (`pairs.strip_pair_count`) where the Mosaic GPU kernels do not count them (−1)."""
+    reported = int(getattr(out.stats.backend_stats, "strip_pairs", 0))
+    if reported >= 0:
+        return reported
+    p = jax.jit(project)(g, cam)
+    bins = jax.jit(lambda p: bin_gaussians(p, cam.width, cam.height, cap))(p)
+    count = jax.jit(strip_pair_count, static_argnums=(2, 3))(
+        p, bins, tile_grid(cam.width, cam.height)[0], config)
+    return int(count)
 
 
 def run_case(case: Case, rows, repeat: int, with_error: bool):
@@ -65,7 +88,7 @@ def run_case(case: Case, rows, repeat: int, with_error: bool):
         row = dict(scene=case.name, width=cam.width, height=cam.height, gaussians=g.num,
                    row=name, median_ms=times[name],
                    compile_s=compile_s[name], pairs=int(out.stats.pairs_required),
-                   strip_pairs=int(getattr(out.stats.backend_stats, "strip_pairs", 0)))
+                   strip_pairs=_strip_pairs(out, g, cam, ROWS[name][1], cap))
         if truth is not None:
             err = np.abs(np.asarray(out.image, np.float64) - truth)
             row.update(max_abs_err=float(err.max()), psnr_db=psnr(out.image, truth))
@@ -93,7 +116,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", action="append", default=[], help="scene SPEC (repeatable)")
     ap.add_argument("--preset", choices=sorted(PRESETS))
     add_data_argument(ap)
-    ap.add_argument("--rows", nargs="+", default=list(ROWS), choices=list(ROWS))
+    ap.add_argument("--rows", nargs="+", choices=list(ROWS),
+                    help="rows to run (default: the preset's, else the cpu rows)")
     ap.add_argument("--repeat", type=int, default=7, help="timing rounds")
     ap.add_argument("--no-error", action="store_true", help="skip the float64 reference")
     ap.add_argument("--csv", help="write rows to this CSV file")
@@ -102,6 +126,7 @@ def main(argv=None) -> int:
     specs = args.scene + (PRESETS[args.preset] if args.preset else [])
     if not specs:
         specs = ["default@640x360"]
+    args.rows = args.rows or PRESET_ROWS[args.preset or "cpu"]
     print(device_line())
     rows = []
     for spec in specs:

@@ -178,6 +178,20 @@ TILES_ROWS = {  # the paper's Table IV (ablation) and Table V (precision) rows, 
 }
 """name -> (backend, config): every backend and Local-GS switch the CPU benchmark compares."""
 
+ABLATION_ROWS = {  # the paper's Table IV for the Pallas kernels (Mosaic GPU on a GPU)
+    "brute": ("brute", C()),
+    "pallas_vanilla": ("pallas_vanilla", C()),
+    "pallas:baseline": ("pallas", C(hoist=False, warp_cull=False)),
+    "pallas:+hoisting": ("pallas", C(warp_cull=False)),
+    "pallas:+warp_culling": ("pallas", C()),
+    "pallas:+coherent_blending": ("pallas", C(blend="fast")),
+    "pallas:difference+culling": ("pallas", C(hoist=False)),
+    "pallas:global_coords": ("pallas", C(local_coords=False)),
+}
+"""name -> (backend, config): the cumulative ablation on the Pallas kernels (baseline: the
+Local-GS kernel's structure with the difference form and no strip masks; `pallas_vanilla`: the
+original rasterizer's structure) and `brute` (every Gaussian at every pixel: small scenes)."""
+
 PALLAS_ROWS = {  # "auto" rows run what KernelConfig's auto_* picks on this device
     "pallas": ("pallas", C()),
     "pallas:fast": ("pallas", C(blend="fast")),

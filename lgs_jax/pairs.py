@@ -115,6 +115,19 @@ def strip_masks(pg: PairGaussians, bins: TileBins, tiles_x: int, config: RasterC
     return jnp.where(t < bins.tile_start.shape[0], mask, 0)
 
 
+def strip_pair_count(p: Projected, bins: TileBins, tiles_x: int, config: RasterConfig):
+    """Strip–Gaussian pairs the strip masks keep (int32): Σ over the pairs of their masks' set
+    bits, 8 per pair without warp culling; strip_pairs / (8·pairs) is the share of the
+    blending work warp culling leaves. Counted here in XLA (a gather of each pair's Gaussian
+    fields): the Mosaic GPU kernels build their masks themselves and report −1, so a study that
+    wants the count on that path calls this beside the render."""
+    real = jnp.sum(bins.tile < bins.tile_start.shape[0], dtype=jnp.int32)
+    if not config.warp_cull:
+        return 8 * real
+    masks = strip_masks(gather(p, bins.gauss), bins, tiles_x, config)
+    return jnp.sum(lax.population_count(masks), dtype=jnp.int32)
+
+
 def record_columns(cols, tx, ty, config: RasterConfig, mask=None):
     """The 12 columns of the Local-GS kernels' pair record of Gaussians `cols` in tiles (tx, ty)
     (lgs_jax.backends.pallas.steps): hoisted, V (Eq. 8) relative to the tile's origin and ln o;

@@ -324,19 +324,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
             raise ValueError(f"{name}: expected an int in [1, 2^31 - 1] or None, got {value!r}")
     if gaussians.num == 0:
         return _empty_render(camera, background, dt, backend, config)
-    traced = _is_traced((gaussians, camera, background))
-    if not REGISTRY[backend].binned:
-        capacity = 0  # no pair buffer
-    elif capacity is None:
-        if traced:
-            raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an "
-                             "eager render's stats.capacity), then check stats.overflow and "
-                             "stats.pairs_required, or use lgs_jax.render_growing")
-        required = int(count_pairs(gaussians, camera, antialiased=config.antialiased,
-                                   colors=colors))
-        if required >= binning.MAX_PAIRS:
-            raise CapacityError(required, 0)
-        capacity = pair_capacity(required)
+    capacity = _sized_capacity(capacity, gaussians, camera, background, backend, config, colors)
     if screen_offsets is not None and np.shape(screen_offsets) != (gaussians.num, 2):
         raise ValueError(f"screen_offsets: expected shape ({gaussians.num}, 2), got "
                          f"{np.shape(screen_offsets)}")
@@ -347,6 +335,25 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):
         raise CapacityError(int(out.stats.pairs_required), int(capacity))
     return out
+
+
+def _sized_capacity(capacity, gaussians, camera, background, backend: str,
+                    config: RasterConfig, colors) -> int:
+    """`render`'s pair capacity: 0 for a backend without pairs, `capacity` if given, else (eager
+    calls only) `pair_capacity` of the pairs the render needs."""
+    if not REGISTRY[backend].binned:
+        return 0  # no pair buffer
+    if capacity is not None:
+        return capacity
+    if _is_traced((gaussians, camera, background)):
+        raise ValueError("capacity: under jit/vmap/grad pass capacity=<int> (e.g. from an "
+                         "eager render's stats.capacity), then check stats.overflow and "
+                         "stats.pairs_required, or use lgs_jax.render_growing")
+    required = int(count_pairs(gaussians, camera, antialiased=config.antialiased,
+                               colors=colors))
+    if required >= binning.MAX_PAIRS:
+        raise CapacityError(required, 0)
+    return pair_capacity(required)
 
 
 def _checked_colors(colors, background, n: int, dtype):

@@ -152,3 +152,25 @@ def test_record_columns_are_computed_from_the_lanes_data(hoist):
 
     for c, v in enumerate(jaxpr.outvars):
         assert from_lanes(v), f"record column {c} is a constant"
+
+
+def test_strip_pair_count_is_what_the_tiles_backend_reports():
+    """`pairs.strip_pair_count` (the count the Mosaic GPU kernels do not report) equals the
+    `tiles` backend's strip pairs, with and without warp culling."""
+    import jax
+
+    import lgs_jax
+    from lgs_jax import binning
+    from lgs_jax.layout import tile_grid
+    from lgs_jax.projection import project
+    from tests import scenes
+
+    g = scenes.cast(scenes.scene(3), np.float32)
+    cam = scenes.camera()
+    for config in (lgs_jax.RasterConfig(), lgs_jax.RasterConfig(warp_cull=False)):
+        out = scenes.render(g, cam, "tiles", config)
+        p = project(g, cam)
+        bins = binning.bin_gaussians(p, cam.width, cam.height, scenes.CAPACITY)
+        count = jax.jit(pairs.strip_pair_count, static_argnums=(2, 3))(
+            p, bins, tile_grid(cam.width, cam.height)[0], config)
+        assert int(count) == int(out.stats.backend_stats.strip_pairs)

@@ -204,8 +204,11 @@ def test_block_sizes_give_the_same_images(seed):
             np.testing.assert_array_equal(background, np.broadcast_to(
                 np.asarray(scenes.BACKGROUND, background.dtype), background.shape))
         for field in ("image", "alpha", "depth"):
-            np.testing.assert_array_equal(getattr(outs[128], field), getattr(outs[256], field),
-                                          err_msg=f"{backend} {field}")
+            a, b = getattr(outs[128], field), getattr(outs[256], field)
+            if field == "image" and backend == "pallas" and not ON_GPU:
+                assert_composites_equal(a, b)  # 128-pixel blocks write an image, 256 planes
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=f"{backend} {field}")
 
 
 def test_render_stops_are_per_block():
