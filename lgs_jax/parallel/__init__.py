@@ -13,9 +13,9 @@ from .gaussian_parallel import (ExchangeCapacityError, ShardedOutput, ShardedSta
                                 count_sharded, grown_capacities, render_sharded,
                                 render_sharded_growing)
 from .shards import (GAUSSIANS, VIEWS, GaussianShards, gather_gaussians, gaussian_mesh,
-                     gaussian_sharding, shard_gaussians)
+                     gaussian_sharding, shard_gaussians, to_host)
 
 __all__ = ["GAUSSIANS", "VIEWS", "ExchangeCapacityError", "GaussianShards", "ShardedOutput",
            "ShardedStats", "Traffic", "composite_sharded", "count_sharded", "gather_gaussians", "gaussian_mesh",
            "gaussian_sharding", "grown_capacities", "record_width", "render_sharded",
-           "render_sharded_growing", "shard_gaussians", "traffic"]
+           "render_sharded_growing", "shard_gaussians", "to_host", "traffic"]

@@ -14,8 +14,8 @@ from __future__ import annotations
 import dataclasses
 
 import jax
-import jax.numpy as jnp
 import numpy as np
+from jax.experimental import multihost_utils
 from jax.sharding import NamedSharding, PartitionSpec
 
 from ..scene import Gaussians, validate_gaussians
@@ -75,19 +75,32 @@ def padded_rows(num: int, devices: int) -> int:
 
 
 def shard_gaussians(g: Gaussians, mesh: jax.sharding.Mesh) -> GaussianShards:
-    """`g` padded (module docstring) and placed in blocks over `mesh`'s "gaussians" axis."""
+    """`g` padded (module docstring) and placed in blocks over `mesh`'s "gaussians" axis.
+
+    Each device's block is cut from a host copy of `g` (`jax.make_array_from_callback`), so
+    with several processes (`jax.distributed.initialize`) each process places the blocks of its
+    own devices: every process passes the same `g` (or at least the rows its devices hold)."""
     validate_gaussians(g)
     rows = padded_rows(g.num, shard_count(mesh))
+    sharding = gaussian_sharding(mesh)
 
-    def pad(x):
-        x = jnp.asarray(x)
-        return jnp.concatenate([x, jnp.zeros((rows - x.shape[0],) + x.shape[1:], x.dtype)])
+    def place(x):
+        x = np.asarray(x)
+        x = np.concatenate([x, np.zeros((rows - x.shape[0],) + x.shape[1:], x.dtype)])
+        return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])
 
-    padded = jax.tree.map(pad, g)
-    return GaussianShards(jax.device_put(padded, gaussian_sharding(mesh)), g.num)
+    return GaussianShards(jax.tree.map(place, g), g.num)
+
+
+def to_host(x) -> np.ndarray:
+    """A (possibly sharded) array whole on the host: with several processes every process gets
+    it all (`multihost_utils.process_allgather`)."""
+    if jax.process_count() > 1:
+        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+    return np.asarray(x)
 
 
 def gather_gaussians(shards: GaussianShards) -> Gaussians:
     """The `num` real Gaussians as host numpy arrays, in global row order (one model: what a
-    checkpoint or a PLY file holds)."""
-    return jax.tree.map(lambda x: np.asarray(x)[:shards.num], shards.gaussians)
+    checkpoint or a PLY file holds), in every process."""
+    return jax.tree.map(lambda x: to_host(x)[:shards.num], shards.gaussians)

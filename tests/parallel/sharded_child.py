@@ -220,6 +220,30 @@ def save_views_mesh(res: dict):
         res[f"views/one/{k}"] = np.stack([np.asarray(a[k]) for a in alone])
 
 
+def save_eager(res: dict, devices: int = 4):
+    """Eager calls (float32): buffers sized by counting first, and an exchange buffer too small
+    refused with the count it needs."""
+    dtype = np.float32
+    g, cam = scene(dtype), scenes.camera(W, H, dtype=dtype)
+    bg = np.asarray(scenes.BACKGROUND, dtype)
+    mesh = parallel.gaussian_mesh(devices)
+    shards = parallel.shard_gaussians(g, mesh)
+    out = parallel.render_sharded(shards, cam, mesh, background=bg, backend="tiles")
+    one = jax.jit(lambda g, c, bg: outputs(lgs_jax.render(g, c, background=bg, backend="tiles",
+                                                          capacity=CAPACITY)))
+    for k, v in outputs(out).items():
+        res[f"eager/sharded/{k}"] = np.asarray(v)
+    for k, v in one(g, cam, bg).items():
+        res[f"eager/one/{k}"] = np.asarray(v)
+    res["eager/capacities"] = np.asarray([out.stats.capacity, out.stats.exchange_capacity])
+    try:
+        parallel.render_sharded(shards, cam, mesh, background=bg, backend="tiles",
+                                capacity=CAPACITY, exchange_capacity=2)
+        res["eager/refused"] = np.asarray([0, 0])
+    except parallel.ExchangeCapacityError as e:
+        res["eager/refused"] = np.asarray([e.required, e.capacity])
+
+
 def main(path: str, slow: bool):
     res = {}
     settled = save_growth(res)
@@ -230,6 +254,7 @@ def main(path: str, slow: bool):
         save_render_grads(res, "f32d1", np.float32, 1)
         save_render_grads(res, "f32d4", np.float32, 4)
         save_projected_bound(res, "bound64d4", np.float64, 4)
+        save_eager(res)
     np.savez(path, **res)
 
 

@@ -130,3 +130,11 @@ def test_gaussian_parallel_on_one_two_and_four_devices(slow_results):
     _forward_matches(res, "f32d4", "uniform")
     _params_close(res, "f32d4", "uniform", rtol=1e-4)
     _within_projected_bound(res, "bound64d4", np.float64)
+
+
+@pytest.mark.slow
+def test_gaussian_parallel_eager_calls_size_and_refuse(slow_results):
+    res = slow_results
+    _same_bits(res, "eager/one", "eager/sharded")  # buffers counted first: nothing dropped
+    assert res["eager/capacities"].tolist() == [128, 8]
+    assert res["eager/refused"].tolist() == [8, 2]  # an overflow raises, with the count needed
