@@ -22,8 +22,10 @@ its projected fields is the sum over its tiles of one gradient row each (the sam
 one device, the walk of a tile being the same). One device sums those rows in emission order,
 16 at a time then across chunks (backends.backward.segment_sums), an association set by where
 the Gaussian's rows fall in the whole pair buffer; here each band sums its own tiles' rows
-(where they fall in its buffer) and the source adds the band sums. Both are sums of the same K
-numbers (K = the Gaussian's tiles), so (Higham, Accuracy and Stability, Thm. 4.1)
+(where they fall in its buffer) and the source adds the band sums. A device's tiles outside its
+band get zero cotangents, so their rows are exact zeros. Both are sums of the same K numbers
+(K = the Gaussian's tiles), so (any order of summation: Higham, Accuracy and Stability of
+Numerical Algorithms, ch. 4)
 
     |ĝ_sharded − ĝ_one| <= 2·γ_(K−1)·Σ_t |r_t|,   γ_m = m·u / (1 − m·u),
 
@@ -31,6 +33,9 @@ u the unit roundoff (2^-24 float32, 2^-53 float64), r_t the Gaussian's row of ti
 projection's backward then maps both through the same Jacobian. The background's and the
 camera's gradients, sums over pixels, are likewise re-associated (each device sums its band,
 then a psum). `tests/parallel` checks the bound, row by row.
+
+Batched cameras render one view after another (`_over_views`), each view bit-identical to
+`render` of that view alone.
 """
 
 from __future__ import annotations
