@@ -120,32 +120,6 @@ def save_render_grads(res: dict, tag: str, dtype, devices: int, exchange: int = 
             res[f"{tag}/{name}/{i}/exchange_counts"] = np.asarray(stats.exchange_counts)
 
 
-def save_growth(res: dict, devices: int = 4) -> int:
-    """float64 on 4 devices, the scene concentrated in band 0, from an exchange capacity of 2:
-    overflows (reported), then `render_sharded_growing` grows it. Returns the capacity that
-    settled."""
-    dtype = np.float64
-    cam, bg, w = scenes.camera(W, H, dtype=dtype), np.asarray(scenes.BACKGROUND, dtype), weights(
-        dtype)
-    mesh = parallel.gaussian_mesh(devices)
-    gs = parallel.shard_gaussians(scene(dtype, concentrated=True), mesh).gaussians
-    calls = []
-
-    def fn(gs, *, capacity, exchange_capacity):
-        result = sharded_grads(gs, cam, bg, w, mesh=mesh, capacity=capacity,
-                               exchange_capacity=exchange_capacity)
-        stats = result[1]
-        calls.append((capacity, exchange_capacity, bool(stats.exchange_overflow),
-                      int(stats.exchange_required), bool(stats.overflow)))
-        return result
-
-    _, capacity, exchange = parallel.render_sharded_growing(fn, gs, capacity=CAPACITY,
-                                                            exchange_capacity=2)
-    res["growth/calls"] = np.asarray(calls, np.int64)
-    res["growth/settled"] = np.asarray([capacity, exchange])
-    return exchange
-
-
 def tile_masks():
     """(1 + tiles, H, W): the whole image, then each tile's pixels alone."""
     masks = [np.ones((H, W))]
@@ -200,17 +174,34 @@ def save_projected_bound(res: dict, tag: str, dtype, devices: int):
 
 
 def save_views_mesh(res: dict):
-    """A 2 x 2 mesh ("views" x "gaussians"): a batch of 2 views of the float32 scene, and the
-    one-device render of each view alone."""
+    """A 2 x 2 mesh ("views" x "gaussians"): a batch of 2 views of the float32 scene, from an
+    exchange capacity of 2, which overflows (reported), then `render_sharded_growing` grows it;
+    and the one-device render of each view alone."""
     dtype = np.float32
     g, bg = scene(dtype), np.asarray(scenes.BACKGROUND, dtype)
     views = [scenes.camera(W, H, dtype=dtype, yaw=y) for y in (0.0, 0.15)]
     cams = lgs_jax.stack_cameras(views)
     mesh = parallel.gaussian_mesh(2, views=2)
     shards = parallel.shard_gaussians(g, mesh)
-    out = jax.jit(lambda gs, c, bg: outputs(parallel.render_sharded(
-        parallel.GaussianShards(gs, N), c, mesh, background=bg, backend="tiles",
-        capacity=CAPACITY, exchange_capacity=EXCHANGE)))(shards.gaussians, cams, bg)
+    calls = []
+
+    @functools.partial(jax.jit, static_argnames=("capacity", "exchange_capacity"))
+    def sharded(gs, c, bg, *, capacity, exchange_capacity):
+        out = parallel.render_sharded(parallel.GaussianShards(gs, N), c, mesh, background=bg,
+                                      backend="tiles", capacity=capacity,
+                                      exchange_capacity=exchange_capacity)
+        return outputs(out), out.stats
+
+    def fn(*args, capacity, exchange_capacity):
+        out, stats = sharded(*args, capacity=capacity, exchange_capacity=exchange_capacity)
+        calls.append((capacity, exchange_capacity, bool(np.any(stats.exchange_overflow)),
+                      int(np.max(stats.exchange_required)), bool(np.any(stats.overflow))))
+        return out, stats
+
+    (out, _), *settled = parallel.render_sharded_growing(fn, shards.gaussians, cams, bg,
+                                                         capacity=CAPACITY, exchange_capacity=2)
+    res["growth/calls"] = np.asarray(calls, np.int64)
+    res["growth/settled"] = np.asarray(settled)
     # the scene as an argument: a constant scene's projection would be folded at compile time
     one = jax.jit(lambda g, c, bg: outputs(lgs_jax.render(g, c, background=bg, backend="tiles",
                                                           capacity=CAPACITY)))
@@ -246,8 +237,7 @@ def save_eager(res: dict, devices: int = 4):
 
 def main(path: str, slow: bool):
     res = {}
-    settled = save_growth(res)
-    save_render_grads(res, "f64d4", np.float64, 4, settled, ("uniform", "concentrated"))
+    save_render_grads(res, "f64d4", np.float64, 4, EXCHANGE, ("uniform", "concentrated"))
     save_projected_bound(res, "bound32d2", np.float32, 2)
     save_views_mesh(res)
     if slow:
