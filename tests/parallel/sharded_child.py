@@ -1,7 +1,7 @@
 """The child process of tests/parallel/test_gaussian_parallel.py: JAX on 4 simulated CPU devices
 (`--xla_force_host_platform_device_count`, set before JAX starts). Renders and gradients, one
 device and sharded, saved to an .npz the parent checks (`python -m tests.parallel.sharded_child
-OUT.npz [slow]`).
+OUT.npz PART`, PART one of `PARTS`).
 
 Few compiles (each costs seconds on a CPU): every scene has the same shapes, each program is
 run on several scenes."""
@@ -235,18 +235,23 @@ def save_eager(res: dict, devices: int = 4):
         res["eager/refused"] = np.asarray([e.required, e.capacity])
 
 
-def main(path: str, slow: bool):
+PARTS = {
+    "render": lambda res: (save_render_grads(res, "f64d4", np.float64, 4, EXCHANGE,
+                                             ("uniform", "concentrated")),
+                           save_views_mesh(res)),
+    "bound": lambda res: save_projected_bound(res, "bound32d2", np.float32, 2),
+    "slow": lambda res: (save_render_grads(res, "f32d1", np.float32, 1),
+                         save_render_grads(res, "f32d4", np.float32, 4),
+                         save_projected_bound(res, "bound64d4", np.float64, 4),
+                         save_eager(res)),
+}
+
+
+def main(path: str, part: str):
     res = {}
-    save_render_grads(res, "f64d4", np.float64, 4, EXCHANGE, ("uniform", "concentrated"))
-    save_projected_bound(res, "bound32d2", np.float32, 2)
-    save_views_mesh(res)
-    if slow:
-        save_render_grads(res, "f32d1", np.float32, 1)
-        save_render_grads(res, "f32d4", np.float32, 4)
-        save_projected_bound(res, "bound64d4", np.float64, 4)
-        save_eager(res)
+    PARTS[part](res)
     np.savez(path, **res)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], len(sys.argv) > 2 and sys.argv[2] == "slow")
+    main(sys.argv[1], sys.argv[2])

@@ -4,8 +4,8 @@ one-device gradients, uneven shards and bands change nothing, an exchange overfl
 and grown out of, runs repeat their bits, and a 2 x 2 mesh (views x Gaussians) renders each view
 as `render` does.
 
-The renders run in one child process (tests/parallel/sharded_child.py: JAX simulates 4 devices
-only when told before it starts); the cases here check its results."""
+The renders run in child processes (tests/parallel/sharded_child.py: JAX simulates 4 devices
+only when told before it starts); the cases here check their results."""
 
 import os
 import subprocess
@@ -22,24 +22,15 @@ N = 37  # the child's scenes' Gaussians (sharded_child.N: importing it would sta
 PROJECTED = ("mean2d", "conic", "depth", "opacity", "rgb")
 
 
-def _run_child(tmp_path_factory, slow: bool):
-    path = tmp_path_factory.mktemp("sharded") / "results.npz"
+def _run_child(tmp_path, part: str):
+    """The child's results for `part` (one process per test: pytest-xdist runs tests of a module
+    on several workers, which would each run a shared fixture's child again)."""
+    path = tmp_path / f"{part}.npz"
     env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=ROOT)
-    args = [sys.executable, "-m", "tests.parallel.sharded_child", str(path)] + (
-        ["slow"] if slow else [])
-    done = subprocess.run(args, env=env, cwd=ROOT, capture_output=True, text=True, timeout=900)
+    done = subprocess.run([sys.executable, "-m", "tests.parallel.sharded_child", str(path), part],
+                          env=env, cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     return dict(np.load(path))
-
-
-@pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    return _run_child(tmp_path_factory, slow=False)
-
-
-@pytest.fixture(scope="module")
-def slow_results(tmp_path_factory):
-    return _run_child(tmp_path_factory, slow=True)
 
 
 def _same_bits(res, a: str, b: str, keys=IMAGES):
@@ -55,16 +46,10 @@ def _forward_matches(res, tag: str, name: str):
     assert not res[f"{tag}/{name}/0/overflow"].any()
 
 
-def test_gaussian_parallel_forward_is_bit_identical(results):
-    for name in ("uniform", "concentrated"):  # float64, 4 devices
-        _forward_matches(results, "f64d4", name)
-    # float32, 2 devices, from the projected Gaussians (`composite_sharded`)
-    _same_bits(results, "bound32d2/one/out", "bound32d2/sharded/out")
-
-
 def _within_projected_bound(res, tag: str, dtype):
     """|ĝ_sharded − ĝ_one| <= 2·γ_(K−1)·Σ_t |r_t| per Gaussian and projected field
     (lgs_jax.parallel.gaussian_parallel), r_t the Gaussian's gradient row of tile t alone."""
+    _same_bits(res, f"{tag}/one/out", f"{tag}/sharded/out")  # the forward: the same bits
     u = np.finfo(dtype).eps / 2
     k = np.maximum(res[f"{tag}/tiles"] - 1, 0).astype(np.float64)
     gamma = k * u / (1 - k * u)
@@ -87,56 +72,43 @@ def _params_close(res, tag: str, name: str, rtol: float):
         assert np.abs(sharded - one).max() <= rtol * scale, (f, np.abs(sharded - one).max() / scale)
 
 
-def test_gaussian_parallel_gradients_within_the_bound(results):
-    _within_projected_bound(results, "bound32d2", np.float32)
+def test_gaussian_parallel_matches_one_device(tmp_path):
+    res = _run_child(tmp_path, "render")
+    # float64 on 4 devices: 37 Gaussians in 4 blocks of 10 (3 padding rows, not counted), one
+    # band empty; the uniform scene and one crowded into the top band (band 0 receives nearly
+    # every record): the forward to the bit, the gradients to the bound's rounding
     for name in ("uniform", "concentrated"):
-        _params_close(results, "f64d4", name, rtol=1e-12)
-
-
-def test_gaussian_parallel_uneven_shards_and_bands(results):
-    # 37 Gaussians in 4 blocks of 10 (3 padding rows, not counted), one band empty, and a
-    # scene whose Gaussians all sit in the top band: band 0 receives nearly every record
-    assert results["f64d4/concentrated/one/out/counts"].sum() == N
-    _forward_matches(results, "f64d4", "concentrated")
-    sent = results["f64d4/concentrated/0/exchange_counts"]  # [source, destination]
+        _forward_matches(res, "f64d4", name)
+        _params_close(res, "f64d4", name, rtol=1e-12)
+        a, b = f"f64d4/{name}/0", f"f64d4/{name}/1"  # run twice: the same bits
+        _same_bits(res, f"{a}/out", f"{b}/out")
+        _same_bits(res, f"{a}/grad", f"{b}/grad", scenes.FIELDS + ("background",))
+    assert res["f64d4/concentrated/one/out/counts"].sum() == N
+    sent = res["f64d4/concentrated/0/exchange_counts"]  # [source, destination]
     assert sent[:, 0].sum() > sent[:, 1:].sum() and not sent[:, 3].any()
+    # 2 x 2 mesh (views x Gaussians), 2 views from an exchange capacity of 2: the overflow is
+    # reported (flag, count needed) and grown out of once; each view then is `render` of it alone
+    calls = res["growth/calls"]  # (capacity, exchange capacity, overflow, required, pairs)
+    assert calls.tolist() == [[512, 2, 1, 14, 0], [512, 16, 0, 14, 0]]
+    assert res["growth/settled"].tolist() == [512, 16]
+    _same_bits(res, "views/one", "views/sharded")
+    assert np.array_equal(res["views/sharded/visible"][:, :N], res["views/one/visible"])
 
 
-def test_gaussian_parallel_exchange_overflow_is_reported_and_grown(results):
-    calls = results["growth/calls"]  # (capacity, exchange capacity, overflow, required, pairs)
-    assert calls[0].tolist() == [512, 2, 1, 14, 0]  # reported: the flag and the count needed
-    assert calls[-1].tolist() == [512, 16, 0, 14, 0] and len(calls) == 2  # grown once, enough
-    assert results["growth/settled"].tolist() == [512, 16]
-
-
-def test_gaussian_parallel_is_deterministic(results):
-    for name in ("uniform", "concentrated"):
-        a, b = f"f64d4/{name}/0", f"f64d4/{name}/1"
-        _same_bits(results, f"{a}/out", f"{b}/out")
-        _same_bits(results, f"{a}/grad", f"{b}/grad", scenes.FIELDS + ("background",))
-
-
-def test_gaussian_parallel_views_by_gaussians_mesh(results):
-    # each view of the batch, split over views and Gaussians, is `render` of that view alone
-    # (at the exchange capacity the growth settled on)
-    _same_bits(results, "views/one", "views/sharded")
-    assert np.array_equal(results["views/sharded/visible"][:, :N], results["views/one/visible"])
+def test_gaussian_parallel_gradients_within_the_bound(tmp_path):
+    # float32 on 2 devices, from the projected Gaussians (`composite_sharded`)
+    _within_projected_bound(_run_child(tmp_path, "bound"), "bound32d2", np.float32)
 
 
 @pytest.mark.slow
-def test_gaussian_parallel_on_one_two_and_four_devices(slow_results):
-    res = slow_results
+def test_gaussian_parallel_on_one_and_four_devices(tmp_path):
+    res = _run_child(tmp_path, "slow")
     _forward_matches(res, "f32d1", "uniform")  # one device: forward and backward to the bit
     _same_bits(res, "f32d1/uniform/one/grad", "f32d1/uniform/0/grad",
                scenes.FIELDS + ("background",))
     _forward_matches(res, "f32d4", "uniform")
     _params_close(res, "f32d4", "uniform", rtol=1e-4)
     _within_projected_bound(res, "bound64d4", np.float64)
-
-
-@pytest.mark.slow
-def test_gaussian_parallel_eager_calls_size_and_refuse(slow_results):
-    res = slow_results
-    _same_bits(res, "eager/one", "eager/sharded")  # buffers counted first: nothing dropped
+    _same_bits(res, "eager/one", "eager/sharded")  # eager: buffers counted first, nothing lost
     assert res["eager/capacities"].tolist() == [128, 8]
     assert res["eager/refused"].tolist() == [8, 2]  # an overflow raises, with the count needed
