@@ -288,11 +288,14 @@ def render_sharded(shards: GaussianShards, camera: Camera, mesh, *, capacity: in
         output has one). A mesh with a "views" axis (`gaussian_mesh(d, views=v)`) splits the
         batch over its rows (data parallelism over views), each row a replica of the scene.
       mesh: the device mesh the shards live on.
-      capacity: the pair buffer of each device; exchange_capacity: the records a source can send
-        each destination. None (eager only): counted first (`count_sharded`, one camera), then
-        rounded up with `render.pair_capacity`. Under jit/grad pass ints and check
-        `stats.overflow` / `stats.exchange_overflow` (`render_sharded_growing` does that loop).
-      background, backend, config: as `render` (one background for every view).
+      capacity: the pair buffer of each device. None (eager only, one camera): counted first
+        (`count_sharded`), then rounded up with `render.pair_capacity`. Under jit/grad pass an
+        int and check `stats.overflow` (`render_sharded_growing` does that loop).
+      exchange_capacity: the records a source can send each destination; None and ints as
+        `capacity`, checked by `stats.exchange_overflow`.
+      background: as `render`'s (one for every view).
+      backend: as `render`'s, a tile backend (not "brute").
+      config: as `render`'s.
       screen_offsets: optional (D·n, 2) (or (views, D·n, 2)) added to the projected means, as
         `render`'s, sharded as the Gaussians.
 
