@@ -1,0 +1,293 @@
+"""Property tests that search scenes: hypothesis draws the Gaussians themselves, so that a failure
+shrinks to the feature that causes it (one needle, one far centre, one opacity a hair above 1/255).
+
+The strategy (`scene_values`) draws, for a fixed N = 16 Gaussians, every value that matters to
+culling: screen positions on the image or up to 6000 px off it, depths (distinct), pixel sizes
+from 0.05 px to ~8000 px with 3D axis ratios up to e^10 (2D condition numbers past 1e8 after the
+0.3 px² dilation), rotations (quaternions, not unit length, zero included), opacities anywhere
+or within 1e-6..5% of 1/255 on either side. Shapes never change, so every example
+reuses the compiled programs.
+
+Binning level (no render; images 1024 to 16384 px wide): at probe pixels on and around each
+Gaussian's 1/255 ellipse, every pixel whose alpha test passes (the float test of the
+compositing code in the scene's dtype, or the exact test on the same inputs in float64) lies in
+the Gaussian's pixel box, its tile rectangle and, in that tile, in both strip masks (difference
+and hoisted forms); every pixel whose hoisted float test passes inside a listed tile is in the
+hoisted strip mask; and the hoisted exponent (Eq. 8–10, tile-local) is within
+`lgs_jax.hoist.error_bound` of its float64 value.
+
+Render level (56x40 in the default set, 3840x2160 in the slow set): `tiles` and `reference` equal
+`brute` in float64 (F64_ATOL); in float32 their error against the float64 `brute` image exceeds
+float32 `brute`'s own by more than F32_ATOL on at most F32_FLIP_SHARE of the pixels (threshold
+flips, each at most one Gaussian); images are finite; Gaussians that binning gives no tile
+change no bit of the brute-force image; permuting Gaussians of distinct depths changes no bit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, event, given, settings, strategies as st
+
+import lgs_jax
+from lgs_jax import alpha as alpha_forms
+from lgs_jax import binning, hoist
+from lgs_jax.composite import gaussian_alpha, passes
+from lgs_jax.layout import TILE
+from lgs_jax.pairs import strip_mask_columns, table_columns
+from lgs_jax.projection import project
+from tests import scenes
+from tests.compare import F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_render_close
+
+N = 16  # Gaussians per example (fixed: one compile per program)
+RENDER_W, RENDER_H = 56, 40  # default-set render size: 4x3 tiles, the last row partial
+CAPACITY = N * 4 * 3  # every Gaussian in every tile (unbounded needles are)
+WIDTHS = (1024, 4096, 8192, 16384)  # binning level: 16:9 images up to 16K
+PROBES = 8  # probe directions per Gaussian, each probed at a 3x3 pixel neighbourhood
+CAP = 0.99  # the 3dgs convention's alpha cap
+ALPHA_MIN = 1 / 255
+COLOURS = np.random.default_rng(0).normal(0, 1.5, (N, 1, 3))  # SH band 0 per Gaussian
+FEW = max(4, settings.default.max_examples // 4)  # render-level examples (profile-scaled)
+
+
+def _each(*strategies):
+    """A fixed-length (N,) float64 array whose entries are drawn from any of `strategies`."""
+    return st.lists(st.one_of(*strategies), min_size=N, max_size=N).map(np.asarray)
+
+
+def _near_threshold_logit(rel):
+    o = ALPHA_MIN * (1 + rel)
+    return float(np.log(o / (1 - o)))
+
+
+@st.composite
+def scene_values(draw, width: int, height: int):
+    """Float64 values of N Gaussians for a `width` x `height` camera (`scenes.camera`):
+    screen position (px), depth, pixel scale, axis ratio, quaternion, logit opacity. (Colours
+    are fixed per index, `COLOURS`: culling never reads them.)"""
+    u = draw(_each(st.floats(-0.25 * width, 1.25 * width), st.floats(-6000.0, -0.25 * width),
+                   st.floats(1.25 * width, width + 6000.0)))
+    v = draw(_each(st.floats(-0.25 * height, 1.25 * height), st.floats(-6000.0, 0.0),
+                   st.floats(height, height + 6000.0)))
+    depth = draw(st.lists(st.floats(0.5, 20.0), min_size=N, max_size=N, unique=True)
+                 .map(np.asarray))
+    log_px = draw(_each(st.floats(-3.0, 9.0)))  # largest axis: e^-3 to e^9 px
+    log_ratio = draw(_each(st.floats(0.0, 10.0), st.just(0.0)))  # 3D largest / smallest axis
+    mid = draw(_each(st.floats(0.0, 1.0)))  # where the middle axis sits between them
+    quat = draw(st.lists(st.floats(-1.0, 1.0), min_size=4 * N, max_size=4 * N)
+                .map(lambda q: np.asarray(q).reshape(N, 4)))
+    logit = draw(_each(st.floats(-6.0, 8.0),
+                       st.floats(-5e-2, 5e-2).map(_near_threshold_logit),
+                       st.floats(-1e-6, 1e-6).map(_near_threshold_logit)))
+    return dict(u=u, v=v, depth=depth, log_px=log_px, log_ratio=log_ratio, mid=mid, quat=quat,
+                logit=logit)
+
+
+def gaussians(values: dict, width: int, height: int, dtype) -> lgs_jax.Gaussians:
+    """The Gaussians of `scene_values` for `scenes.camera(width, height)` (focal 0.9·width,
+    principal point at the centre, looking down +z), in `dtype`."""
+    f = 0.9 * width
+    z = values["depth"]
+    means = np.stack([(values["u"] - width / 2) * z / f, (values["v"] - height / 2) * z / f, z],
+                     -1)
+    big = values["log_px"] + np.log(z / f)  # world log-scale of the largest axis
+    ratio = values["log_ratio"]
+    log_scales = np.stack([big, big - values["mid"] * ratio, big - ratio], -1)
+    g = lgs_jax.Gaussians(means=means, quats=values["quat"], log_scales=log_scales,
+                          logit_opacities=values["logit"], sh=COLOURS)
+    return scenes.cast(g, dtype)
+
+
+# ------------------------------------------------------------------ binning level, to 16K
+
+@st.composite
+def probe_values(draw, width: int, height: int):
+    """Per Gaussian and probe: a target point on or near the image (the probe looks from the
+    Gaussian's centre towards it) and a relative level ε of the ellipse q = τ(1 + ε). The
+    targets come from a drawn seed; the level of each Gaussian's probes is drawn (so that
+    hypothesis can steer them onto the ellipse) and spread over its probes by the seed."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    target = rng.uniform(-0.1, 1.1, (N, PROBES, 2)) * [width, height]
+    level = draw(_each(st.floats(-1e-5, 1e-5), st.floats(-3e-2, 3e-2)))
+    return target, level[:, None] * rng.uniform(0, 1, (N, PROBES))
+
+
+def probe_pixels(p, target, level, width, height):
+    """(gaussian, column, row, keep) of the N·PROBES·9 probe pixels (fixed count: one compile):
+    the 3x3 pixels around each point where the ray from a Gaussian's centre towards its target
+    meets the ellipse q = τ(1 + ε) (float64, from the projection's own conic); `keep` marks
+    those of valid Gaussians inside the image (the others are pixel (0, 0), not checked)."""
+    f64 = lambda x: np.asarray(x, np.float64)
+    mean, conic, o = f64(p.mean2d), f64(p.conic), f64(p.opacity)
+    tau = 2 * np.log(np.maximum(255 * o, 1.0))
+    d = target - mean[:, None]
+    d = d / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-30)[..., None]
+    qd = (conic[:, None, 0] * d[..., 0] ** 2 + 2 * conic[:, None, 1] * d[..., 0] * d[..., 1]
+          + conic[:, None, 2] * d[..., 1] ** 2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.sqrt(tau[:, None] * (1 + level) / qd)
+    point = mean[:, None] + np.where(np.isfinite(r), r, 0.0)[..., None] * d
+    ok = np.isfinite(point).all(-1) & (np.abs(point).max(-1) < 1e7)
+    point = np.where(ok[..., None], point, -10.0)
+    step = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1]), -1).reshape(9, 2)
+    pix = (np.floor(point)[:, :, None, :] + step).reshape(-1, 2)  # (N·PROBES·9, 2)
+    gauss = np.repeat(np.arange(N), PROBES * 9)
+    keep = ((pix[:, 0] >= 0) & (pix[:, 0] < width) & (pix[:, 1] >= 0) & (pix[:, 1] < height)
+            & np.asarray(p.valid)[gauss])
+    pix = np.where(keep[:, None], pix, 0).astype(np.int64)
+    return gauss, pix[:, 0], pix[:, 1], keep
+
+
+def check_binning_covers(p, width, height, gauss, col, row, keep):
+    """The coverage properties of the module docstring at probe pixels (gauss, col, row) where
+    `keep`."""
+    dt = np.dtype(p.mean2d.dtype)
+    u = np.finfo(dt).eps / 2
+    cols = [np.asarray(c)[gauss] for c in table_columns(p)][:6]
+    mx, my, a, b, c, o = (jnp.asarray(x) for x in cols)
+    px, py = jnp.asarray((col + 0.5).astype(dt)), jnp.asarray((row + 0.5).astype(dt))
+    power, alpha = gaussian_alpha((mx, my), (a, b, c), o, px, py, jnp.asarray(CAP, dt))
+    float_pass = np.asarray(passes(power, alpha))
+    # The exact test on the same inputs: q <= τ (the product o·e^power >= 1/255, power <= 0).
+    up = [np.asarray(x, np.float64) for x in cols]
+    dx, dy = up[0] - (col + 0.5), up[1] - (row + 0.5)
+    power64 = -0.5 * (up[2] * dx * dx + up[4] * dy * dy) - up[3] * dx * dy
+    exact_pass = (power64 <= 0) & (up[5] * np.exp(power64) >= ALPHA_MIN)
+
+    x0, x1, y0, y1, _ = (np.asarray(t)[gauss] for t in binning.pixel_box(p, width, height))
+    in_box = (col >= x0) & (col <= x1) & (row >= y0) & (row <= y1)
+    tx0, ty0, nx, ny, _ = (np.asarray(t)[gauss] for t in binning.tile_rects(p, width, height))
+    tx, ty = col // TILE, row // TILE
+    in_tiles = (tx >= tx0) & (tx < tx0 + nx) & (ty >= ty0) & (ty < ty0 + ny)
+    strip = (row % TILE) // 2
+    tx_j, ty_j = jnp.asarray(tx, jnp.int32), jnp.asarray(ty, jnp.int32)
+    in_strip = {h: (np.asarray(strip_mask_columns(
+        [mx, my, a, b, c, o], tx_j, ty_j, lgs_jax.RasterConfig(hoist=h))) >> strip) & 1 == 1
+        for h in (False, True)}
+
+    # The hoisted form in the tile-local frame of the probe's tile (RasterConfig's default).
+    origin = np.stack([tx * TILE, ty * TILE], -1).astype(dt)
+    log_o = jnp.log(o)
+    v = hoist.hoist(jnp.stack([mx, my], -1), jnp.stack([a, b, c], -1), log_o, jnp.asarray(origin))
+    lx, ly = px - origin[:, 0], py - origin[:, 1]
+    raw = hoist.evaluate_terms([v[:, k] for k in range(6)], lx, ly)
+    _, hoisted_pass, _ = alpha_forms.hoisted(raw, log_o, jnp.asarray(CAP, dt))
+    hoisted_pass = np.asarray(hoisted_pass)
+    log_o64 = np.log(np.maximum(up[5], 1e-300))  # o = 0 only where `keep` is False
+    raw64 = log_o64 + power64
+    bound = np.asarray(hoist.error_bound(
+        np.stack(up[:2], -1), np.stack(up[2:5], -1), log_o64, origin.astype(np.float64),
+        np.abs(np.asarray(lx, np.float64)), np.abs(np.asarray(ly, np.float64)), 16 * u))
+
+    def where(bad):
+        k = int(np.flatnonzero(bad)[0])
+        return (f"{dt.name} {width}x{height}: Gaussian {gauss[k]} pixel ({col[k]}, {row[k]}), "
+                f"mean ({cols[0][k]:.6g}, {cols[1][k]:.6g}), conic ({cols[2][k]:.6g}, "
+                f"{cols[3][k]:.6g}, {cols[4][k]:.6g}), o {cols[5][k]:.9g}")
+
+    passing = (float_pass | exact_pass) & keep
+    for name, covered in (("pixel box", in_box), ("tile rectangle", in_tiles),
+                          ("difference strip mask", in_strip[False]),
+                          ("hoisted strip mask", in_strip[True])):
+        missed = passing & ~covered
+        assert not missed.any(), f"{name} misses a passing pixel: {where(missed)}"
+    missed = hoisted_pass & keep & in_tiles & ~in_strip[True]
+    assert not missed.any(), f"hoisted strip mask misses a hoisted pass: {where(missed)}"
+    err = np.where(keep, np.abs(np.asarray(raw, np.float64) - raw64), 0.0)
+    over = err > bound
+    assert not over.any(), f"hoisted exponent error {err[over].max():.3g} over bound: {where(over)}"
+    return int(passing.sum())
+
+
+@settings(suppress_health_check=[HealthCheck.large_base_example])  # N Gaussians' values
+@given(data=st.data(), width=st.sampled_from(WIDTHS))
+def test_binning_covers_every_passing_pixel_to_16k(data, width):
+    """Exact culling at the binning level on images 1K to 16K wide, float32 and float64."""
+    height = width * 9 // 16
+    values = data.draw(scene_values(width, height), label="scene")
+    target, level = data.draw(probe_values(width, height), label="probes")
+    for dtype in (np.float32, np.float64):
+        p = project(gaussians(values, width, height, dtype), scenes.camera(width, height, dtype))
+        passing = check_binning_covers(p, width, height,
+                                       *probe_pixels(p, target, level, width, height))
+        event(f"{dtype.__name__}: {'no' if passing == 0 else 'some'} passing probe pixels")
+
+
+# ------------------------------------------------------------------ render level
+
+def _render(g, cam, backend, capacity=CAPACITY):
+    return lgs_jax.render(g, cam, background=np.asarray(scenes.BACKGROUND, g.means.dtype),
+                          backend=backend, capacity=capacity)
+
+
+def check_culled_equals_brute(values, width, height, capacity):
+    """The render-level properties against `brute` (module docstring)."""
+    g64 = gaussians(values, width, height, np.float64)
+    cam64 = scenes.camera(width, height, np.float64)
+    truth = _render(g64, cam64, "brute", capacity)
+    for backend in ("tiles", "reference"):
+        out = _render(g64, cam64, backend, capacity)
+        for field in ("image", "alpha", "depth"):
+            assert_render_close(getattr(out, field), getattr(truth, field), atol=F64_ATOL,
+                                what=f"{backend} float64 {field}")
+    g32, cam32 = scenes.cast(g64, np.float32), scenes.camera(width, height, np.float32)
+    brute32 = _render(g32, cam32, "brute", capacity)
+    want = np.asarray(truth.image)
+    base = np.abs(np.asarray(brute32.image, np.float64) - want).max(-1)
+    for backend in ("tiles", "reference"):
+        out = _render(g32, cam32, backend, capacity)
+        image = np.asarray(out.image, np.float64)
+        assert np.all(np.isfinite(image)) and np.all(np.isfinite(np.asarray(out.alpha)))
+        excess = np.abs(image - want).max(-1) - base
+        share = np.mean(excess > F32_ATOL)
+        assert share <= F32_FLIP_SHARE, (
+            f"{backend} float32: {share:.2%} of pixels further from float64 brute force than "
+            f"float32 brute force by > {F32_ATOL} (max {excess.max():.3g})")
+        assert excess.max() <= 2.0, f"{backend} float32: a pixel moved by {excess.max():.3g}"
+
+
+@settings(max_examples=FEW)
+@given(values=scene_values(RENDER_W, RENDER_H))
+def test_culled_renders_equal_brute_force(values):
+    check_culled_equals_brute(values, RENDER_W, RENDER_H, CAPACITY)
+
+
+@settings(max_examples=FEW)
+@given(values=scene_values(RENDER_W, RENDER_H))
+def test_gaussians_without_tiles_change_no_bit(values):
+    """Removing (opacity 0) every Gaussian that binning gives no tile leaves the float32
+    brute-force image (which never reads the tiles) and the `tiles` image bit for bit."""
+    g = gaussians(values, RENDER_W, RENDER_H, np.float32)
+    cam = scenes.camera(RENDER_W, RENDER_H, np.float32)
+    _, _, nx, ny, _ = binning.tile_rects(project(g, cam), RENDER_W, RENDER_H)
+    tileless = np.asarray(nx * ny) == 0
+    event(f"{'no' if not tileless.any() else 'some'} Gaussians without tiles")
+    removed = dataclasses.replace(g, logit_opacities=np.where(
+        tileless, -np.inf, g.logit_opacities).astype(np.float32))
+    for backend in ("brute", "tiles"):
+        np.testing.assert_array_equal(_render(removed, cam, backend).image,
+                                      _render(g, cam, backend).image, err_msg=backend)
+
+
+@settings(max_examples=FEW)
+@given(values=scene_values(RENDER_W, RENDER_H), perm=st.permutations(range(N)))
+def test_permuting_gaussians_of_distinct_depths_changes_no_bit(values, perm):
+    g = gaussians(values, RENDER_W, RENDER_H, np.float32)
+    assume(np.unique(np.asarray(g.means[:, 2])).size == N)
+    perm = np.asarray(perm)
+    shuffled = lgs_jax.Gaussians(*(np.asarray(x)[perm] for x in (
+        g.means, g.quats, g.log_scales, g.logit_opacities, g.sh)))
+    cam = scenes.camera(RENDER_W, RENDER_H, np.float32)
+    for backend in ("brute", "tiles"):
+        np.testing.assert_array_equal(_render(shuffled, cam, backend).image,
+                                      _render(g, cam, backend).image, err_msg=backend)
+
+
+@pytest.mark.slow  # 3840x2160: its own compiles of three backends in two dtypes
+@settings(max_examples=4)
+@given(values=scene_values(3840, 2160))
+def test_culled_renders_equal_brute_force_4k(values):
+    check_culled_equals_brute(values, 3840, 2160, N * 240 * 135)
