@@ -182,7 +182,7 @@ def plot_cost(rows, costs, out):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    for c in costs:
+    for c in (c for c in costs if c["form"] in forms.FORMS):
         worst = max(r["max_abs_total_err"] for r in rows if r["form"] == c["form"])
         ax.loglog(c["eval_ns_per_exponent"], worst, "o", label=c["form"])
         ax.annotate(c["form"], (c["eval_ns_per_exponent"], worst), fontsize=7)
