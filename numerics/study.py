@@ -154,15 +154,15 @@ def paper_rows(rng, n):
 
 
 def plot(rows, out):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """PNG plots of the worst error against resolution, offset and anisotropy (figures made
+    without pyplot, so that no backend is switched: notebooks keep theirs)."""
+    from matplotlib.figure import Figure
 
     data = [r for r in rows if r["form"] in forms.FORMS]
     for key, xlabel in (("resolution", "image width (px)"), ("offset_px", "centre offset (px)"),
                         ("anisotropy", "condition number κ")):
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig = Figure(figsize=(6, 4))
+        ax = fig.subplots()
         for form in forms.FORMS:
             xs = sorted({r[key] for r in data})
             ys = [max(r["max_abs_total_err"] for r in data if r["form"] == form and r[key] == x)
@@ -174,14 +174,14 @@ def plot(rows, out):
         ax.legend(fontsize=8)
         fig.tight_layout()
         fig.savefig(os.path.join(out, f"power_err_vs_{key}.png"), dpi=120)
-        plt.close(fig)
 
 
 def plot_cost(rows, costs, out):
     """Evaluation time per exponent against the worst total exponent error, one point per form."""
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = Figure(figsize=(6, 4))
+    ax = fig.subplots()
     for c in (c for c in costs if c["form"] in forms.FORMS):
         worst = max(r["max_abs_total_err"] for r in rows if r["form"] == c["form"])
         ax.loglog(c["eval_ns_per_exponent"], worst, "o", label=c["form"])
@@ -191,7 +191,6 @@ def plot_cost(rows, costs, out):
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "cost_vs_error.png"), dpi=120)
-    plt.close(fig)
 
 
 def _worst(data, form, **kw):
