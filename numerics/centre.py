@@ -40,20 +40,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lgs_jax.projection import EPS2D
+from lgs_jax.projection import EPS2D, project
 
-from . import forms, study
+from . import axes, forms
+from .sampling import RESOLUTIONS, sample as sample_2d
 from .split import centre_split, log_alpha_split
 
-RESOLUTIONS = study.RESOLUTIONS
 OFFSETS = (0, 16, 1024)
-ANISOTROPY = (1.0, 1e2, 1e4)
+ANISOTROPY = (1.0, 1e2, 1e4, 1e6)
 FORMS = ("difference", "local_corner", "difference+split", "local_corner+split",
-         "local_corner+split_perspective", "local_corner+split_exact")
+         "local_corner+split_perspective", "local_corner+split_exact", "principal_axes+split")
 """`+split`: μ from `split.centre_split`; `+split_perspective`: the camera transform in plain
 float32, the rest split (`centre_split(..., compensated_transform=False)`); `+split_exact`: hi,
 lo from the float64 centre (what a perfect centre would give: the remaining error is the
-conic's and the evaluation's)."""
+conic's and the evaluation's); `principal_axes+split`: the principal-axes form (numerics.forms)
+with its axes from the covariance's factor in float32 (numerics.axes) and the split centre."""
 
 
 # ------------------------------------------------------------------ the measurement
@@ -74,7 +75,7 @@ def camera(resolution, rng):
 
 def sample(rng, n, resolution, offset_px, kappa):
     """Float32 world-space Gaussians (lgs_jax.Gaussians) whose 1/255 ellipse holds a pixel, the
-    camera, and the pixels (float64 centres). The screen-space design is `study.sample`'s
+    camera, and the pixels (float64 centres). The screen-space design is `numerics.sampling.sample`'s
     (centre `offset_px` from the pixel, 2D condition number `kappa`); each is lifted to a flat
     3D Gaussian at depth 2–10 (its covariance in the camera's x–y plane scaled by (z/f)², so
     that J·Σ·Jᵀ + 0.3·I is the designed 2D covariance) and moved into the world of a random
@@ -82,7 +83,7 @@ def sample(rng, n, resolution, offset_px, kappa):
     import lgs_jax
     from scipy.spatial.transform import Rotation
 
-    mean2d, pixel, cov, log_o = study.sample(rng, n, resolution, offset_px, kappa)
+    mean2d, pixel, cov, log_o = sample_2d(rng, n, resolution, offset_px, kappa)
     view, fx, fy, cx, cy, width, height = camera(resolution, rng)
     z = rng.uniform(2, 10, n)
     cam_mean = np.stack([(mean2d[:, 0] - cx) * z / fx, (mean2d[:, 1] - cy) * z / fy, z], -1)
@@ -109,17 +110,18 @@ def _camera(cam, dtype):
                           cx=dtype(cx), cy=dtype(cy), width=width, height=height)
 
 
+_project = jax.jit(project)
 _split = jax.jit(centre_split, static_argnames="compensated_transform")
+_axes = jax.jit(lambda *args: axes.principal_axes(axes.factor(*args)),
+                static_argnums=(8, 9))
 
 
 def measure(rng, n, resolution, offset_px, kappa):
     """Rows (one per form in FORMS) of the worst ln α and α errors of float32 exponents against
     the float64 exponent of the same float32 parameters, at pixels inside the 1/255 ellipse."""
-    from lgs_jax.projection import project
-
     g, cam, pixel = sample(rng, n, resolution, offset_px, kappa)
     g64 = jax.tree.map(lambda x: np.asarray(x, np.float64), g)
-    p64, p32 = project(g64, _camera(cam, np.float64)), project(g, _camera(cam, np.float32))
+    p64, p32 = _project(g64, _camera(cam, np.float64)), _project(g, _camera(cam, np.float32))
     f64 = lambda x: np.asarray(x, np.float64)
     log_o = np.log(f64(p64.opacity))
     exact = forms.log_alpha("difference", f64(p64.mean2d), pixel, f64(p64.conic), log_o)
@@ -134,10 +136,16 @@ def measure(rng, n, resolution, offset_px, kappa):
     splits["split_exact"] = (hi64, (f64(p64.mean2d) - hi64).astype(np.float32))
     got = {f: forms.log_alpha(f, mean32, pixel32, conic32, log_o32)
            for f in ("difference", "local_corner")}
-    for form in FORMS[2:]:
+    for form in FORMS[2:-1]:
         base, kind = form.split("+")
         hi, lo = (np.asarray(x) for x in splits[kind])
         got[form] = log_alpha_split(base, hi, lo, pixel32, conic32, log_o32)
+    hi, lo = (np.asarray(x) for x in splits["split"])
+    lam1, lam2, e1 = (np.asarray(x) for x in _axes(
+        g.means, g.quats, g.log_scales, view, fx, fy, cx, cy, *cam[5:]))
+    d = (hi - pixel32) + lo
+    got["principal_axes+split"] = forms.log_alpha("principal_axes", d, np.zeros_like(d),
+                                                  conic32, log_o32, (lam1, lam2, e1))
     alpha = lambda x: np.minimum(0.99, np.exp(x))
     rows = []
     for form in FORMS:
@@ -150,30 +158,42 @@ def measure(rng, n, resolution, offset_px, kappa):
     return rows
 
 
+def sweep(rng, n, resolutions=RESOLUTIONS):
+    """`measure` over resolutions x OFFSETS x ANISOTROPY, n samples each."""
+    return [r for res in resolutions for off in OFFSETS for kappa in ANISOTROPY
+            for r in measure(rng, n, res, off, kappa)]
+
+
+def write(rows, out):
+    """DIR/centre.csv; returns its path."""
+    path = os.path.join(out, "centre.csv")
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m numerics.centre", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="fewer samples (seconds, for tests)")
+    ap.add_argument("--quick", action="store_true",
+                    help="fewer samples, 1K and 16K only (seconds, for tests)")
     ap.add_argument("--out", required=True)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # the float64 reference
     os.makedirs(args.out, exist_ok=True)
     rng = np.random.default_rng(args.seed)
-    n = 500 if args.quick else 20000
-    rows = [r for res in RESOLUTIONS for off in OFFSETS for kappa in ANISOTROPY
-            for r in measure(rng, n, res, off, kappa)]
-    path = os.path.join(args.out, "centre.csv")
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    resolutions = (1024, 16384) if args.quick else RESOLUTIONS
+    rows = sweep(rng, 300 if args.quick else 20000, resolutions)
+    path = write(rows, args.out)
     print(f"worst |error of ln α|, κ = 1, centres within 16 px (rows of {path}):")
-    print(f"{'form':>32s} " + " ".join(f"{r:>8d}" for r in RESOLUTIONS))
+    print(f"{'form':>32s} " + " ".join(f"{r:>8d}" for r in resolutions))
     for form in FORMS:
         worst = [max(r["max_abs_total_err"] for r in rows if r["form"] == form and
                      r["resolution"] == res and r["anisotropy"] == 1.0 and r["offset_px"] <= 16)
-                 for res in RESOLUTIONS]
+                 for res in resolutions]
         print(f"{form:>32s} " + " ".join(f"{e:8.2g}" for e in worst))
     return 0
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 
 import jax
 import jax.numpy as jnp
@@ -24,11 +25,13 @@ import numpy as np
 from benchmarks.common import median_ms
 from lgs_jax import hoist
 
-from . import forms, split
+from lgs_jax.projection import EPS2D
 
-FORMS = forms.FORMS + ("difference+split", "local_corner+split")
-"""`+split`: the centre as (hi, lo) (numerics.centre): the offset is (hi − p) + lo per exponent
-(difference) or (hi − T) + lo per pair before Eq. 8 (local_corner)."""
+from . import axes, forms, split
+
+FORMS = forms.FORMS + ("difference+split", "local_corner+split", "principal_axes+split")
+"""`+split`: the centre as (hi, lo) (numerics.split): the offset is (hi − p) + lo per exponent
+(difference, principal_axes) or (hi − T) + lo per pair before Eq. 8 (local_corner)."""
 
 TILE_ORIGIN = {"global": (1024.0, 512.0), "local_corner": (0.0, 0.0), "local_center": (8.0, 8.0)}
 """Where the timed tile's pixel (0, 0) sits in each form's coordinates (global: a tile at
@@ -53,7 +56,7 @@ def setup(form, mean, conic, log_o, cov64):
                            jnp.zeros_like(hi))
     if form in ("difference", "difference+split"):
         return mean, conic, log_o
-    if form == "principal_axes":
+    if form.startswith("principal_axes"):
         lam1, lam2, e1 = forms.principal_axes(cov64)
         return mean, (1 / lam1).astype(jnp.float32), (1 / lam2).astype(jnp.float32), \
             e1.astype(jnp.float32), log_o
@@ -71,9 +74,11 @@ def evaluate(form, state, pixels):
         d = split.offset(hi[:, None], lo[:, None], pixels[None])
         return forms.log_alpha("difference", d, jnp.zeros_like(d), conic[:, None],
                                log_o[:, None])
-    if form == "principal_axes":
-        mean, inv1, inv2, e1, log_o = (s[:, None] for s in state)
-        d = mean - pixels[None]
+    if form.startswith("principal_axes"):
+        mean, inv1, inv2, e1, log_o = state
+        inv1, inv2, e1, log_o = (s[:, None] for s in (inv1, inv2, e1, log_o))
+        d = (split.offset(mean[0][:, None], mean[1][:, None], pixels[None]) if form.endswith(
+            "+split") else mean[:, None] - pixels[None])
         t1 = e1[..., 0] * d[..., 0] + e1[..., 1] * d[..., 1]
         t2 = e1[..., 0] * d[..., 1] - e1[..., 1] * d[..., 0]
         return log_o - 0.5 * (t1 * t1 * inv1 + t2 * t2 * inv2)
@@ -119,9 +124,11 @@ def measure(n=16384, repeat=20):
         fns["eval", f] = lambda f=f: jax.block_until_ready(evals[f](states[f], pixels[f]))
     ms = median_ms(fns, repeat)
     dev = jax.devices()[0]
+    load = os.getloadavg()[0]  # a shared machine's timings are noisy: say how shared
     return [dict(form=f, gaussians=n, setup_ns_per_gaussian=1e6 * ms["setup", f] / n,
                  eval_ns_per_exponent=1e6 * ms["eval", f] / (n * 256),
-                 device=f"{dev.platform} ({dev.device_kind})", jax=jax.__version__)
+                 device=f"{dev.platform} ({dev.device_kind})", jax=jax.__version__,
+                 load_average=load, cores=os.cpu_count())
             for f in FORMS]
 
 
@@ -132,10 +139,26 @@ def plain_centre(means, viewmat, fx, fy, cx, cy):
     return jnp.stack([fx * t[0] / t[2] + cx, fy * t[1] / t[2] + cy], -1)
 
 
-def measure_centre(n=16384, repeat=20):
-    """Rows (centre, ns_per_gaussian, device): the screen-space centre of n Gaussians from their
-    float32 world means, plain (`plain_centre`) and split (`numerics.split.centre_split`),
-    timed in the same interleaved rounds."""
+def conic_from_factor(*args):
+    """The conic (N, 3) from Σ2 = A·Aᵀ + 0.3·I (numerics.axes.factor), entry by entry as
+    `lgs_jax.projection` forms and inverts it."""
+    a = axes.factor(*args)
+    sxx, sxy, syy = (axes._dot(a[:, i], a[:, j]) for i, j in ((0, 0), (0, 1), (1, 1)))
+    sxx, syy = sxx + EPS2D, syy + EPS2D
+    det = sxx * syy - sxy * sxy
+    return jnp.stack([syy / det, -sxy / det, sxx / det], -1)
+
+
+def axes_from_factor(*args):
+    """(λ₁, λ₂, e₁) from the same factor (numerics.axes.principal_axes)."""
+    return axes.principal_axes(axes.factor(*args))
+
+
+def measure_per_gaussian(n=16384, repeat=20):
+    """Rows (centre, ns_per_gaussian, device) of per-Gaussian work, timed in the same
+    interleaved rounds: the screen-space centre from float32 world means, plain
+    (`plain_centre`) and split (`numerics.split.centre_split`); the 2D shape from the 3D one,
+    as a conic (`conic_from_factor`) and as principal axes (`axes_from_factor`)."""
     rng = np.random.default_rng(0)
     view = np.eye(4, dtype=np.float32)
     view[:3, :3] = np.linalg.qr(rng.normal(size=(3, 3)))[0]  # a rotation (or a reflection)
@@ -145,13 +168,18 @@ def measure_centre(n=16384, repeat=20):
     ahead = view[:3, :3].T.astype(np.float64) @ ([0.0, 0.0, 6.0] - view[:3, 3])  # 6 in front
     means = jnp.asarray((rng.normal(0, 1, (n, 3)) + ahead).astype(np.float32))
     args = (means, jnp.asarray(view)) + tuple(jnp.float32(v) for v in (fx, fy, cx, cy))
-    fns = {"plain": jax.jit(plain_centre), "split": jax.jit(split.centre_split)}
-    for f in fns.values():
-        jax.block_until_ready(f(*args))
-    ms = median_ms({k: (lambda f=f: jax.block_until_ready(f(*args))) for k, f in fns.items()},
-                   repeat)
+    shape_args = (means, jnp.asarray(rng.normal(size=(n, 4)).astype(np.float32)),
+                  jnp.asarray(rng.uniform(-6, -2, (n, 3)).astype(np.float32))) + args[1:]
+    fns = {"plain": (jax.jit(plain_centre), args),
+           "split": (jax.jit(split.centre_split), args),
+           "conic": (jax.jit(conic_from_factor, static_argnums=(8, 9)), shape_args + (4096, 2304)),
+           "axes": (jax.jit(axes_from_factor, static_argnums=(8, 9)), shape_args + (4096, 2304))}
+    for f, a in fns.values():
+        jax.block_until_ready(f(*a))
+    ms = median_ms({k: (lambda f=f, a=a: jax.block_until_ready(f(*a)))
+                    for k, (f, a) in fns.items()}, repeat)
     dev = jax.devices()[0]
-    return [dict(centre=k, gaussians=n, ns_per_gaussian=1e6 * ms[k] / n,
+    return [dict(work=k, gaussians=n, ns_per_gaussian=1e6 * ms[k] / n,
                  device=f"{dev.platform} ({dev.device_kind})", jax=jax.__version__)
             for k in fns]
 
@@ -161,20 +189,24 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--gaussians", type=int, default=16384)
     ap.add_argument("--repeat", type=int, default=20)
-    ap.add_argument("--csv")
+    ap.add_argument("--csv", help="write the forms' rows here, the per-Gaussian rows to "
+                    "FILE_per_gaussian.csv")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # principal_axes' setup is float64
     rows = measure(args.gaussians, args.repeat)
     for r in rows:
         print(f"{r['form']:>18s}  setup {r['setup_ns_per_gaussian']:8.2f} ns/Gaussian  "
               f"evaluate {r['eval_ns_per_exponent']:7.3f} ns/exponent  ({r['device']})")
-    for r in measure_centre(args.gaussians, args.repeat):
-        print(f"{'centre ' + r['centre']:>18s}  {r['ns_per_gaussian']:8.2f} ns/Gaussian")
+    per_gaussian = measure_per_gaussian(args.gaussians, args.repeat)
+    for r in per_gaussian:
+        print(f"{'per Gaussian: ' + r['work']:>20s}  {r['ns_per_gaussian']:8.2f} ns")
     if args.csv:
-        with open(args.csv, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        for path, table in ((args.csv, rows),
+                            (args.csv.removesuffix(".csv") + "_per_gaussian.csv", per_gaussian)):
+            with open(path, "w", newline="") as f:
+                w = csv.DictWriter(f, fieldnames=list(table[0]))
+                w.writeheader()
+                w.writerows(table)
     return 0
 
 

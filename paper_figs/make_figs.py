@@ -16,8 +16,9 @@ a figure whose file is missing is skipped with a message naming the file and tha
 - precision_tradeoff.png (Table V analog): forward time against PSNR vs float64 per exponent
   form, H100 Pallas kernel (`numerics.render_study --backend pallas`).
 - cancellation_vs_resolution.png: the worst float32 error of ln α against image width, per
-  form (`numerics.study`: the paper's Eq. 11 cancellation), and the centre floor with and
-  without the split centre (`numerics.centre`).
+  form (`numerics.study`: the paper's Eq. 11 cancellation); from float32 world parameters
+  (`numerics.centre`), the centre floor with and without the split centre, and needles with
+  the principal axes computed in float32 from the covariance's factor.
 - culling_per_tile.png (the paper's Fig. 1 idea): per tile of a real scene, the share of
   strip–Gaussian pairs that warp culling skips (`paper_figs.culling`).
 """
@@ -144,31 +145,39 @@ def precision_tradeoff(path="numerics/results/render/render_summary_pallas.csv")
     save(fig, "precision_tradeoff.png")
 
 
+def _worst_by_width(ax, data, forms=None):
+    """One line per form: the worst ln α error of `data`'s rows at each image width."""
+    for form in forms or dict.fromkeys(r["form"] for r in data):
+        xs = sorted({int(r["resolution"]) for r in data if r["form"] == form})
+        ys = [max(float(r["max_abs_total_err"]) for r in data
+                  if r["form"] == form and int(r["resolution"]) == x) for x in xs]
+        ax.loglog(xs, ys, "o-", label=form, base=2)
+    ax.set_xlabel("image width (px)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+
+
 def cancellation_vs_resolution(study="numerics/results/summary.csv",
                                centre="numerics/results/centre.csv"):
-    """Left: worst ln α error against width per form, all offsets and anisotropies (the
-    paper's cancellation); right: κ = 1, centres within 16 px, current and split centres."""
-    fig, axs = plt.subplots(1, 2, figsize=(12, 4.2))
-    data = [r for r in rows(study) if r["max_abs_total_err"] and "@" not in r["form"]
-            and not r["form"].startswith("paper")]
-    for ax, sets in ((axs[0], (data, None)), (axs[1], (rows(centre), "centre"))):
-        sel, kind = sets
-        if kind:
-            sel = [r for r in sel if float(r["anisotropy"]) == 1.0 and int(r["offset_px"]) <= 16]
-        for form in dict.fromkeys(r["form"] for r in sel):
-            xs = sorted({int(r["resolution"]) for r in sel if r["form"] == form})
-            ys = [max(float(r["max_abs_total_err"]) for r in sel
-                      if r["form"] == form and int(r["resolution"]) == x) for x in xs]
-            ax.loglog(xs, ys, "o-", label=form, base=2)
-        ax.set_xlabel("image width (px)")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+    """Worst ln α error against width: per form over the whole study (the paper's
+    cancellation); the centre floor (κ = 1, centres within 16 px) with and without the split
+    centre; needles (κ = 1e6) with the float32 principal axes."""
+    fig, axs = plt.subplots(1, 3, figsize=(16, 4.2))
+    _worst_by_width(axs[0], [r for r in rows(study) if r["max_abs_total_err"]
+                             and "@" not in r["form"] and not r["form"].startswith("paper")])
+    pipeline = rows(centre)
+    _worst_by_width(axs[1], [r for r in pipeline if float(r["anisotropy"]) == 1.0
+                             and int(r["offset_px"]) <= 16])
+    _worst_by_width(axs[2], [r for r in pipeline if float(r["anisotropy"]) == 1e6],
+                    ("difference", "local_corner", "local_corner+split",
+                     "principal_axes+split"))
     axs[1].annotate("local_corner+split lies under +split_exact", (0.02, 0.02),
                     xycoords="axes fraction", fontsize=7)
     axs[0].set_ylabel("worst |error| of ln α, float32")
-    axs[0].set_title("forms (numerics.study: all offsets, κ to 1e6)", fontsize=9)
-    axs[1].set_title("the centre floor, κ = 1, centres within 16 px (numerics.centre)",
-                     fontsize=9)
+    for ax, title in zip(axs, ("forms (numerics.study: all offsets, κ to 1e6)",
+                               "the centre floor: κ = 1, centres within 16 px",
+                               "needles: κ = 1e6, centres 0–1024 px away")):
+        ax.set_title(title, fontsize=9)
     save(fig, "cancellation_vs_resolution.png")
 
 
