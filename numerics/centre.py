@@ -49,12 +49,13 @@ from .split import centre_split, log_alpha_split
 OFFSETS = (0, 16, 1024)
 ANISOTROPY = (1.0, 1e2, 1e4, 1e6)
 FORMS = ("difference", "local_corner", "difference+split", "local_corner+split",
-         "local_corner+split_perspective", "local_corner+split_exact", "principal_axes+split")
+         "local_corner+split_perspective", "local_corner+split_exact", "whitened+split")
 """`+split`: μ from `split.centre_split`; `+split_perspective`: the camera transform in plain
 float32, the rest split (`centre_split(..., compensated_transform=False)`); `+split_exact`: hi,
 lo from the float64 centre (what a perfect centre would give: the remaining error is the
-conic's and the evaluation's); `principal_axes+split`: the principal-axes form (numerics.forms)
-with its axes from the covariance's factor in float32 (numerics.axes) and the split centre."""
+conic's and the evaluation's); `whitened+split`: the principal-axes form, whitened
+(numerics.forms), its axes from the covariance's factor in float32 (numerics.axes), and the
+split centre."""
 
 
 # ------------------------------------------------------------------ the measurement
@@ -144,7 +145,7 @@ def measure(rng, n, resolution, offset_px, kappa):
     lam1, lam2, e1 = (np.asarray(x) for x in _axes(
         g.means, g.quats, g.log_scales, view, fx, fy, cx, cy, *cam[5:]))
     d = (hi - pixel32) + lo
-    got["principal_axes+split"] = forms.log_alpha("principal_axes", d, np.zeros_like(d),
+    got["whitened+split"] = forms.log_alpha("whitened", d, np.zeros_like(d),
                                                   conic32, log_o32, (lam1, lam2, e1))
     alpha = lambda x: np.minimum(0.99, np.exp(x))
     rows = []

@@ -3,13 +3,16 @@
     python -m numerics.cost [--gaussians G] [--repeat N] [--csv FILE]
 
 One call evaluates G Gaussians at the 256 pixel centres of one 16x16 tile, the work a tile does
-per Gaussian, split as a renderer splits it: `setup` runs once per Gaussian (difference: nothing;
-hoisted forms: the 6-vector V of Eq. 8 relative to the tile origin; principal_axes: the 2x2
-eigendecomposition in float64, then λ and e₁ rounded to float32), `evaluate` once per
-(Gaussian, pixel). Reported: median ns per Gaussian for each part and per exponent for the
-evaluation, each form timed in the same interleaved rounds (benchmarks.common.median_ms). The
-evaluation arithmetic is that of `numerics.forms.log_alpha` (tests/numerics/test_forms.py checks
-they agree).
+per Gaussian, split as a renderer splits it: `setup` runs once per Gaussian, or pair
+(difference: nothing; hoisted forms: the 6-vector V of Eq. 8 relative to the tile origin;
+principal_axes and whitened: the 2x2 eigendecomposition in float64, then rounded to float32),
+`evaluate` once per (Gaussian, pixel). `FORMS` adds the split centre's forms (numerics.split).
+Reported: median ns per Gaussian for each part and per exponent for the evaluation, each form
+timed in the same interleaved rounds (`median_cpu_ms`: the process's CPU time, all threads
+summed, so that other processes on a shared machine do not count); then per Gaussian the work
+that differs upstream (`measure_per_gaussian`: the centre plain or split, the 2D shape as a
+conic or as float32 principal axes). The evaluation arithmetic is that of
+`numerics.forms.log_alpha` (tests/numerics/test_cost.py checks they agree).
 """
 
 from __future__ import annotations
@@ -17,25 +20,42 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import statistics
+import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from benchmarks.common import median_ms
 from lgs_jax import hoist
 
 from lgs_jax.projection import EPS2D
 
 from . import axes, forms, split
 
-FORMS = forms.FORMS + ("difference+split", "local_corner+split", "principal_axes+split")
+FORMS = forms.FORMS + ("whitened", "difference+split", "local_corner+split", "whitened+split")
 """`+split`: the centre as (hi, lo) (numerics.split): the offset is (hi − p) + lo per exponent
-(difference, principal_axes) or (hi − T) + lo per pair before Eq. 8 (local_corner)."""
+(difference, whitened) or (hi − T) + lo per pair before Eq. 8 (local_corner)."""
 
 TILE_ORIGIN = {"global": (1024.0, 512.0), "local_corner": (0.0, 0.0), "local_center": (8.0, 8.0)}
 """Where the timed tile's pixel (0, 0) sits in each form's coordinates (global: a tile at
 (1024, 512) of a large image; local: the tile-local frames)."""
+
+
+def median_cpu_ms(fns: dict, repeat: int) -> dict:
+    """{name: median ms of this process's CPU time} of each blocking callable over `repeat`
+    rounds, all callables in turn within each round, after one untimed call each. CPU time
+    (`time.process_time`, every thread of XLA's pool summed) rather than wall time: on a
+    machine shared with other work, wall time counts the other processes' turns too."""
+    for f in fns.values():
+        f()
+    times = {name: [] for name in fns}
+    for _ in range(repeat):
+        for name, f in fns.items():
+            t0 = time.process_time()
+            f()
+            times[name].append(time.process_time() - t0)
+    return {name: 1e3 * statistics.median(t) for name, t in times.items()}
 
 
 def tile_pixels(form):
@@ -56,6 +76,9 @@ def setup(form, mean, conic, log_o, cov64):
                            jnp.zeros_like(hi))
     if form in ("difference", "difference+split"):
         return mean, conic, log_o
+    if form.startswith("whitened"):
+        w1, w2 = forms.whitening(*forms.principal_axes(cov64))
+        return mean, w1.astype(jnp.float32), w2.astype(jnp.float32), log_o
     if form.startswith("principal_axes"):
         lam1, lam2, e1 = forms.principal_axes(cov64)
         return mean, (1 / lam1).astype(jnp.float32), (1 / lam2).astype(jnp.float32), \
@@ -74,11 +97,17 @@ def evaluate(form, state, pixels):
         d = split.offset(hi[:, None], lo[:, None], pixels[None])
         return forms.log_alpha("difference", d, jnp.zeros_like(d), conic[:, None],
                                log_o[:, None])
-    if form.startswith("principal_axes"):
-        mean, inv1, inv2, e1, log_o = state
-        inv1, inv2, e1, log_o = (s[:, None] for s in (inv1, inv2, e1, log_o))
+    if form.startswith("whitened"):
+        mean, w1, w2, log_o = state
+        w1, w2, log_o = w1[:, None], w2[:, None], log_o[:, None]
         d = (split.offset(mean[0][:, None], mean[1][:, None], pixels[None]) if form.endswith(
             "+split") else mean[:, None] - pixels[None])
+        t1 = w1[..., 0] * d[..., 0] + w1[..., 1] * d[..., 1]
+        t2 = w2[..., 0] * d[..., 0] + w2[..., 1] * d[..., 1]
+        return log_o - 0.5 * (t1 * t1 + t2 * t2)
+    if form == "principal_axes":
+        mean, inv1, inv2, e1, log_o = (s[:, None] for s in state)
+        d = mean - pixels[None]
         t1 = e1[..., 0] * d[..., 0] + e1[..., 1] * d[..., 1]
         t2 = e1[..., 0] * d[..., 1] - e1[..., 1] * d[..., 0]
         return log_o - 0.5 * (t1 * t1 * inv1 + t2 * t2 * inv2)
@@ -112,7 +141,7 @@ def scene(n, seed=0):
 
 def measure(n=16384, repeat=20):
     """Rows (form, setup_ns_per_gaussian, eval_ns_per_exponent, device): each form's setup and
-    evaluation timed in the same interleaved rounds (benchmarks.common.median_ms)."""
+    evaluation timed in the same interleaved rounds (`median_cpu_ms`)."""
     data = scene(n)
     setups = {f: jax.jit(lambda m, q, o, c, f=f: setup(f, m, q, o, c)) for f in FORMS}
     evals = {f: jax.jit(lambda s, p, f=f: evaluate(f, s, p)) for f in FORMS}
@@ -122,9 +151,9 @@ def measure(n=16384, repeat=20):
     for f in FORMS:
         fns["setup", f] = lambda f=f: jax.block_until_ready(setups[f](*data[f]))
         fns["eval", f] = lambda f=f: jax.block_until_ready(evals[f](states[f], pixels[f]))
-    ms = median_ms(fns, repeat)
+    ms = median_cpu_ms(fns, repeat)
     dev = jax.devices()[0]
-    load = os.getloadavg()[0]  # a shared machine's timings are noisy: say how shared
+    load = os.getloadavg()[0]  # how shared the machine was
     return [dict(form=f, gaussians=n, setup_ns_per_gaussian=1e6 * ms["setup", f] / n,
                  eval_ns_per_exponent=1e6 * ms["eval", f] / (n * 256),
                  device=f"{dev.platform} ({dev.device_kind})", jax=jax.__version__,
@@ -150,8 +179,9 @@ def conic_from_factor(*args):
 
 
 def axes_from_factor(*args):
-    """(λ₁, λ₂, e₁) from the same factor (numerics.axes.principal_axes)."""
-    return axes.principal_axes(axes.factor(*args))
+    """The whitened axes (w₁, w₂) from the same factor (numerics.axes.principal_axes, then
+    numerics.forms.whitening): the per-Gaussian setup of the robust form in float32."""
+    return forms.whitening(*axes.principal_axes(axes.factor(*args)))
 
 
 def measure_per_gaussian(n=16384, repeat=20):
@@ -176,7 +206,7 @@ def measure_per_gaussian(n=16384, repeat=20):
            "axes": (jax.jit(axes_from_factor, static_argnums=(8, 9)), shape_args + (4096, 2304))}
     for f, a in fns.values():
         jax.block_until_ready(f(*a))
-    ms = median_ms({k: (lambda f=f, a=a: jax.block_until_ready(f(*a)))
+    ms = median_cpu_ms({k: (lambda f=f, a=a: jax.block_until_ready(f(*a)))
                     for k, (f, a) in fns.items()}, repeat)
     dev = jax.devices()[0]
     return [dict(work=k, gaussians=n, ns_per_gaussian=1e6 * ms[k] / n,

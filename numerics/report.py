@@ -117,8 +117,9 @@ def _half_precision_section(rows):
 
 def _cost_section(data, costs):
     by_cost = {c["form"]: c for c in costs}
-    lines = [f"## Cost ({costs[0]['device']}, load average {costs[0]['load_average']:.1f} on "
-             f"{costs[0]['cores']} cores, `python -m numerics.cost`, same run)", "",
+    lines = [f"## Cost ({costs[0]['device']}, `python -m numerics.cost`, same run: CPU time of "
+             f"all threads, the machine's load average {costs[0]['load_average']:.1f} on "
+             f"{costs[0]['cores']} cores)", "",
              "| form | setup, ns per Gaussian | evaluation, ns per exponent | worst error |",
              "|---|---:|---:|---:|"]
     for form in forms.FORMS:
@@ -136,17 +137,20 @@ def _recommendation_section(data, costs):
     return ["## Recommendation", "",
             "- The renderer should evaluate in tile-local coordinates (`local_coords=True`, "
             "the default; corner or centre origin are equivalent to within 0.6 dB): it is as "
-            "accurate as the original difference form, and the hoist saves per-exponent "
-            f"arithmetic ({by_cost['local_corner']['eval_ns_per_exponent']:.3f} vs "
-            f"{by_cost['difference']['eval_ns_per_exponent']:.3f} ns here; whether that shows "
-            "in a whole render depends on the backend: numerics/results/render/tradeoff.png). "
+            "accurate as the original difference form. Its evaluation costs "
+            f"{by_cost['local_corner']['eval_ns_per_exponent']:.3f} ns per exponent here "
+            f"against the difference form's {by_cost['difference']['eval_ns_per_exponent']:.3f} "
+            "(here the hoisted dot product is an XLA matrix product; in the GPU kernels it is "
+            "six multiply-adds: whether the hoist pays depends on the backend, "
+            "numerics/results/render/tradeoff.png). "
             "Never the global expansion: its worst exponent error here is "
             f"{worst('global'):.3g} (an α off by up to {alpha_err('global'):.2g}) and "
             "it grows with the image.",
             "- principal_axes is the only form that survives κ = 1e6 needles "
             f"({worst('principal_axes'):.3g} vs {worst('local_corner'):.3g}), at "
             f"{ratio('setup_ns_per_gaussian'):.1f}x "
-            "the per-Gaussian setup (a float64 eigendecomposition) and "
+            "the per-Gaussian setup (a float64 eigendecomposition here; float32 from the "
+            "covariance's factor in the last section) and "
             f"{ratio('eval_ns_per_exponent'):.1f}x "
             "the evaluation here. The renderer does not need it: the 0.3 px² dilation caps "
             "screen-space anisotropy at λ_max/0.3, so κ = 1e6 needs σ_max ≈ 550 px, "
@@ -203,13 +207,13 @@ def _centre_section(centre_rows, costs, per_gaussian):
              "exponent of the same parameters. κ = 1, centres within 16 px of the pixel:", "",
              "| form | " + " | ".join(f"{w}" for w in res) + " |", "|---|" + "---:|" * len(res)]
     for form in ("difference", "local_corner", "local_corner+split_perspective",
-                 "difference+split", "local_corner+split", "principal_axes+split"):
+                 "difference+split", "local_corner+split", "whitened+split"):
         lines.append(f"| {form} | " + " | ".join(f"{e:.2g}" for e in worst(form, (1.0,)))
                      + " |")
     lines += ["", "Needles, κ = 1e6, centres 0 to 1024 px away:", "",
               "| form | " + " | ".join(f"{w}" for w in res) + " |",
               "|---|" + "---:|" * len(res)]
-    for form in ("difference", "local_corner+split", "principal_axes+split"):
+    for form in ("difference", "local_corner+split", "whitened+split"):
         lines.append(f"| {form} | " + " | ".join(
             f"{e:.2g}" for e in worst(form, (1e6,), (0, 16, 1024))) + " |")
     ev = lambda form: by_cost[form]["eval_ns_per_exponent"]
@@ -222,9 +226,8 @@ def _centre_section(centre_rows, costs, per_gaussian):
               "1K level of the current forms. The camera transform must be compensated too: "
               "splitting only the perspective step (`+split_perspective`) leaves most of the "
               "floor.",
-              f"- Cost here ({costs[0]['device']}, same run, load average "
-              f"{costs[0]['load_average']:.1f} on {costs[0]['cores']} cores: differences of "
-              "a few tens of percent are within its noise): per Gaussian the split centre "
+              f"- Cost here ({costs[0]['device']}, same run, CPU time of all threads): per "
+              "Gaussian the split centre "
               f"{work['split']:.1f} ns against the plain centre's {work['plain']:.1f}; per pair "
               f"(V of Eq. 8) {setup('local_corner+split'):.1f} against "
               f"{setup('local_corner'):.1f} ns, one float32 addition per axis; per exponent the "
@@ -232,10 +235,11 @@ def _centre_section(centre_rows, costs, per_gaussian):
               f"{ev('local_corner'):.3f} ns, the same code), the difference form's has one "
               f"addition per axis more ({ev('difference+split'):.3f} vs {ev('difference'):.3f} "
               "ns).",
-              "- `principal_axes+split` (axes from the covariance's factor in float32, "
-              "numerics.axes; split centre) removes the needle error as well. Per exponent "
-              f"{ev('principal_axes+split'):.3f} ns, "
-              f"{ev('principal_axes+split') / ev('difference'):.2f}x the difference form's; per "
+              "- `whitened+split` (the principal-axes form whitened, wᵢ = eᵢ/√λᵢ, its axes from "
+              "the covariance's factor in float32, numerics.axes; split centre) removes the "
+              "needle error as well. Per exponent "
+              f"{ev('whitened+split'):.3f} ns, "
+              f"{ev('whitened+split') / ev('difference'):.2f}x the difference form's; per "
               f"Gaussian its float32 setup costs {work['axes']:.1f} ns against "
               f"{work['conic']:.1f} ns for the conic it replaces."]
     return lines

@@ -170,7 +170,7 @@ def cancellation_vs_resolution(study="numerics/results/summary.csv",
                              and int(r["offset_px"]) <= 16])
     _worst_by_width(axs[2], [r for r in pipeline if float(r["anisotropy"]) == 1e6],
                     ("difference", "local_corner", "local_corner+split",
-                     "principal_axes+split"))
+                     "whitened+split"))
     axs[1].annotate("local_corner+split lies under +split_exact", (0.02, 0.02),
                     xycoords="axes fraction", fontsize=7)
     axs[0].set_ylabel("worst |error| of ln α, float32")
