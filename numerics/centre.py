@@ -76,11 +76,11 @@ def camera(resolution, rng):
 
 def sample(rng, n, resolution, offset_px, kappa):
     """Float32 world-space Gaussians (lgs_jax.Gaussians) whose 1/255 ellipse holds a pixel, the
-    camera, and the pixels (float64 centres). The screen-space design is `numerics.sampling.sample`'s
-    (centre `offset_px` from the pixel, 2D condition number `kappa`); each is lifted to a flat
-    3D Gaussian at depth 2–10 (its covariance in the camera's x–y plane scaled by (z/f)², so
-    that J·Σ·Jᵀ + 0.3·I is the designed 2D covariance) and moved into the world of a random
-    camera pose."""
+    camera, and the pixels (float64 centres). The screen-space design is that of
+    `numerics.sampling.sample` (centre `offset_px` from the pixel, 2D condition number
+    `kappa`); each is lifted to a flat 3D Gaussian at depth 2–10 (its covariance in the
+    camera's x–y plane scaled by (z/f)², so that J·Σ·Jᵀ + 0.3·I is the designed 2D covariance)
+    and moved into the world of a random camera pose."""
     import lgs_jax
     from scipy.spatial.transform import Rotation
 
