@@ -18,8 +18,13 @@ hoisted strip mask; and the hoisted exponent (Eq. 8–10, tile-local) is within
 
 Render level (40x24 in the default set, 3840x2160 in the slow set): `tiles` and `reference` equal
 `brute` in float64 (F64_ATOL); in float32 their error against the float64 `brute` image exceeds
-float32 `brute`'s own by more than F32_ATOL on at most F32_FLIP_SHARE of the pixels (threshold
-flips, each at most one Gaussian); images are finite; Gaussians that binning gives no tile
+float32 `brute`'s own by more than F32_ATOL on at most F32_FLIP_SHARE of the pixels away from
+alpha thresholds (`threshold_band`: where a Gaussian's exponent is within both forms' rounding
+of ln(1/255); there, and for stop-test flips, a pixel moves by at most one Gaussian). A
+Gaussian whose opacity is within ~1e-6 of 1/255 sits at the threshold over its whole footprint:
+the hoisted form's test compares ln α with ln(1/255), whose ulp (~5e-7) is coarser than the
+difference form's α >= 1/255, so such a Gaussian flips over large areas (hypothesis found one
+over 6% of the image); images are finite; Gaussians that binning gives no tile
 change no bit of the brute-force image; permuting Gaussians of distinct depths changes no bit.
 """
 
@@ -52,6 +57,7 @@ WIDTHS = (1024, 4096, 8192, 16384)  # binning level: 16:9 images up to 16K
 PROBES = 8  # probe directions per Gaussian, each probed at a 3x3 pixel neighbourhood
 CAP = 0.99  # the 3dgs convention's alpha cap
 ALPHA_MIN = 1 / 255
+LN_MIN = np.log(ALPHA_MIN)
 COLOURS = np.random.default_rng(0).normal(0, 1.5, (N, 1, 3))  # SH band 0 per Gaussian
 FEW = max(4, settings.default.max_examples // 4)  # render-level examples (profile-scaled)
 
@@ -259,6 +265,30 @@ def _render(g, cam, backend, capacity=CAPACITY):
                           backend=backend, config=lgs_jax.RasterConfig(), capacity=capacity)
 
 
+def threshold_band(p, width, height):
+    """(H, W) bool: pixels where some valid Gaussian's alpha test may round either way between
+    the difference form (`brute`) and the hoisted form (`tiles`' default): its exponent,
+    evaluated in float64 on the float32 inputs, lies within both forms' evaluation bounds
+    (difference: 8u of its terms; hoisted: lgs_jax.hoist.error_bound over the tile) plus the
+    threshold's own rounding (ln(1/255) has an ulp of ~5e-7) of ln(1/255)."""
+    u = np.finfo(np.float32).eps / 2
+    f64 = lambda x: np.asarray(x, np.float64)
+    mean, conic, opacity = f64(p.mean2d), f64(p.conic), f64(p.opacity)
+    px, py = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    ox, oy = np.floor(px / TILE) * TILE, np.floor(py / TILE) * TILE
+    near = np.zeros((height, width), bool)
+    for k in np.flatnonzero(np.asarray(p.valid)):
+        a, b, c = conic[k]
+        dx, dy = mean[k, 0] - px, mean[k, 1] - py
+        log_o = np.log(opacity[k])
+        half, cross = 0.5 * (a * dx * dx + c * dy * dy), b * dx * dy
+        hoisted = np.asarray(hoist.error_bound_terms(a, b, c, mean[k, 0] - ox, mean[k, 1] - oy,
+                                                     log_o, px - ox, py - oy, 16 * u))
+        band = hoisted + 8 * u * (half + np.abs(cross) + abs(log_o)) + 64 * u * (1 - LN_MIN)
+        near |= np.abs(log_o - half - cross - LN_MIN) <= band
+    return near
+
+
 def check_culled_equals_brute(values, width, height, capacity):
     """The render-level properties against `brute` (module docstring)."""
     g64 = gaussians(values, width, height, np.float64)
@@ -273,15 +303,18 @@ def check_culled_equals_brute(values, width, height, capacity):
     brute32 = _render(g32, cam32, "brute", capacity)
     want = np.asarray(truth.image)
     base = np.abs(np.asarray(brute32.image, np.float64) - want).max(-1)
+    near = threshold_band(project(g32, cam32), width, height)
+    event(f"{'some' if near.any() else 'no'} pixels at an alpha threshold")
     for backend in ("tiles", "reference"):
         out = _render(g32, cam32, backend, capacity)
         image = np.asarray(out.image, np.float64)
         assert np.all(np.isfinite(image)) and np.all(np.isfinite(np.asarray(out.alpha)))
         excess = np.abs(image - want).max(-1) - base
-        share = np.mean(excess > F32_ATOL)
+        share = np.sum(excess[~near] > F32_ATOL) / excess.size
         assert share <= F32_FLIP_SHARE, (
-            f"{backend} float32: {share:.2%} of pixels further from float64 brute force than "
-            f"float32 brute force by > {F32_ATOL} (max {excess.max():.3g})")
+            f"{backend} float32: {share:.2%} of the pixels away from alpha thresholds further "
+            f"from float64 brute force than float32 brute force by > {F32_ATOL} "
+            f"(max {excess[~near].max(initial=0):.3g})")
         assert excess.max() <= 2.0, f"{backend} float32: a pixel moved by {excess.max():.3g}"
 
 
@@ -323,7 +356,7 @@ def test_permuting_gaussians_of_distinct_depths_changes_no_bit(values, perm):
 
 
 @pytest.mark.slow  # 3840x2160: its own compiles of three backends in two dtypes
-@settings(max_examples=4)
+@settings(max_examples=3)
 @given(values=scene_values(3840, 2160))
 def test_culled_renders_equal_brute_force_4k(values):
     check_culled_equals_brute(values, 3840, 2160, N * 240 * 135)
