@@ -48,6 +48,7 @@ from .split import centre_split, log_alpha_split
 
 OFFSETS = (0, 16, 1024)
 ANISOTROPY = (1.0, 1e2, 1e4, 1e6)
+QUICK_SAMPLES, QUICK_RESOLUTIONS = 300, (1024, 16384)  # --quick (numerics.study's too)
 FORMS = ("difference", "local_corner", "difference+split", "local_corner+split",
          "local_corner+split_perspective", "local_corner+split_exact", "whitened+split")
 """`+split`: μ from `split.centre_split`; `+split_perspective`: the camera transform in plain
@@ -186,8 +187,8 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)  # the float64 reference
     os.makedirs(args.out, exist_ok=True)
     rng = np.random.default_rng(args.seed)
-    resolutions = (1024, 16384) if args.quick else RESOLUTIONS
-    rows = sweep(rng, 300 if args.quick else 20000, resolutions)
+    resolutions = QUICK_RESOLUTIONS if args.quick else RESOLUTIONS
+    rows = sweep(rng, QUICK_SAMPLES if args.quick else 20000, resolutions)
     path = write(rows, args.out)
     print(f"worst |error of ln α|, κ = 1, centres within 16 px (rows of {path}):")
     print(f"{'form':>32s} " + " ".join(f"{r:>8d}" for r in resolutions))

@@ -199,7 +199,8 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # principal_axes' setup is float64
-    centre_rows = centre.sweep(rng, n, (1024, 16384) if args.quick else RESOLUTIONS)
+    centre_rows = (centre.sweep(rng, centre.QUICK_SAMPLES, centre.QUICK_RESOLUTIONS)
+                   if args.quick else centre.sweep(rng, n, RESOLUTIONS))
     centre.write(centre_rows, args.out)
     costs = cost.measure(4096 if args.quick else 16384, 5 if args.quick else 20)
     per_gaussian = cost.measure_per_gaussian(4096 if args.quick else 16384,
