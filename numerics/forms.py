@@ -10,6 +10,9 @@ d = μ − p (Gaussian centre minus pixel centre), Q = [[a, b], [b, c]] the coni
                  (λ, e) of the 2D covariance computed once per Gaussian in float64 (the cost: one
                  2x2 eigendecomposition per Gaussian in higher precision) and stored in the
                  evaluation dtype
+  whitened       the principal-axes form with the axes scaled per Gaussian, wᵢ = eᵢ/√λᵢ:
+                 ln o − ½((w₁·d)² + (w₂·d)²), one product fewer per axis and exponent (not in
+                 FORMS, the study's sweep: numerics.centre and numerics.cost use it)
 
 Every form takes arrays in one dtype and returns ln α in it; `evaluation_bound` bounds the
 rounding of that evaluation (inputs taken as exact), so that errors from rounding the inputs
@@ -74,6 +77,15 @@ def principal_axes(cov):
     return lam1, lam2, xp.stack([xp.cos(theta), xp.sin(theta)], -1)
 
 
+def whitening(lam1, lam2, e1):
+    """The whitened axes (w₁, w₂), each (..., 2), w₁ = e₁/√λ₁, w₂ = e₂/√λ₂ with e₂ = e₁ turned
+    by 90°, in the arrays' dtype: dᵀΣ⁻¹d = (w₁·d)² + (w₂·d)²."""
+    xp = _xp(e1)
+    s1, s2 = 1 / xp.sqrt(lam1), 1 / xp.sqrt(lam2)
+    return (xp.stack([e1[..., 0] * s1, e1[..., 1] * s1], -1),
+            xp.stack([-e1[..., 1] * s2, e1[..., 0] * s2], -1))
+
+
 def log_alpha(form: str, mean, pixel, conic, log_o, axes=None):
     """ln α of Gaussians (mean (..., 2), conic (..., 3), log_o (...)) at pixels (..., 2).
 
@@ -91,6 +103,12 @@ def log_alpha(form: str, mean, pixel, conic, log_o, axes=None):
         t1 = e1[..., 0] * dx + e1[..., 1] * dy
         t2 = e1[..., 0] * dy - e1[..., 1] * dx
         return log_o - 0.5 * (t1 * t1 / lam1 + t2 * t2 / lam2)
+    if form == "whitened":
+        w1, w2 = whitening(*axes)
+        dx, dy = mean[..., 0] - pixel[..., 0], mean[..., 1] - pixel[..., 1]
+        t1 = w1[..., 0] * dx + w1[..., 1] * dy
+        t2 = w2[..., 0] * dx + w2[..., 1] * dy
+        return log_o - 0.5 * (t1 * t1 + t2 * t2)
     if form not in FORMS:
         raise ValueError(f"form: expected one of {FORMS}, got {form!r}")
     xp = _xp(pixel)
@@ -110,6 +128,8 @@ def evaluation_bound(form: str, mean, pixel, conic, log_o, axes=None, dtype=np.f
     principal_axes: t = e·d errs by |δt| <= 5u·|d| (d's rounding, two products, a sum), so
     t²/λ errs by <= (2|t|·|δt| + δt²)/λ plus 4u of its size; inside the ellipse |t₂| <= √(τλ₂),
     which is why this form gains √κ over the others on needles.
+    whitened: likewise with t = w·d, |δt| <= 8u·|d|/√λ (w's own rounding: a square root, a
+    division, a product).
     """
     u = np.finfo(dtype).eps / 2
     f64 = lambda x: np.asarray(x, np.float64)
@@ -125,6 +145,16 @@ def evaluation_bound(form: str, mean, pixel, conic, log_o, axes=None, dtype=np.f
         dt = 5 * u * np.hypot(dx, dy)
         term = lambda t, lam: (2 * np.abs(t) * dt + dt * dt) / lam + 4 * u * t * t / lam
         return 0.5 * (term(t1, lam1) + term(t2, lam2)) + 4 * u * np.abs(log_o)
+    if form == "whitened":
+        lam1, lam2, e1 = f64(axes[0]), f64(axes[1]), f64(axes[2])
+        dist = np.hypot(dx, dy)
+        total = 0.0
+        for t, lam in ((e1[..., 0] * dx + e1[..., 1] * dy, lam1),
+                       (e1[..., 0] * dy - e1[..., 1] * dx, lam2)):
+            t = t / np.sqrt(lam)
+            dt = 8 * u * dist / np.sqrt(lam)  # w's rounding (√, ÷, ×), d's, two products, a sum
+            total = total + 2 * np.abs(t) * dt + dt * dt + 3 * u * t * t
+        return 0.5 * total + 4 * u * np.abs(log_o)
     origin = tile_origin(form, pixel)
     local = np.abs(pixel - origin)
     return np.asarray(hoist.error_bound(mean, conic, log_o, origin, local[..., 0], local[..., 1],

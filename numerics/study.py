@@ -36,34 +36,10 @@ import numpy as np
 
 from lgs_jax import hoist
 
-from . import cost, forms
+from . import centre, cost, forms
+from .report import report
+from .sampling import ANISOTROPY, OFFSETS, OPACITIES, RESOLUTIONS, sample
 
-RESOLUTIONS = (1024, 2048, 4096, 8192, 16384)
-OFFSETS = (0, 4, 16, 64, 256, 1024, 4096)
-ANISOTROPY = (1.0, 1e2, 1e4, 1e6)
-OPACITIES = (1.5 / 255, 0.05, 0.5, 1.0)  # the opacity sweep (4096 px wide; empty column elsewhere)
-LN255 = np.log(255.0)
-
-
-def sample(rng, n, resolution, offset, kappa, opacity=None):
-    """Float64 Gaussians (mean, pixel, cov, log_o) with the pixel inside the 1/255 ellipse
-    (opacity uniform in [2/255, 1] unless given)."""
-    height = resolution * 9 // 16
-    pixel = np.floor(rng.uniform([0, 0], [resolution, height], (n, 2))) + 0.5
-    phi = rng.uniform(0, 2 * np.pi, n)
-    d = (offset + rng.uniform(0, 1, n))[:, None] * np.stack([np.cos(phi), np.sin(phi)], -1)
-    theta = rng.uniform(0, np.pi, n)
-    c, s = np.cos(theta), np.sin(theta)
-    lam = np.stack([np.full(n, kappa), np.ones(n)], -1)  # shape, scaled below
-    log_o = np.log(rng.uniform(2 / 255, 1.0, n) if opacity is None else np.full(n, opacity))
-    tau = 2 * (LN255 + log_o)
-    level = tau * rng.uniform(0.01, 1.0, n)  # target q at the pixel
-    # q(d) for eigenvalues lam·scale: scale = q(d; lam) / level.
-    t1, t2 = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
-    scale = (t1 * t1 / lam[:, 0] + t2 * t2 / lam[:, 1]) / level
-    lam = lam * scale[:, None]
-    lam = np.maximum(lam, 0.3 + 1e-3 * rng.uniform(0, 1, (n, 2)))  # the dilation floor
-    return pixel + d, pixel, forms.covariance(lam[:, 0], lam[:, 1], theta), log_o
 
 
 def measure(rng, n, resolution, offset, kappa, opacity=None):
@@ -154,15 +130,15 @@ def paper_rows(rng, n):
 
 
 def plot(rows, out):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """PNG plots of the worst error against resolution, offset and anisotropy (figures made
+    without pyplot, so that no backend is switched: notebooks keep theirs)."""
+    from matplotlib.figure import Figure
 
     data = [r for r in rows if r["form"] in forms.FORMS]
     for key, xlabel in (("resolution", "image width (px)"), ("offset_px", "centre offset (px)"),
                         ("anisotropy", "condition number κ")):
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig = Figure(figsize=(6, 4))
+        ax = fig.subplots()
         for form in forms.FORMS:
             xs = sorted({r[key] for r in data})
             ys = [max(r["max_abs_total_err"] for r in data if r["form"] == form and r[key] == x)
@@ -174,15 +150,15 @@ def plot(rows, out):
         ax.legend(fontsize=8)
         fig.tight_layout()
         fig.savefig(os.path.join(out, f"power_err_vs_{key}.png"), dpi=120)
-        plt.close(fig)
 
 
 def plot_cost(rows, costs, out):
     """Evaluation time per exponent against the worst total exponent error, one point per form."""
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for c in costs:
+    fig = Figure(figsize=(6, 4))
+    ax = fig.subplots()
+    for c in (c for c in costs if c["form"] in forms.FORMS):
         worst = max(r["max_abs_total_err"] for r in rows if r["form"] == c["form"])
         ax.loglog(c["eval_ns_per_exponent"], worst, "o", label=c["form"])
         ax.annotate(c["form"], (c["eval_ns_per_exponent"], worst), fontsize=7)
@@ -191,171 +167,6 @@ def plot_cost(rows, costs, out):
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "cost_vs_error.png"), dpi=120)
-    plt.close(fig)
-
-
-def _worst(data, form, **kw):
-    """Worst total exponent error of a form over the rows matching every kw."""
-    return max(r["max_abs_total_err"] for r in data
-               if r["form"] == form and all(r[k] == v for k, v in kw.items()))
-
-
-def _paper_section(rows):
-    eq = {r["form"]: r for r in rows if r["form"].startswith("paper")}
-    below = all(eq[k]["max_abs_power_err"] <= b for k, b in (("paper_eq11_global", 3.81),
-                                                            ("paper_eq12_local", 2.44e-4)))
-    return ["## The paper's bounds (Eq. 11–12)", "",
-            f"- Global quadratic, x, μ in [3990, 4010]: measured "
-            f"{eq['paper_eq11_global']['max_abs_power_err']:.3g}; paper's Eq. 11: 3.81; rigorous "
-            f"bound 2u·S: {eq['paper_eq11_global']['bound']:.3g}.",
-            f"- Local quadratic, x, μ in [−16, 32]: measured "
-            f"{eq['paper_eq12_local']['max_abs_power_err']:.3g}; paper's Eq. 12: 2.44e-4; "
-            f"rigorous bound: {eq['paper_eq12_local']['bound']:.3g}.",
-            "- Eq. 11–12 count one rounding per term; float32 rounds each product and each sum, "
-            "so a rigorous bound is twice theirs. In this run the measured errors "
-            + ("stay below the paper's figures" if below else "exceed a paper figure") +
-            " and below the rigorous bounds; the global/local ratio (~1e4) is the paper's point "
-            "and holds."]
-
-
-def _forms_section(data):
-    near = lambda form: max(r["max_abs_total_err"] for r in data
-                            if r["form"] == form and r["offset_px"] <= 16)
-    far = lambda form: max(r["max_abs_total_err"] for r in data
-                           if r["form"] == form and r["offset_px"] >= 1024)
-    flips = lambda form: max(r["flip_share"] for r in data if r["form"] == form)
-    lines = ["## Forms, centres within 16 px of the pixel vs 1024 px or more away", "",
-             "| form | worst error, offset <= 16 px | worst error, offset >= 1024 px | worst "
-             "1/255-flip share |", "|---|---:|---:|---:|"]
-    for form in forms.FORMS:
-        lines.append(f"| {form} | {near(form):.3g} | {far(form):.3g} | {flips(form):.2%} |")
-    lines += ["", "## By anisotropy (all offsets and resolutions)", "",
-              "| form | " + " | ".join(f"κ={k:g}" for k in ANISOTROPY) + " |",
-              "|---|" + "---:|" * len(ANISOTROPY)]
-    for form in forms.FORMS:
-        lines.append(f"| {form} | " + " | ".join(
-            f"{_worst(data, form, anisotropy=k):.3g}" for k in ANISOTROPY) + " |")
-    return lines
-
-
-def _reading_section(data):
-    floor = {res: _worst(data, "difference", anisotropy=1.0, resolution=res)
-             for res in (RESOLUTIONS[0], RESOLUTIONS[-1])}
-    return ["## Reading", "",
-            f"- Isotropic Gaussians (κ = 1) share one floor in every form, growing with the "
-            f"image: {floor[RESOLUTIONS[0]]:.2g} at {RESOLUTIONS[0]} px wide, "
-            f"{floor[RESOLUTIONS[-1]]:.2g} at {RESOLUTIONS[-1]} px. It is the float32 rounding "
-            "of the centre coordinate itself (ulp ≈ 1e-3 px at 16K), which no evaluation form "
-            "removes: only carrying the centre relative to its tile from higher precision would.",
-            "- The global expansion's error grows with resolution, as Eq. 11 says; the paper's "
-            "claim that tile-local coordinates remove it holds against the global expansion.",
-            "- The original 3DGS difference form never expands globally; compare its column with "
-            "the local forms before crediting the hoist with accuracy.",
-            "- For needles (large κ) far from the pixel every screen-space form is limited by "
-            "the float32 conic itself (max_abs_total_err vs max_abs_power_err in summary.csv); "
-            "the principal-axes form, with axes computed once per Gaussian in float64, is the "
-            "robust alternative."]
-
-
-def _opacity_section(data):
-    swept = [r for r in data if r["opacity"] != ""]
-    lines = ["## By opacity (4096 px wide, offsets 0 and 256 px, κ = 1 and 1e4)", "",
-             "| form | " + " | ".join(f"o={o:.3g}" for o in OPACITIES) + " | 1/255 flips, "
-             f"o={OPACITIES[0]:.3g} |", "|---|" + "---:|" * (len(OPACITIES) + 1)]
-    for form in forms.FORMS:
-        sel = lambda o: [r for r in swept if r["form"] == form and r["opacity"] == o]
-        lines.append(f"| {form} | " + " | ".join(
-            f"{max(r['max_abs_total_err'] for r in sel(o)):.3g}" for o in OPACITIES)
-            + f" | {max(r['flip_share'] for r in sel(OPACITIES[0])):.2%} |")
-    flip0 = lambda form: max(r["flip_share"] for r in swept
-                             if r["form"] == form and r["opacity"] == OPACITIES[0])
-    return lines + [
-        "", "At o just above 1/255 the alpha ellipse is small (τ = 2 ln(255·o) ≈ 0.8) and "
-        "every sample sits near the 1/255 threshold; even there the local forms flip "
-        f"{flip0('local_corner'):.2%} of the decisions and the global expansion "
-        f"{flip0('global'):.2%}. The local forms' error grows with opacity because τ, and "
-        "with it the reach |d| of the ellipse and the size of the terms, grows."]
-
-
-def _half_precision_section(rows):
-    low = [r for r in rows if "@" in r["form"]]
-    lines = ["## Half precision (κ <= 100, centres within 64 px; total error)", "",
-             "| form | width | worst ln α error | worst α error | 1/255 flips |",
-             "|---|---:|---:|---:|---:|"]
-    for form in sorted({r["form"] for r in low}):
-        for res in sorted({r["resolution"] for r in low}):
-            sel = [r for r in low if r["form"] == form and r["resolution"] == res]
-            lines.append(f"| {form} | {res} | {max(r['max_abs_total_err'] for r in sel):.3g} | "
-                         f"{max(r['max_alpha_err'] for r in sel):.3g} | "
-                         f"{max(r['flip_share'] for r in sel):.2%} |")
-    w16 = lambda form: max(r["max_abs_total_err"] for r in low if r["form"] == form)
-    a16 = lambda form: max(r["max_alpha_err"] for r in low if r["form"] == form)
-    return lines + [
-        "", "Here the hoist hurts: with 11 significant bits (float16) the expansion's terms, "
-        "which reach hundreds inside a tile before cancelling, lose what the difference "
-        f"form keeps (worst ln α error {w16('local_corner@float16'):.2g} vs "
-        f"{w16('difference@float16'):.2g}; α {a16('local_corner@float16'):.2g} vs "
-        f"{a16('difference@float16'):.2g}). bfloat16 (8 bits) is unusable in either form. "
-        "A half-precision kernel should evaluate the difference form from float32 "
-        "offsets, never the hoisted one; float32 is where the hoist is free."]
-
-
-def _cost_section(data, costs):
-    by_cost = {c["form"]: c for c in costs}
-    lines = [f"## Cost ({costs[0]['device']}, `python -m numerics.cost`, same run)", "",
-             "| form | setup, ns per Gaussian | evaluation, ns per exponent | worst error |",
-             "|---|---:|---:|---:|"]
-    for form in forms.FORMS:
-        c = by_cost[form]
-        lines.append(f"| {form} | {c['setup_ns_per_gaussian']:.1f} | "
-                     f"{c['eval_ns_per_exponent']:.3f} | {_worst(data, form):.3g} |")
-    return lines
-
-
-def _recommendation_section(data, costs):
-    by_cost = {c["form"]: c for c in costs}
-    ratio = lambda key: by_cost["principal_axes"][key] / max(by_cost["local_corner"][key], 1e-12)
-    alpha_err = lambda form: max(r["max_alpha_err"] for r in data if r["form"] == form)
-    worst = lambda form: _worst(data, form)
-    return ["## Recommendation", "",
-            "- The renderer should evaluate in tile-local coordinates (`local_coords=True`, "
-            "the default; corner or centre origin are equivalent to within 0.6 dB): it is as "
-            "accurate as the original difference form, and the hoist saves per-exponent "
-            f"arithmetic ({by_cost['local_corner']['eval_ns_per_exponent']:.3f} vs "
-            f"{by_cost['difference']['eval_ns_per_exponent']:.3f} ns here; whether that shows "
-            "in a whole render depends on the backend: numerics/results/render/tradeoff.png). "
-            "Never the global expansion: its worst exponent error here is "
-            f"{worst('global'):.3g} (an α off by up to {alpha_err('global'):.2g}) and "
-            "it grows with the image.",
-            "- principal_axes is the only form that survives κ = 1e6 needles "
-            f"({worst('principal_axes'):.3g} vs {worst('local_corner'):.3g}), at "
-            f"{ratio('setup_ns_per_gaussian'):.1f}x "
-            "the per-Gaussian setup (a float64 eigendecomposition) and "
-            f"{ratio('eval_ns_per_exponent'):.1f}x "
-            "the evaluation here. The renderer does not need it: the 0.3 px² dilation caps "
-            "screen-space anisotropy at λ_max/0.3, so κ = 1e6 needs σ_max ≈ 550 px, "
-            "and at rendering level (numerics/results/render/README.md, H100) the local forms "
-            "are within 1/255 of float64 on all but 8e-7 of the pixels up to 8K. It is the "
-            "form to use where the conic itself is ill-conditioned (no dilation, or "
-            "half-precision storage).",
-            "- The floor that remains at 8K–16K is the float32 centre coordinate; carrying "
-            "means relative to their tile (projection in tile-local coordinates) would remove "
-            "it and is the next step if 16K rendering matters."]
-
-
-def report(rows, costs, out):
-    """DIR/REPORT.md: every number computed from this run's rows and costs."""
-    data = [r for r in rows if r["form"] in forms.FORMS]
-    sections = [_paper_section(rows), _forms_section(data), _reading_section(data),
-                _opacity_section(data), _half_precision_section(rows),
-                _cost_section(data, costs), _recommendation_section(data, costs)]
-    lines = ["# Float32 exponent study (exponent level)", "",
-             "Generated by `python -m numerics.study`; every number below is computed by that run "
-             "(summary.csv). Errors are worst absolute errors of ln α in float32."]
-    for section in sections:
-        lines += [""] + section
-    with open(os.path.join(out, "REPORT.md"), "w") as f:
-        f.write("\n".join(lines) + "\n")
 
 
 def main(argv=None) -> int:
@@ -388,14 +199,20 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # principal_axes' setup is float64
+    centre_rows = (centre.sweep(rng, centre.QUICK_SAMPLES, centre.QUICK_RESOLUTIONS)
+                   if args.quick else centre.sweep(rng, n, RESOLUTIONS))
+    centre.write(centre_rows, args.out)
     costs = cost.measure(4096 if args.quick else 16384, 5 if args.quick else 20)
-    with open(os.path.join(args.out, "cost.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(costs[0]))
-        w.writeheader()
-        w.writerows(costs)
+    per_gaussian = cost.measure_per_gaussian(4096 if args.quick else 16384,
+                                             5 if args.quick else 20)
+    for name, table in (("cost.csv", costs), ("cost_per_gaussian.csv", per_gaussian)):
+        with open(os.path.join(args.out, name), "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(table[0]))
+            w.writeheader()
+            w.writerows(table)
     plot(rows, args.out)
     plot_cost(rows, costs, args.out)
-    report(rows, costs, args.out)
+    report(rows, costs, args.out, centre_rows, per_gaussian)
     print(f"wrote {len(rows)} rows, plots and REPORT.md to {args.out}")
     return 0
 

@@ -1,16 +1,33 @@
-"""Figures from the recorded results (no GPU needed): run from the repository root.
+"""Figures from the recorded results (CPU only, no GPU needed), from the repository root:
 
-    python paper_figs/make_figs.py
+    python -m paper_figs            (or: python paper_figs/make_figs.py)
 
-- pallas_vs_gsplat.png: rasterization-kernel and end-to-end times per scene and camera (H100,
-  bench_results/h100-2026-11/triton/gpu_bench.csv): the Table III analog (Local-GS vs vanilla
-  kernel) with gsplat beside them.
-- precision_tradeoff.png: run time against PSNR vs float64 per exponent form (H100 Pallas kernel,
-  numerics/results/render/render_summary_pallas.csv): the Table V analog.
+Each figure reads recorded CSV files (`FIGURES`: the files and the command that writes them);
+a figure whose file is missing is skipped with a message naming the file and that command.
+
+- speedup_vs_scene_size.png (Table III analog): the Local-GS Mosaic GPU forward against our
+  vanilla 3DGS kernel (rasterization stage) and against gsplat 1.5.3 (rasterization and end
+  to end), against the number of Gaussians, H200 (`benchmarks.scale --full`).
+- ablation.png (Table IV analog, XLA `tiles` backend): rasterization time (row − prep) of the
+  cumulative ablation baseline → +hoisting → +warp culling → +coherent blending, and local
+  coordinates off, with each row's max error against float64; the CPU and H100 runs of
+  `benchmarks.ablation`.
+- ablation_mosaic.png: the same for the Mosaic GPU kernels (`MOSAIC_ABLATION`).
+- precision_tradeoff.png (Table V analog): forward time against PSNR vs float64 per exponent
+  form, H100 Pallas kernel (`numerics.render_study --backend pallas`).
+- cancellation_vs_resolution.png: the worst float32 error of ln α against image width, per
+  form (`numerics.study`: the paper's Eq. 11 cancellation); from float32 world parameters
+  (`numerics.centre`), the centre floor with and without the split centre, and needles with
+  the principal axes computed in float32 from the covariance's factor.
+- culling_per_tile.png (the paper's Fig. 1 idea): per tile of a real scene, the share of
+  strip–Gaussian pairs that warp culling skips (`paper_figs.culling`).
 """
+
+from __future__ import annotations
 
 import csv
 import os
+import sys
 
 import matplotlib
 
@@ -20,42 +37,103 @@ import numpy as np  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
+DPI = 110
+H200 = "bench_results/h200-2026-12"
+FULL_FWD = f"{H200}/session-dec04d/3_full_fwd/full.csv"
+MOSAIC_ABLATION = f"{H200}/ablation_mosaic.csv"
+ABLATION_STEPS = ("baseline", "+hoisting", "+warp_culling", "+coherent_blending",
+                  "global_coords")
 
 
-def pallas_vs_gsplat():
-    path = os.path.join(ROOT, "bench_results", "h100-2026-11", "triton", "gpu_bench.csv")
-    rows = list(csv.DictReader(open(path)))
-    cases = list(dict.fromkeys((r["scene"], r["width"], r["height"]) for r in rows))
-    kinds = ["pallas", "pallas:fast", "pallas_vanilla", "gsplat"]
-    fig, axs = plt.subplots(1, 2, figsize=(13, 4))
-    x = np.arange(len(cases))
-    for ax, key, title in zip(axs, ("raster_ms", "e2e_ms"),
-                              ("rasterization stage", "end-to-end forward")):
-        for i, kind in enumerate(kinds):
-            vals = [float(next(r[key] for r in rows if (r["scene"], r["width"], r["height"])
-                               == c and r["row"] == kind)) for c in cases]
-            ax.bar(x + (i - 1.5) * 0.2, vals, 0.2, label=kind)
-        short = lambda s: s.replace("synthetic1000000", "synth 1M").replace("synthetic3000000",
-                                                                          "synth 3M")
-        ax.set_xticks(x, [f"{short(s)}\n{w}x{h}" for s, w, h in cases], fontsize=7)
-        ax.set_ylabel("ms (H100, median of 30)")
-        ax.set_title(title)
-        ax.grid(axis="y", alpha=0.3)
-    axs[0].legend(fontsize=8)
+def rows(path):
+    with open(os.path.join(ROOT, path)) as f:
+        return list(csv.DictReader(f))
+
+
+def save(fig, name):
     fig.tight_layout()
-    fig.savefig(os.path.join(HERE, "pallas_vs_gsplat.png"), dpi=110)
+    fig.savefig(os.path.join(HERE, name), dpi=DPI)
     plt.close(fig)
 
 
-def precision_tradeoff():
-    path = os.path.join(ROOT, "numerics", "results", "render", "render_summary_pallas.csv")
-    rows = list(csv.DictReader(open(path)))
+def speedup_vs_scene_size(path=FULL_FWD):
+    """Speed-ups of the Local-GS row over `vanilla` and `gsplat` against Gaussians."""
+    data = rows(path)
+    by = {(r["scene"], r["row"]): r for r in data}
+    scenes = sorted({r["scene"] for r in data}, key=lambda s: int(by[s, "localgs"]["gaussians"]))
+    fig, axs = plt.subplots(1, 2, figsize=(12, 4.2), sharex=True)
+    series = (("vanilla", "raster_ms", axs[0], "our vanilla 3DGS kernel"),
+              ("gsplat", "raster_ms", axs[0], "gsplat 1.5.3 rasterize_to_pixels"),
+              ("gsplat", "e2e_ms", axs[1], "gsplat 1.5.3, end to end"))
+    for other, key, ax, label in series:
+        for res, marker in (("720", "o"), ("800", "s"), ("1080", "D"), ("2160", "^")):
+            sel = [s for s in scenes if by[s, "localgs"]["height"] == res and (s, other) in by]
+            if not sel:
+                continue
+            x = [int(by[s, "localgs"]["gaussians"]) for s in sel]
+            y = [float(by[s, other][key]) / float(by[s, "localgs"][key]) for s in sel]
+            ax.scatter(x, y, marker=marker, label=f"vs {label}, height {res}",
+                       color="C0" if other == "vanilla" else ("C1" if key == "raster_ms"
+                                                              else "C2"))
+            for s, xi, yi in zip(sel, x, y):
+                ax.annotate(s, (xi, yi), fontsize=6, alpha=0.7)
+    for ax, title in zip(axs, ("rasterization stage", "end-to-end forward")):
+        ax.axhline(1, color="k", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_xlabel("Gaussians")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6)
+    axs[0].set_ylabel("speed-up of Local-GS (other / Local-GS time)")
+    fig.suptitle(f"Local-GS forward on the H200 ({path})", fontsize=8)
+    save(fig, "speedup_vs_scene_size.png")
+
+
+def _ablation_panel(ax, data, scene, title):
+    prep = float(next(r["median_ms"] for r in data if r["scene"] == scene and
+                      r["row"] == "prep"))
+    sel = {r["row"].split(":", 1)[1]: r for r in data if r["scene"] == scene and ":" in r["row"]
+           and r["row"].split(":", 1)[1] in ABLATION_STEPS}
+    steps = [s for s in ABLATION_STEPS if s in sel]
+    times = [float(sel[s].get("raster_ms") or 0) or float(sel[s]["median_ms"]) - prep
+             for s in steps]
+    bars = ax.bar(range(len(steps)), times, color=["C0"] * 4 + ["C3"])
+    for bar, s in zip(bars, steps):
+        err = sel[s].get("max_abs_err")
+        if err:
+            ax.annotate(f"{float(err):.1e}", (bar.get_x() + bar.get_width() / 2,
+                                              bar.get_height()), ha="center", fontsize=6)
+    ax.set_xticks(range(len(steps)), [s.replace("_", " ") for s in steps], rotation=30,
+                  fontsize=7, ha="right")
+    ax.set_title(title, fontsize=8)
+    ax.grid(axis="y", alpha=0.3)
+
+
+def ablation(sources=(("CPU, 2 cores", "bench_results/cpu-2026-11/bench.csv"),
+                      ("H100, XLA", "bench_results/h100-2026-11/xla/bench.csv")),
+             name="ablation.png"):
+    """Table IV analog, one panel per (source, scene): raster time per cumulative step, with
+    the max error against float64 over each bar."""
+    panels = [(label, data, scene) for label, path in sources for data in [rows(path)]
+              for scene in dict.fromkeys(r["scene"] for r in data)]
+    fig, axs = plt.subplots(1, len(panels), figsize=(2.6 * len(panels), 3.6), squeeze=False)
+    for ax, (label, data, scene) in zip(axs[0], panels):
+        w = next(r["width"] for r in data if r["scene"] == scene)
+        h = next(r["height"] for r in data if r["scene"] == scene)
+        _ablation_panel(ax, data, scene, f"{label}\n{scene} {w}x{h}")
+    axs[0][0].set_ylabel("rasterization ms (row − prep)")
+    fig.suptitle("cumulative ablation (bar labels: max |error| vs float64)", fontsize=8)
+    save(fig, name)
+
+
+def precision_tradeoff(path="numerics/results/render/render_summary_pallas.csv"):
+    data = rows(path)
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for form, marker in zip(["difference", "global", "local_corner", "local_center"], "osD^"):
-        sel = [r for r in rows if r["form"] == form]
+        sel = [r for r in data if r["form"] == form]
         ax.scatter([float(r["time_ms"]) for r in sel], [float(r["psnr_db"]) for r in sel],
                    marker=marker, label=form)
-    for r in rows:
+    for r in data:
         if r["form"] == "global":
             ax.annotate(f"{r['scene']} {r['resolution']}", (float(r["time_ms"]),
                                                             float(r["psnr_db"])), fontsize=6)
@@ -64,12 +142,106 @@ def precision_tradeoff():
     ax.set_ylabel("PSNR vs float64 render (dB)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(os.path.join(HERE, "precision_tradeoff.png"), dpi=110)
+    save(fig, "precision_tradeoff.png")
+
+
+def _worst_by_width(ax, data, forms=None):
+    """One line per form: the worst ln α error of `data`'s rows at each image width."""
+    for form in forms or dict.fromkeys(r["form"] for r in data):
+        xs = sorted({int(r["resolution"]) for r in data if r["form"] == form})
+        ys = [max(float(r["max_abs_total_err"]) for r in data
+                  if r["form"] == form and int(r["resolution"]) == x) for x in xs]
+        ax.loglog(xs, ys, "o-", label=form, base=2)
+    ax.set_xlabel("image width (px)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def cancellation_vs_resolution(study="numerics/results/summary.csv",
+                               centre="numerics/results/centre.csv"):
+    """Worst ln α error against width: per form over the whole study (the paper's
+    cancellation); the centre floor (κ = 1, centres within 16 px) with and without the split
+    centre; needles (κ = 1e6) with the float32 principal axes."""
+    fig, axs = plt.subplots(1, 3, figsize=(16, 4.2))
+    _worst_by_width(axs[0], [r for r in rows(study) if r["max_abs_total_err"]
+                             and "@" not in r["form"] and not r["form"].startswith("paper")])
+    pipeline = rows(centre)
+    _worst_by_width(axs[1], [r for r in pipeline if float(r["anisotropy"]) == 1.0
+                             and int(r["offset_px"]) <= 16])
+    _worst_by_width(axs[2], [r for r in pipeline if float(r["anisotropy"]) == 1e6],
+                    ("difference", "local_corner", "local_corner+split",
+                     "whitened+split"))
+    axs[1].annotate("local_corner+split lies under +split_exact", (0.02, 0.02),
+                    xycoords="axes fraction", fontsize=7)
+    axs[0].set_ylabel("worst |error| of ln α, float32")
+    for ax, title in zip(axs, ("forms (numerics.study: all offsets, κ to 1e6)",
+                               "the centre floor: κ = 1, centres within 16 px",
+                               "needles: κ = 1e6, centres 0–1024 px away")):
+        ax.set_title(title, fontsize=9)
+    save(fig, "cancellation_vs_resolution.png")
+
+
+def culling_per_tile(scenes=("default", "guitar")):
+    """Per tile, the share of strip–Gaussian pairs warp culling skips, over the render."""
+    fig, axs = plt.subplots(1, len(scenes), figsize=(5.6 * len(scenes) + 1, 3.6), squeeze=False,
+                            layout="constrained")
+    for ax, name in zip(axs[0], scenes):
+        data = rows(f"paper_figs/data/culling_{name}.csv")
+        tx = np.array([int(r["tile_x"]) for r in data])
+        ty = np.array([int(r["tile_y"]) for r in data])
+        share = np.full((ty.max() + 1, tx.max() + 1), np.nan)
+        for r, x, y in zip(data, tx, ty):
+            share[y, x] = float(r["skipped_share"]) if r["skipped_share"] else np.nan
+        w, h = int(data[0]["width"]), int(data[0]["height"])
+        ax.imshow(plt.imread(os.path.join(HERE, "data", f"culling_{name}.png")),
+                  extent=(0, w, h, 0))
+        im = ax.imshow(share, extent=(0, 16 * share.shape[1], 16 * share.shape[0], 0),
+                       cmap="viridis", vmin=0, vmax=1, alpha=0.55)
+        pairs = sum(int(r["pairs"]) for r in data)
+        strips = sum(int(r["strip_pairs"]) for r in data)
+        ax.set_title(f"{name} {w}x{h}: warp culling skips {1 - strips / (8 * pairs):.0%}\n"
+                     f"of {8 * pairs:,} strip–Gaussian pairs", fontsize=9)
+        ax.set_xlim(0, w)
+        ax.set_ylim(h, 0)
+        ax.axis("off")
+    fig.colorbar(im, ax=axs[0].tolist(), shrink=0.8, label="share of strip pairs skipped")
+    fig.savefig(os.path.join(HERE, "culling_per_tile.png"), dpi=DPI)
     plt.close(fig)
 
 
+FIGURES = {
+    "speedup_vs_scene_size.png": (speedup_vs_scene_size, [FULL_FWD],
+                                  "python -m benchmarks.scale --full (H200)"),
+    "ablation.png": (ablation, ["bench_results/cpu-2026-11/bench.csv",
+                                "bench_results/h100-2026-11/xla/bench.csv"],
+                     "python -m benchmarks.ablation --csv FILE (CPU; H100)"),
+    "ablation_mosaic.png": (lambda: ablation((("H200, Mosaic GPU", MOSAIC_ABLATION),),
+                                             "ablation_mosaic.png"), [MOSAIC_ABLATION],
+                            "python -m benchmarks.ablation with the Pallas rows, on the GPU"),
+    "precision_tradeoff.png": (precision_tradeoff,
+                               ["numerics/results/render/render_summary_pallas.csv"],
+                               "python -m numerics.render_study --backend pallas (GPU)"),
+    "cancellation_vs_resolution.png": (cancellation_vs_resolution,
+                                       ["numerics/results/summary.csv",
+                                        "numerics/results/centre.csv"],
+                                       "python -m numerics.study / python -m numerics.centre"),
+    "culling_per_tile.png": (culling_per_tile, ["paper_figs/data/culling_default.csv",
+                                                "paper_figs/data/culling_guitar.csv"],
+                             "python -m paper_figs.culling (CPU)"),
+}
+
+
+def main(argv=None) -> int:
+    """Draw every figure whose files exist; name each skipped one. Exit 0 either way."""
+    for name, (draw, paths, command) in FIGURES.items():
+        missing = [p for p in paths if not os.path.exists(os.path.join(ROOT, p))]
+        if missing:
+            print(f"skipped {name}: missing {', '.join(missing)} (written by: {command})")
+            continue
+        draw()
+        print(f"wrote paper_figs/{name}")
+    return 0
+
+
 if __name__ == "__main__":
-    pallas_vs_gsplat()
-    precision_tradeoff()
-    print("wrote", ", ".join(f for f in os.listdir(HERE) if f.endswith(".png")))
+    sys.exit(main())

@@ -1,5 +1,6 @@
 """notebooks/*.ipynb run top to bottom: code cells executed in order, plots to the Agg backend,
-IPython's `display` replaced by a no-op (CI has no IPython)."""
+IPython's `display` replaced by a no-op (CI has no IPython). The committed files carry their
+outputs (`python -m notebooks.refresh` executes them in place) and stay small."""
 
 import json
 import os
@@ -37,3 +38,17 @@ def test_notebook_runs(name, monkeypatch):
             exec(compile(source, f"{name}:{cell['id']}", "exec"), scope)
     assert os.getcwd() == str(ROOT)
     plt.close("all")
+
+
+MAX_BYTES = 1_000_000  # per notebook: PNG outputs at notebooks.refresh.DPI
+
+
+@pytest.mark.parametrize("name", ["precision.ipynb", "train_real_capture.ipynb"])
+def test_notebook_is_committed_executed_and_small(name):
+    """Every code cell ran, once each and in order (a cell edited or added without
+    `python -m notebooks.refresh` has no execution count), and the file is under MAX_BYTES."""
+    path = ROOT / "notebooks" / name
+    nb = json.loads(path.read_text())
+    counts = [cell.get("execution_count") for cell in nb["cells"] if cell["cell_type"] == "code"]
+    assert counts == list(range(1, len(counts) + 1)), f"{name}: run python -m notebooks.refresh"
+    assert path.stat().st_size < MAX_BYTES, f"{name}: {path.stat().st_size} bytes"

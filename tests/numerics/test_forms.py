@@ -39,7 +39,7 @@ def test_float32_error_within_bound(log_kappa, theta, log_lmin, offset, angle, p
                         np.stack([px, py], -1), logit)
     mean, pixel, conic, log_o, axes = args32
     up = lambda x: np.asarray(x, np.float64)
-    for form in forms.FORMS:
+    for form in forms.FORMS + ("whitened",):
         got = forms.log_alpha(form, mean, pixel, conic, log_o, axes)
         assert got.dtype == np.float32, form
         want = forms.log_alpha(form, up(mean), up(pixel), up(conic), up(log_o),
@@ -56,6 +56,6 @@ def test_float64_evaluations_of_all_forms_agree(seed):
     args = _gaussians(np.float64, rng.uniform(0, np.log(1e4), M), rng.uniform(0, np.pi, M),
                       rng.uniform(-3, 5, M), rng.uniform(0, 40, M), rng.uniform(0, 7, M),
                       rng.uniform(0, 4096, (M, 2)), rng.uniform(-5, 10, M))
-    results = {f: forms.log_alpha(f, *args[:4], args[4]) for f in forms.FORMS}
+    results = {f: forms.log_alpha(f, *args[:4], args[4]) for f in forms.FORMS + ("whitened",)}
     for f, r in results.items():
         np.testing.assert_allclose(r, results["difference"], rtol=1e-9, atol=1e-7, err_msg=f)

@@ -1,0 +1,5 @@
+import sys
+
+from .make_figs import main
+
+sys.exit(main())
