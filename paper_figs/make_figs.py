@@ -38,9 +38,12 @@ import numpy as np  # noqa: E402
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 DPI = 110
-H200 = "bench_results/h200-2026-12"
-FULL_FWD = f"{H200}/session-dec04d/3_full_fwd/full.csv"
-MOSAIC_ABLATION = f"{H200}/ablation_mosaic.csv"
+FWD = "bench_results/render_vs_gsplat"  # fwd_<scene>.csv per scene (benchmarks.scale)
+FWD_SCENES = ("lego_800", "guitar_720p", "guitar_4k", "lego_x16_1080p", "guitar_x16_1080p",
+              "synthetic4M_1080p", "guitar_x64_1080p", "guitar_x110_4k", "synthetic10M_4k")
+FULL_FWD = [f"{FWD}/fwd_{s}.csv" for s in FWD_SCENES]
+CPU_ABLATION = "bench_results/cpu_backends/bench.csv"
+MOSAIC_ABLATION = "bench_results/ablation/gpu.csv"
 ABLATION_STEPS = ("baseline", "+hoisting", "+warp_culling", "+coherent_blending",
                   "global_coords")
 
@@ -56,9 +59,9 @@ def save(fig, name):
     plt.close(fig)
 
 
-def speedup_vs_scene_size(path=FULL_FWD):
+def speedup_vs_scene_size(paths=FULL_FWD):
     """Speed-ups of the Local-GS row over `vanilla` and `gsplat` against Gaussians."""
-    data = rows(path)
+    data = [r for path in paths for r in rows(path)]
     by = {(r["scene"], r["row"]): r for r in data}
     scenes = sorted({r["scene"] for r in data}, key=lambda s: int(by[s, "localgs"]["gaussians"]))
     fig, axs = plt.subplots(1, 2, figsize=(12, 4.2), sharex=True)
@@ -85,7 +88,7 @@ def speedup_vs_scene_size(path=FULL_FWD):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6)
     axs[0].set_ylabel("speed-up of Local-GS (other / Local-GS time)")
-    fig.suptitle(f"Local-GS forward on the H200 ({path})", fontsize=8)
+    fig.suptitle(f"Local-GS forward on the H200 ({FWD}/fwd_*.csv)", fontsize=8)
     save(fig, "speedup_vs_scene_size.png")
 
 
@@ -109,9 +112,7 @@ def _ablation_panel(ax, data, scene, title):
     ax.grid(axis="y", alpha=0.3)
 
 
-def ablation(sources=(("CPU, 2 cores", "bench_results/cpu-2026-11/bench.csv"),
-                      ("H100, XLA", "bench_results/h100-2026-11/xla/bench.csv")),
-             name="ablation.png"):
+def ablation(sources=(("CPU, 2 cores", CPU_ABLATION),), name="ablation.png"):
     """Table IV analog, one panel per (source, scene): raster time per cumulative step, with
     the max error against float64 over each bar."""
     panels = [(label, data, scene) for label, path in sources for data in [rows(path)]
@@ -210,14 +211,13 @@ def culling_per_tile(scenes=("default", "guitar")):
 
 
 FIGURES = {
-    "speedup_vs_scene_size.png": (speedup_vs_scene_size, [FULL_FWD],
-                                  "python -m benchmarks.scale --full (H200)"),
-    "ablation.png": (ablation, ["bench_results/cpu-2026-11/bench.csv",
-                                "bench_results/h100-2026-11/xla/bench.csv"],
-                     "python -m benchmarks.ablation --csv FILE (CPU; H100)"),
-    "ablation_mosaic.png": (lambda: ablation((("H200, Mosaic GPU", MOSAIC_ABLATION),),
+    "speedup_vs_scene_size.png": (speedup_vs_scene_size, FULL_FWD,
+                                  "python -m benchmarks.scale --scenes S --csv FILE (GPU)"),
+    "ablation.png": (ablation, [CPU_ABLATION],
+                     "python -m benchmarks.ablation --preset cpu --csv FILE (CPU)"),
+    "ablation_mosaic.png": (lambda: ablation((("GPU, Mosaic GPU kernels", MOSAIC_ABLATION),),
                                              "ablation_mosaic.png"), [MOSAIC_ABLATION],
-                            "python -m benchmarks.ablation with the Pallas rows, on the GPU"),
+                            "python -m benchmarks.ablation --preset gpu --csv FILE (GPU)"),
     "precision_tradeoff.png": (precision_tradeoff,
                                ["numerics/results/render/render_summary_pallas.csv"],
                                "python -m numerics.render_study --backend pallas (GPU)"),
