@@ -113,7 +113,7 @@ class Settings:
 class Setup:
     """What the jitted functions of one run depend on statically (hashable): the recipe, the
     strategy, the run length (the means' schedule), the scene scale, the backend, and the
-    devices a step's views are split across (data parallel: `step._over_views`)."""
+    devices a step's views are split across (data parallel: `step.over_views`)."""
 
     settings: Settings = Settings()
     strategy: Strategy = DefaultStrategy()

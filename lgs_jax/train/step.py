@@ -76,13 +76,24 @@ def replicated(devices: int):
     return jax.sharding.NamedSharding(mesh(devices), jax.sharding.PartitionSpec())
 
 
-def _over_views(one, devices: int):
-    """`one(g, cam, target, offsets, look)` mapped over a batch of views (g shared):
-    `jax.vmap`, and with `devices` > 1 the batch split across the first `devices` devices (a
-    `shard_map` over a mesh axis "views", each device rendering its share of the views with
-    the whole scene; the gradient of the shared scene sums the devices' parts, an
-    all-reduce)."""
-    batched = jax.vmap(one, in_axes=(None, 0, 0, 0, 0))
+def over_views(one, devices: int, vectorize: bool = False):
+    """`one(g, cam, target, offsets, look)` over a batch of views (the leading axis of all but
+    g, which they share), stacked outputs: one view after another (`lax.map`; a single view is
+    `one` itself) or with `vectorize` through `jax.vmap` (for the Pallas backends, whose
+    kernels take the views as one more grid axis). Under vmap the XLA backends' loops and
+    conditions on per-view values become selects that run every branch to the pair capacity,
+    which costs far more than the views one by one. With `devices` > 1 the batch is split
+    across the first `devices` devices (a `shard_map` over a mesh axis "views", each device
+    rendering its share of the views with the whole scene; the gradient of the shared scene
+    sums the devices' parts, an all-reduce)."""
+    def batched(g, *per_view):
+        if vectorize:
+            return jax.vmap(one, in_axes=(None, 0, 0, 0, 0))(g, *per_view)
+        if jax.tree.leaves(per_view)[0].shape[0] == 1:
+            out = one(g, *jax.tree.map(lambda x: x[0], per_view))
+            return jax.tree.map(lambda x: jnp.asarray(x)[None], out)
+        return jax.lax.map(lambda views: one(g, *views), per_view)
+
     if devices == 1:
         return batched
     whole, views = jax.sharding.PartitionSpec(), jax.sharding.PartitionSpec("views")
@@ -124,8 +135,8 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
             return (loss_fn(image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
                     jnp.mean((image - target) ** 2), o.stats, o.visible)
 
-        losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets,
-                                                                  look)
+        losses, mse, stats, visible = over_views(one, s.devices, s.backend.startswith(
+            "pallas"))(g, views, targets, offsets, look)
         total = (jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
                  + view_params.regularizer(s.settings, per_view))
         return total, (jnp.mean(mse), stats, visible)

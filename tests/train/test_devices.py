@@ -1,4 +1,4 @@
-"""Data-parallel training (`fit(..., devices=N)`, `step._over_views`): on two CPU devices
+"""Data-parallel training (`fit(..., devices=N)`, `step.over_views`): on two CPU devices
 (`--xla_force_host_platform_device_count`, set before JAX starts, so in a child process) a run
 with refinements follows the one-device run to float rounding (the gradients' sum is taken in
 another order), compiles its step no more often, and repeats itself to the bit, watched or

@@ -14,7 +14,7 @@ import pytest
 import lgs_jax
 from lgs_jax import train
 from lgs_jax.io.datasets import Dataset
-from lgs_jax.train import ahead, data as train_data, losses, optim, pool as train_pool
+from lgs_jax.train import ahead, feed as train_data, losses, optim, pool as train_pool
 from lgs_jax.train.settings import Setup
 from lgs_jax.train.step import train_step
 

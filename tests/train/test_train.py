@@ -22,7 +22,7 @@ from skimage.metrics import structural_similarity
 import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
-from lgs_jax.train import ahead, data as train_data, init, report
+from lgs_jax.train import ahead, feed as train_data, init, report
 
 
 def test_ssim_equals_scikit_image():
