@@ -45,13 +45,14 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="run folders go here (default: a temporary one)")
     args = ap.parse_args()
     d = lgs_jax.load_dataset(args.data, downscale=args.downscale)
-    settings = train.Settings(batch=args.batch, eval_every=10**9, checkpoint_every=10**9)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, data in (("one size", d), ("two sizes", mixed(d, args.keep))):
             out = os.path.join(args.out or tmp, name.replace(" ", "_"))
-            r = train.fit(data, args.steps, out, settings=settings, overwrite=True,
-                          log=lambda m: None)
+            config = train.FitConfig(data=data.path, out=out, steps=args.steps,
+                                     recipe=train.Recipe(batch=args.batch), eval_every=10**9,
+                                     checkpoint_every=10**9, overwrite=True)
+            r = train.fit(config, data, log=lambda m: None)
             rows.append((name, r))
             print(json.dumps(dict(run=name, **r)), flush=True)
     print(f"\n{'capture':10s} {'held-out PSNR':>14s} {'SSIM':>7s} {'Gaussians':>10s} "

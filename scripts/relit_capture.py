@@ -95,11 +95,11 @@ def main(argv=None) -> None:
     print("|---|---:|---:|---:|---:|---:|", flush=True)
     for mode in args.modes.split(","):
         flags = {} if mode == "plain" else {mode: True}
-        settings = train.Settings(eval_every=args.steps + 1, checkpoint_every=args.steps,
-                                  **flags)
+        config = train.FitConfig(data=d.path, out=os.path.join(out, mode), steps=args.steps,
+                                 recipe=train.Recipe(**flags), eval_every=args.steps + 1,
+                                 checkpoint_every=max(args.steps, 1), overwrite=True)
         t0 = time.perf_counter()
-        r = train.fit(d, args.steps, os.path.join(out, mode), settings=settings,
-                      overwrite=True, log=lambda m: None)
+        r = train.fit(config, d, log=lambda m: None)
         metrics = report.read_metrics(os.path.join(out, mode, "metrics.jsonl"))
         psnrs = [m["psnr"] for m in metrics if "psnr" in m and "loss" in m]
         tail = float(np.mean(psnrs[-max(1, len(psnrs) // 10):]))

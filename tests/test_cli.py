@@ -8,7 +8,7 @@ import pytest
 
 import lgs_jax
 from lgs_jax import cli, video
-from lgs_jax.cli import main
+from lgs_jax.cli import fit as fit_cmd, main
 
 
 def test_render_default_scene_writes_png(tmp_path, capsys):
@@ -204,11 +204,90 @@ def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
         jax.config.update("jax_compilation_cache_dir", session)
 
 
-@pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], False),
-                                        (["--compile-ahead-process"], "process")])
+@pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], "off"),
+                                        (["--compile-ahead-process"], "process"),
+                                        (["--compile-ahead", "thread"], "thread")])
 def test_fit_compile_ahead_flags(flags, want):
     args = cli.parser().parse_args(["fit", "--data", "d", "--out", "o", *flags])
-    assert cli.ahead_mode(args) == want
+    assert fit_cmd.config_of(args).compile_ahead == want
+
+
+def _fit_parser():
+    import argparse
+
+    sub = next(a for a in cli.parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices["fit"]
+
+
+def _changed(o, default):
+    """A value of option `o`'s field other than `default` that its bounds allow."""
+    import typing
+
+    from lgs_jax.train.options import split_optional
+
+    t, _ = split_optional(o.type)
+    meta = o.field.metadata
+    if t is bool:
+        return not default
+    if typing.get_origin(t) is typing.Literal or meta.get("choices"):
+        known = typing.get_args(t) or meta["choices"]
+        return next((v for v in known if v != default), default)
+    if t is str:
+        return f"{o.dest}-x"
+    if typing.get_origin(t) is tuple:
+        return (1, 2, 3, 4)
+    low, high = meta.get("low"), meta.get("high")
+    base = default if default is not None else (low or 0) + 1
+    value = t(base + 1) if t is int else base * 0.5 + 0.25
+    return value if high is None or value <= high else t(high - (high - (low or 0)) / 2)
+
+
+def test_fit_options_and_fit_config_cannot_drift():
+    """The fit command line is FitConfig's: every field (its Recipe's and the strategies'
+    included) has an option of its name, every option sets a field (or is in one of
+    lgs_jax.cli.fit's tables: ALIASES, DERIVED, CLI_ONLY), the defaults agree, and the options
+    of a configuration with every field changed parse back to that configuration."""
+    import typing
+
+    from lgs_jax import train
+
+    fit = _fit_parser()
+    flags = {f for a in fit._actions for f in a.option_strings} - {"-h", "--help"}
+    config, strategy = fit_cmd.config_options(), fit_cmd.strategy_options()
+    made = {o.flag for o in config + strategy} | {"--strategy"}
+    negated = {"--no-" + o.flag[2:] for o in config + strategy if o.type is not bool
+               and typing.get_args(o.type) and bool in typing.get_args(o.type)}
+    negated |= {"--no-" + o.flag[2:] for o in strategy if o.type is bool}
+    assert flags == made | negated | set(fit_cmd.ALIASES) | set(fit_cmd.CLI_ONLY)
+    fields = {f.name for f in dataclasses.fields(train.FitConfig)} - {"recipe", "strategy"}
+    fields |= {f.name for f in dataclasses.fields(train.Recipe)}
+    assert {o.dest for o in config} == fields and len(config) == len(fields)
+    for cls in train.STRATEGIES.values():
+        names = {f.name for f in dataclasses.fields(cls)}
+        assert names <= {o.dest for o in strategy} | set(fit_cmd.DERIVED)
+    dests = [o.dest for o in config + strategy]
+    assert len(dests) == len(set(dests))  # one option per name
+    minimal = ["fit", "--data", "d", "--out", "o"]
+    args = cli.parser().parse_args(minimal)
+    assert fit_cmd.config_of(args) == train.FitConfig(data="d", out="o")
+    for o in config:
+        want = o.field.default if o.field.default is not dataclasses.MISSING else getattr(
+            args, o.dest)
+        assert getattr(args, o.dest) == want, o.flag
+    assert all(getattr(args, o.dest) is None for o in strategy)  # the strategy's own
+    for name, cls in train.STRATEGIES.items():
+        top = {o.dest: _changed(o, o.field.default) for o in config if o.path[0] != "recipe"}
+        top.update(data="d", out="o", resume=True, overwrite=False, devices=2)
+        recipe = train.Recipe(**{o.dest: _changed(o, o.field.default) for o in config
+                                 if o.path[0] == "recipe"} | dict(batch=4))
+        fields = {f.name: _changed(next(o for o in strategy if o.dest == f.name), f.default)
+                  for f in dataclasses.fields(cls) if f.name not in fit_cmd.DERIVED}
+        fields |= {f: top[src] for f, src in fit_cmd.DERIVED.items() if f in
+                   {g.name for g in dataclasses.fields(cls)}}
+        changed = train.FitConfig(**top, recipe=recipe, strategy=cls(**fields))
+        words = fit_cmd.argv(changed)
+        assert fit_cmd.config_of(cli.parser().parse_args(["fit"] + words)) == changed, name
+        assert changed != train.FitConfig(data="d", out="o")
 
 
 def test_fit_compile_ahead_flags_exclude_each_other(capsys):

@@ -12,7 +12,7 @@ from ..config import CONVENTIONS
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
 VIDEO_EXTENSIONS = (".mp4",)  # lgs_jax.video.write_video (H.264)
-EXIT_FAILURE, EXIT_USAGE = 1, 2
+EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 
 
 class UsageError(Exception):
@@ -26,8 +26,8 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def number_at_least(low, kind=int):
-    """An argparse type: a finite number of `kind` (int or float) >= `low`."""
+def number_at_least(low, kind=int, high=None):
+    """An argparse type: a finite number of `kind` (int or float) >= `low` (and <= `high`)."""
     name = "an integer" if kind is int else "a number"
 
     def parse(text: str):
@@ -37,8 +37,9 @@ def number_at_least(low, kind=int):
             raise argparse.ArgumentTypeError(f"expected {name}, got {text!r}") from None
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if v < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
+        if v < low or (high is not None and v > high):
+            bound = f">= {low}" if high is None else f"from {low} to {high}"
+            raise argparse.ArgumentTypeError(f"must be {bound}, got {v}")
         return v
     return parse
 
@@ -49,6 +50,7 @@ def int_at_least(low: int):
 
 
 finite_float = number_at_least(-math.inf, float)  # an argparse type: a finite float
+port = number_at_least(1, int, 65535)  # an argparse type: a TCP port
 
 
 def check_input(path: str, what: str) -> None:
