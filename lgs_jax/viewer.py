@@ -231,6 +231,8 @@ def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 
     the server runs in threads until its `stop()`."""
     if output not in OUTPUTS:
         raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
+    if not (isinstance(port, int) and not isinstance(port, bool) and 1 <= port <= 65535):
+        raise ValueError(f"port: expected a TCP port from 1 to 65535, got {port!r}")
     try:
         import viser
     except ImportError:

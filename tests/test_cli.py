@@ -84,6 +84,48 @@ def test_unwritable_out_directory_is_refused_before_rendering(tmp_path, capsys, 
     assert "not writable" in _error_line(capsys)
 
 
+@pytest.mark.parametrize("args,match", [
+    (["view", "--port", "70000"], "--port: must be from 1 to 65535, got 70000"),
+    (["fit", "--data", "{tmp}", "--out", "{tmp}/run", "--viewer-port", "0"],
+     "--viewer-port: must be from 1 to 65535, got 0"),
+    (["fit", "--data", "{tmp}", "--out", "{tmp}/run", "--seed", "-1"],
+     "--seed: must be >= 0, got -1"),
+    (["fit", "--data", "{tmp}", "--out", "/proc/lgs_jax_run"], "--out: /proc/lgs_jax_run: "
+                                                               "cannot write there"),
+    (["fit", "--data", "{tmp}", "--out", "{ply}"], "--out: {ply} exists and is not a directory"),
+    (["render", "--out", "/proc/lgs_jax.png"], "--out: /proc/lgs_jax.png: not writable"),
+    (["video", "--out", "/proc/lgs_jax.mp4"], "--out: /proc/lgs_jax.mp4: not writable"),
+    (["eval", "{ply}", "--data", "{tmp}", "--out", "{ply}"], "--out: {ply} is a file, not a "
+                                                              "folder"),
+    (["eval", "{ply}", "--data", "{tmp}", "--out", "/proc/lgs_jax_eval"],
+     "--out: /proc/lgs_jax_eval: cannot make the folder"),
+])
+def test_ports_seeds_and_outputs_are_checked_before_any_work(tmp_path, capsys, monkeypatch,
+                                                            args, match):
+    """Exit code 2 and one line, before anything is loaded, rendered or trained."""
+    from lgs_jax import train
+
+    for owner, name in ((lgs_jax, "load_ply"), (lgs_jax, "default_scene"), (lgs_jax, "render"),
+                        (train, "fit"), (train, "evaluate")):
+        monkeypatch.setattr(owner, name, lambda *a, **k: pytest.fail("work started"))
+    ply = tmp_path / "s.ply"
+    ply.write_text("not read")
+    fill = lambda s: s.format(tmp=tmp_path, ply=ply)
+    try:
+        code = main([fill(a) for a in args])
+    except SystemExit as e:
+        code = e.code
+    assert code == 2
+    assert fill(match) in _error_line(capsys)
+
+
+def test_the_viewer_refuses_ports_out_of_range():
+    from lgs_jax import viewer
+
+    with pytest.raises(ValueError, match="port: expected a TCP port from 1 to 65535, got 70000"):
+        viewer.serve(None, [lgs_jax.default_camera()], port=70000)
+
+
 @pytest.mark.parametrize("content,size,match", [
     ("[{", [], "not valid JSON"), ('[{"fx": "abc"}]', [], "camera 0: missing 'rotation'"),
     ('{"camera_angle_x": 0.7, "frames": []}', [], "'frames' is empty"),

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import tempfile
 
 from ..config import CONVENTIONS
 
@@ -63,7 +64,7 @@ def check_input(path: str, what: str) -> None:
 
 def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") -> None:
     """Raise `UsageError` unless `path` can be written as `kind`: one of `extensions` in an
-    existing, writable directory (checked before rendering, not after)."""
+    existing directory where a file can be written (checked before rendering, not after)."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in extensions:
         raise UsageError(f"--out: {path}: extension {ext or '(none)'!r} is not {kind} format "
@@ -73,8 +74,32 @@ def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") ->
         raise UsageError(f"--out: {path}: directory {folder} does not exist")
     if os.path.isdir(path):
         raise UsageError(f"--out: {path} is a directory")
-    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)) \
+            or not _writable(folder):
         raise UsageError(f"--out: {path}: not writable")
+
+
+def check_out_dir(path: str) -> None:
+    """Raise `UsageError` unless folder `path` exists or can be made, and takes files (it is
+    made here)."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise UsageError(f"--out: {path} is a file, not a folder")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"--out: {path}: cannot make the folder ({e.strerror or e})") from None
+    if not (os.access(path, os.W_OK) and _writable(path)):
+        raise UsageError(f"--out: {path}: not writable")
+
+
+def _writable(folder: str) -> bool:
+    """Whether a file can be made in `folder` (tried: permission bits do not tell for root,
+    nor on file systems such as /proc)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
 
 
 def view_options(p, sizes: bool = True) -> None:

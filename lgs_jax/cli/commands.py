@@ -86,9 +86,11 @@ def _render(args) -> int:
           f"{int(s.pairs_required)} (capacity {int(s.capacity)})")
     import matplotlib.image
 
+    from ..files import written
     from ..video import frame_pixels
 
-    matplotlib.image.imsave(args.out, frame_pixels(out, args.output))
+    with written(args.out) as tmp:
+        matplotlib.image.imsave(tmp, frame_pixels(out, args.output))
     print(f"wrote {args.out}")
     return 0
 

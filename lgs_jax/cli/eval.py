@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import os
 
-from .args import check_dataset, check_input, int_at_least, raster_config
+from .args import check_dataset, check_input, check_out_dir, int_at_least, raster_config
 from ..config import CONVENTIONS
 
 
@@ -44,6 +44,8 @@ def run(args) -> int:
 
     check_input(args.scene, "scene")
     check_dataset(args.data)
+    if args.out:
+        check_out_dir(args.out)
     result = train.evaluate(lgs_jax.load_ply(args.scene), args.data, split=args.split,
                             downscale=args.downscale, backend=args.backend,
                             config=raster_config(args), out=args.out)

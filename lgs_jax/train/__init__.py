@@ -17,8 +17,7 @@ Modules (each usable alone):
   `ahead`      `Stepper`: a jitted step compiled ahead for its next buffer size.
   `loop`       `fit`: the loop; `state` its state (fresh, resumed, saved), `checkpoint` the
                checkpoint files, `rundir` the run folder (checks, lock), `outputs` what a run
-               leaves, `report` the progress bar and metrics, `interrupt` Ctrl-C, `files`
-               files written whole.
+               leaves, `report` the progress bar and metrics, `interrupt` Ctrl-C.
   `evaluate`   a scene's PSNR and SSIM on a capture's views (`python -m lgs_jax eval`).
   `camera_opt` the training views' pose deltas (`Recipe.pose_opt`, gsplat's --pose_opt).
   `color_opt`  an affine colour correction per training view (`Recipe.color_opt`).

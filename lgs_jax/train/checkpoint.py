@@ -1,11 +1,11 @@
 """Checkpoints: `checkpoint.npz` (every array of the pool, active mask and free slots included, of
 the optimizer state, of the strategy state and of the views' own parameters, plus the step)
 and `checkpoint.json` (step, pair capacities, pool size, skipped steps, the run's configuration
-and its data), each written whole (`files.written`). Resuming restores those bits exactly: with
-the same configuration, a resumed run continues bit-identically to an uninterrupted one (views
-and random keys depend only on the step and the seed). A checkpoint that cannot be read, or
-does not fit the run, raises `CheckpointError` naming the file and the problem before anything
-in the folder changes.
+and its data), each written whole (`lgs_jax.files.written`). Resuming restores those bits
+exactly: with the same configuration, a resumed run continues bit-identically to an
+uninterrupted one (views and random keys depend only on the step and the seed). A checkpoint
+that cannot be read, or does not fit the run, raises `CheckpointError` naming the file and the
+problem before anything in the folder changes.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .files import written
+from ..files import written
 
 PARTS = ("pool", "opt", "strategy", "views")  # views: `view_params`' state, None without it
 META = dict(step=0, capacity=1, eval_capacity=1, pool_size=1, skipped=0)  # int fields, minimum
@@ -134,10 +134,13 @@ def restore(out: str, templates: tuple, step: int) -> tuple:
     parts = []
     for name, template in zip(PARTS, templates):
         leaves, treedef = jax.tree.flatten(template)
-        count = sum(k.startswith(f"{name}_") for k in arrays)
-        if count != len(leaves):
-            raise CheckpointError(path, f"holds {count} arrays of the {name} state, this run's "
-                                        f"configuration has {len(leaves)}")
+        have = {k for k in arrays if k.startswith(f"{name}_")}
+        want = {f"{name}_{i}" for i in range(len(leaves))}
+        if have != want:
+            missing = sorted(want - have, key=len)[:1] or ["none"]
+            raise CheckpointError(path, f"holds {len(have)} arrays of the {name} state, this "
+                                        f"run's configuration has {len(leaves)} (missing: "
+                                        f"{missing[0]})")
         got = []
         for i, leaf in enumerate(leaves):
             a = arrays[f"{name}_{i}"]

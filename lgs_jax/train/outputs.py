@@ -1,4 +1,5 @@
-"""What a run leaves in OUT at its end (`finish`), each file written whole (`files.written`):
+"""What a run leaves in OUT at its end (`finish`), each file written whole
+(`lgs_jax.files.written`):
 scene.ply (the active Gaussians, INRIA PLY), cameras.json (INRIA: the training cameras, at their
 optimized poses with pose_opt, then the held-out ones), colors.json (with color_opt: each
 training view's colour correction), bilateral_grids.npz (with bilateral_grid: each training
@@ -21,7 +22,7 @@ from ..io.ply import save_ply
 from . import appearance, bilateral_grid, camera_opt, color_opt, report
 from .config import Setup
 from .feed import RunData
-from .files import written
+from ..files import written
 from .pool import active_gaussians
 from .state import RunState, scene
 from .step import render_views

@@ -13,7 +13,7 @@ import jax
 import numpy as np
 import tqdm
 
-from .files import written
+from ..files import written
 
 
 class _Bar(tqdm.tqdm):

@@ -35,8 +35,9 @@ class RunDirError(ValueError):
 
 def run_files(out: str) -> list[str]:
     """The files a run wrote into `out`: RUN_FILES and the held-out renders."""
+    partial = r"\..+\.partial(\..+)?"  # `lgs_jax.files.written`'s temporary, left by a kill
     return [n for n in os.listdir(out) if n in RUN_FILES or re.fullmatch(r"heldout_.+\.png", n)
-            or re.fullmatch(r"\..+\.partial(\..+)?", n)]  # `files.written`'s, left by a kill
+            or re.fullmatch(partial, n)]
 
 
 def _contents(out: str) -> list[str]:

@@ -15,7 +15,7 @@ from ..render import count_pairs, next_pow2, pair_capacity, render
 from . import appearance, checkpoint, report, view_params
 from .config import FitConfig, Setup
 from .feed import RunData
-from .files import written
+from ..files import written
 from .init import start_gaussians
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians

@@ -8,6 +8,7 @@ import dataclasses
 import io
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -23,6 +24,8 @@ import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
 from lgs_jax.train import ahead, feed as train_data, init, report
+
+from .captures import tiny_capture
 
 
 def test_ssim_equals_scikit_image():
@@ -169,6 +172,7 @@ def _fit(data, out, **kwargs):
 
 
 def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
+    train.train_step.clear_cache()  # another test of this process may have compiled it
     seen = []
     result = _fit(skull, tmp_path, eval_every=2, watch=lambda *a: seen.append(a), watch_every=0)
     rows = report.read_metrics(str(tmp_path / "metrics.jsonl"))
@@ -227,8 +231,9 @@ def test_resume_is_bit_identical(skull, tmp_path):
     own parameters (pose deltas, colour corrections and appearance embeddings with their head,
     `view_params`) and their Adam states (both runs optimize them). The uninterrupted run is watched
     (`fit`'s `watch`, at its start and end only) and the other streams its training images
-    (`FitConfig.stream_images`), which change nothing. The first training view's photo is darkened
-    (x0.6), so that its colour correction darkens against the other's."""
+    (`FitConfig.stream_images`), which change nothing; a third is stopped by Ctrl-C and resumed.
+    The first training view's photo is darkened (x0.6), so that its colour correction darkens
+    against the other's."""
     images = skull.images.copy()
     images[skull.train[0]] *= 0.6
     skull = dataclasses.replace(skull, images=images)
@@ -249,7 +254,20 @@ def test_resume_is_bit_identical(skull, tmp_path):
     assert any(m.startswith("training images streamed") for m in lines), lines
     assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
     _fit(skull, tmp_path / "b", resume=True, stream=True, **own)
-    a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
+    # Ctrl-C (SIGINT, here during the watch after step 4): the run stops at that step's
+    # boundary, writes its checkpoint (step 4, between the periodic ones at 3 and 6) and raises
+    # `Interrupted`; resumed, it ends with the same bits
+    interrupt = lambda step, *_: step == 4 and os.kill(os.getpid(), signal.SIGINT)
+    with pytest.raises(train.Interrupted) as stopped:
+        _fit(skull, tmp_path / "c", watch=interrupt, watch_every=0, **own)
+    assert (stopped.value.step, stopped.value.steps) == (4, STEPS)
+    assert json.load(open(tmp_path / "c" / "checkpoint.json"))["step"] == 4
+    assert not (tmp_path / "c" / "result.json").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+    _fit(skull, tmp_path / "c", resume=True, **own)
+    a, b, c = (np.load(tmp_path / r / "checkpoint.npz") for r in "abc")
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], c[name], err_msg=name)
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
     # views' leaves: colour (corrections, Adam count, mu, nu), embed (the same), head (its
     # six weights, Adam count, mu, nu), then pose (deltas, ...)
@@ -276,8 +294,9 @@ def test_resume_is_bit_identical(skull, tmp_path):
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     ply = [(tmp_path / r / "scene.ply").read_bytes() for r in "ab"]
     assert ply[0] == ply[1]
-    rows = report.read_metrics(str(tmp_path / "b" / "metrics.jsonl"))
-    assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
+    for run in "bc":
+        rows = report.read_metrics(str(tmp_path / run / "metrics.jsonl"))
+        assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
 
 
 def test_compiling_ahead_changes_no_bit(skull, tmp_path):
@@ -625,6 +644,34 @@ def test_progress_bar_redraws_while_a_step_runs():
     last = stream.getvalue().split("\r")[-1]
     assert "2/10" in last and "loss=0.1250" in last and "<" in last and "step/s" in last
     assert "psnr=21.50" in last and "gaussians=120" in last
+
+
+def test_progress_rate_and_eta_leave_out_the_compile():
+    """After a first step that compiled for a while, the rate and ETA are the steps' own (the
+    loop's `rate`), not the compile's spread over the steps to come."""
+    stream = io.StringIO()
+    bar = report.Progress(0, 100, file=stream, interval=10)
+    time.sleep(0.3)  # compiling
+    bar.step(0.25, 20.0, 100, rate=50.0)
+    bar.bar.refresh()
+    bar.close()
+    last = stream.getvalue().split("\r")[-1]
+    assert "1/100" in last and "<00:01" in last and "50.00step/s" in last, last
+
+
+def test_random_starts_scale_with_the_images(tmp_path):
+    """Without SfM points, a point per 4 pixels of the largest training image (at most
+    100,000): 50x50 images start with 625 (a CPU step at 100,000 takes far longer)."""
+    from lgs_jax.train import feed, init
+
+    config = train.FitConfig(data=tiny_capture(tmp_path / "d", size=50), out="o")
+    assert [config.start_points(p) for p in (2500, 200 * 200, 800 * 800)] == [625, 10_000,
+                                                                            100_000]
+    assert dataclasses.replace(config, init_points=7).start_points(2500) == 7
+    lines = []
+    g = init.start_gaussians(feed.prepare(config.data), config, lines.append)
+    assert g.num == 625 and lines == ["no SfM points: 625 random points in a cube of "
+                                      "half-width 0.25 x scene scale"]
 
 
 def test_8_bit_images_train_to_the_same_bits(tmp_path):
