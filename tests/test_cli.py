@@ -119,6 +119,34 @@ def test_ports_seeds_and_outputs_are_checked_before_any_work(tmp_path, capsys, m
     assert fill(match) in _error_line(capsys)
 
 
+def test_float64_scenes_render_as_float32_with_a_note(tmp_path, capsys):
+    """Where JAX runs without float64 (the command line's default), a float64 PLY is cast."""
+    import jax
+
+    from lgs_jax.cli.args import load_scene
+
+    ply = tmp_path / "s64.ply"
+    g = lgs_jax.default_scene()
+    lgs_jax.save_ply(ply, jax.tree.map(lambda x: np.asarray(x, np.float64), g))
+    before = jax.config.jax_enable_x64
+    jax.config.update("jax_enable_x64", False)
+    try:
+        scene = load_scene(str(ply))
+    finally:
+        jax.config.update("jax_enable_x64", before)
+    assert scene.means.dtype == np.float32 and scene.num == g.num
+    np.testing.assert_array_equal(scene.means, np.asarray(g.means, np.float32))
+    assert "holds float64 values; rendering them as float32 (JAX_ENABLE_X64=1" in \
+        capsys.readouterr().err
+
+
+def test_a_ply_given_as_cameras_is_named(tmp_path, capsys):
+    ply = tmp_path / "s.ply"
+    lgs_jax.save_ply(ply, lgs_jax.default_scene())
+    assert main(["render", str(ply), "--cameras", str(ply), "--out", str(tmp_path / "x.png")]) == 1
+    assert f"{ply}: not a cameras file (binary, not JSON text" in _error_line(capsys)
+
+
 def test_the_viewer_refuses_ports_out_of_range():
     from lgs_jax import viewer
 

@@ -132,6 +132,26 @@ def view_options(p, sizes: bool = True) -> None:
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
 
 
+def load_scene(path: str | None):
+    """The scene to render: the PLY at `path` (float64 values cast to float32, with a note,
+    where JAX runs without float64: JAX_ENABLE_X64=1 keeps them), or the bundled default."""
+    import sys
+
+    import jax
+    import numpy as np
+
+    import lgs_jax
+
+    if path is None:
+        return lgs_jax.default_scene()
+    scene = lgs_jax.load_ply(path)
+    if scene.means.dtype == np.float64 and not jax.config.jax_enable_x64:
+        print(f"note: {path} holds float64 values; rendering them as float32 "
+              f"(JAX_ENABLE_X64=1 keeps float64)", file=sys.stderr)
+        scene = jax.tree.map(lambda x: np.asarray(x, np.float32), scene)
+    return scene
+
+
 def capture_cameras(args, purpose: str):
     """--cameras at --width/--height where the command has them (`Camera.resized` rules), or
     None for the default scene; a usage error for a file without cameras, or a scene file
@@ -139,8 +159,12 @@ def capture_cameras(args, purpose: str):
     import lgs_jax
 
     if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras, width=getattr(args, "width", None),
-                                    height=getattr(args, "height", None))
+        try:
+            cams = lgs_jax.load_cameras(args.cameras, width=getattr(args, "width", None),
+                                        height=getattr(args, "height", None))
+        except UnicodeDecodeError:
+            raise ValueError(f"{args.cameras}: not a cameras file (binary, not JSON text: a "
+                             f"PLY scene?)") from None
         if not cams:
             raise UsageError(f"--cameras: {args.cameras} holds no cameras")
         return cams

@@ -23,7 +23,7 @@ import numpy as np
 from . import eval as eval_cmd, fit as fit_cmd, video as video_cmd, view as view_cmd
 from .args import (EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE, IMAGE_EXTENSIONS, Parser,
                    UsageError, check_input, check_out, chosen_camera, int_at_least,
-                   raster_config, view_options)
+                   load_scene, raster_config, view_options)
 
 
 def _merged_seconds(spans) -> float:
@@ -63,13 +63,12 @@ def _render(args) -> int:
     """`render`: check the arguments, load, render once, report, write the image."""
     import jax
 
-    import lgs_jax
 
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
         if path:
             check_input(path, what)
     check_out(args.out)
-    scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
+    scene = load_scene(args.scene)
     cam = chosen_camera(args, "to render")
     out, seconds, compiling = _timed_render(
         scene, cam, background=np.asarray(args.background, np.float32), backend=args.backend,

@@ -157,6 +157,24 @@ def resume_command(config) -> str:
     return "python -m lgs_jax fit " + shlex.join(words)
 
 
+def _stopped(config, e: KeyboardInterrupt) -> str:
+    """What a Ctrl-C left: the step of OUT's checkpoint and the command that resumes it."""
+    import os
+
+    from .. import train
+
+    if isinstance(e, train.Interrupted):
+        step = e.step
+    else:  # a second Ctrl-C, or one outside the steps: the last checkpoint written
+        try:
+            with open(os.path.join(config.out, "checkpoint.json")) as f:
+                step = json.load(f)["step"]
+        except (OSError, ValueError, KeyError):
+            return f"interrupted before {config.out} held a checkpoint"
+    return (f"stopped after step {step} of {config.steps}; the checkpoint in {config.out} "
+            f"resumes it:\n  {resume_command(config)}")
+
+
 def run(args) -> int:
     """`fit`: the configuration and OUT checked before any work, then train; Ctrl-C: exit 130
     with the command that resumes."""
@@ -184,10 +202,9 @@ def run(args) -> int:
             served.stop()  # the viewer's threads would keep the process alive
         if isinstance(e, train.RunDirError):  # another fit took OUT meanwhile
             raise UsageError(f"--{e.field.replace('_', '-')}: {e.message}") from None
-        if not isinstance(e, train.Interrupted):
+        if not isinstance(e, KeyboardInterrupt):
             raise
-        print(f"\nstopped after step {e.step} of {e.steps}; the checkpoint in {e.out} "
-              f"resumes it:\n  {resume_command(config)}", file=sys.stderr)
+        print("\n" + _stopped(config, e), file=sys.stderr)
         return 130
     print(json.dumps(result, indent=1))
     if served is not None:

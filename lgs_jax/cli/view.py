@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .args import (capture_cameras, check_input, int_at_least, pick_view, port, raster_config,
-                   view_options)
+from .args import (capture_cameras, check_input, int_at_least, load_scene, pick_view, port,
+                   raster_config, view_options)
 
 
 def parser(sub, common) -> None:
@@ -33,14 +33,13 @@ def parser(sub, common) -> None:
 
 def run(args) -> int:
     """`view`: check the arguments, load, serve until Ctrl-C."""
-    import lgs_jax
     from lgs_jax import viewer
 
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
         if path:
             check_input(path, what)
     cams, start = _cameras(args)
-    scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
+    scene = load_scene(args.scene)
     viewer.serve(scene, cams, start=start, host=args.host, port=args.port,
                  max_size=args.max_size, output=args.output, backend=args.backend,
                  background=np.asarray(args.background, np.float32), config=raster_config(args))

@@ -147,8 +147,20 @@ def save_renders(out: str, images, targets, names, prefix: str = "heldout") -> N
 
 
 def read_metrics(path: str) -> list[dict]:
+    """The rows of a metrics.jsonl; a last line without its newline (a write cut short by a
+    kill) is left out, any other line that is not JSON raises `ValueError` naming it."""
     with open(path) as f:
-        return [json.loads(line) for line in f if line.strip()]
+        lines = f.readlines()
+    if lines and not lines[-1].endswith("\n"):
+        lines.pop()
+    rows = []
+    for number, line in enumerate(lines, 1):
+        if line.strip():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{path}: line {number} is not JSON ({e.msg})") from None
+    return rows
 
 
 def plot_curves(rows: list[dict], path: str) -> None:

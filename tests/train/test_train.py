@@ -646,6 +646,15 @@ def test_progress_bar_redraws_while_a_step_runs():
     assert "psnr=21.50" in last and "gaussians=120" in last
 
 
+def test_metrics_cut_short_by_a_kill_read_without_their_last_line(tmp_path):
+    path = tmp_path / "metrics.jsonl"
+    path.write_text('{"step": 1}\n{"step": 2}\n{"st')
+    assert report.read_metrics(str(path)) == [{"step": 1}, {"step": 2}]
+    path.write_text('{"step": 1}\n{"st\n{"step": 2}\n')
+    with pytest.raises(ValueError, match="metrics.jsonl: line 2 is not JSON"):
+        report.read_metrics(str(path))
+
+
 def test_progress_rate_and_eta_leave_out_the_compile():
     """After a first step that compiled for a while, the rate and ETA are the steps' own (the
     loop's `rate`), not the compile's spread over the steps to come."""
