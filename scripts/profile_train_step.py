@@ -25,7 +25,7 @@ rounds, one training view):
   noise         MCMC's per-step noise on the means
   train_step    `train_step` whole (device time: blocked, no host read)
   train_loop    `train_step` + the host read of its metrics, as `fit` runs it
-  refine        MCMC's refinement (every 100 steps in a run)
+  refine        MCMC's refinement (every 100 steps in a run), its report read back
   gsplat        gsplat's rasterization + backward of Σ image·w (same Gaussians, same view)
 """
 
@@ -121,7 +121,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
                             backend=setup.backend, capacity=capacity).image
     fwd = jax.jit(draw)
     bwd = jax.jit(jax.grad(lambda p: jnp.sum(draw(p) * w)))
-    lossg = jax.jit(lambda p: st._loss_and_grads(setup, capacity, None, st.Pool(p, pool.active),
+    lossg = jax.jit(lambda p: st.loss_and_grads(setup, capacity, None, st.Pool(p, pool.active),
                                                   jax.tree.map(lambda x: x[None], cam),
                                                   target[None], bg, jnp.int32(6000),
                                                   jnp.array([0])))
@@ -145,8 +145,8 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
         "noise": lambda: jax.block_until_ready(noise(pool, key)),
         "train_step": lambda: jax.block_until_ready(call()),
         "train_loop": lambda: {k: v.item() for k, v in jax.device_get(call()[4]).items()},
-        "refine": lambda: jax.block_until_ready(st._refine(
-            sstate, pool, opt_state, 6100, key, strategy=setup.strategy, cap=pool.size)),
+        "refine": lambda: st.refine(setup.strategy, sstate, pool, opt_state, 6100, key,
+                                    pool.size),
     }
     if with_gsplat:
         from benchmarks.scale import gsplat_grad_step

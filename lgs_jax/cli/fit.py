@@ -121,7 +121,7 @@ def argv(config) -> list[str]:
     """The `fit` options that make `config` (`config_of` of them gives it back); ValueError
     for a configuration the command line cannot express (a strategy of another class, a
     `DERIVED` field unlike its option)."""
-    from ..train import STRATEGIES, FitConfig
+    from ..train import STRATEGIES
 
     words = []
     for o in config_options():
@@ -143,7 +143,6 @@ def argv(config) -> list[str]:
         if hasattr(config.strategy, field) and \
                 getattr(config.strategy, field) != getattr(config, source):
             raise ValueError(f"strategy.{field}: the command line sets it to {source}")
-    assert isinstance(config, FitConfig)
     return words
 
 

@@ -82,7 +82,7 @@ def save(out: str, state: tuple, meta: dict) -> None:
 
 
 def read_meta(out: str) -> dict:
-    """checkpoint.json, checked (`CheckpointError`), its arrays' file readable; ValueError for
+    """checkpoint.json, checked (`CheckpointError`), beside a zip file of arrays; ValueError for
     a checkpoint of an older lgs_jax.train."""
     path = os.path.join(out, "checkpoint.json")
     try:
@@ -107,13 +107,11 @@ def read_meta(out: str) -> dict:
     if not os.path.exists(arrays):
         raise CheckpointError(arrays, "missing (checkpoint.json names a checkpoint it lacks)")
     try:
-        with zipfile.ZipFile(arrays) as z:
-            bad = z.testzip()  # reads every member and checks its CRC
-    except (zipfile.BadZipFile, EOFError, OSError, zlib.error, ValueError) as e:
+        with zipfile.ZipFile(arrays):  # its directory (at the end: a truncated file has none);
+            pass  # the members' bytes are checked as `restore` reads them
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as e:
         raise CheckpointError(arrays, f"not a readable .npz file ({e or type(e).__name__})") \
             from None
-    if bad is not None:
-        raise CheckpointError(arrays, f"member {bad} is corrupted")
     return meta
 
 

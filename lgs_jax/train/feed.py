@@ -211,6 +211,12 @@ class TrainViews:
                            else [jnp.asarray(im) for im in images])
         self._worker = ThreadPoolExecutor(1, "lgs_jax-views") if stream else None
         self._copies: dict[int, Future] = {}
+        self.closed = False  # `close` ran: the worker is ended
+
+    @property
+    def held(self) -> list[int]:
+        """The steps whose views are on the device or being copied there."""
+        return sorted(self._copies)
 
     def args(self, step: int):
         """(targets, idx) of 0-based `step`."""
@@ -242,6 +248,7 @@ class TrainViews:
         """End the streaming worker (the copies it made stay valid)."""
         if self._worker is not None:
             self._worker.shutdown()
+        self.closed = True
 
 
 LEVELS = np.arange(256, dtype=np.float32) / np.float32(255)

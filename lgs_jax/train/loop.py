@@ -35,20 +35,14 @@ from .checkpoint import data_of
 from .config import FitConfig, Setup
 from .feed import RunData, TrainViews, nbytes, prepare, streams
 from .interrupt import Interrupted, StopRequest
-from .pool import render_gaussians
 from .state import RunState
 from .step import refine, replicated, train_step
-
-
-def step_sizes(size: tuple) -> dict:
-    """`train_step`'s static sizes for a `Sizes` size (pair capacity, rows)."""
-    return dict(capacity=size[0], rows=size[1])
 
 
 def stepper(config: FitConfig, setup: Setup) -> Stepper:
     """`train_step` of this run (its `setup`) behind an `ahead.Stepper` of the configured
     mode."""
-    static = lambda size: dict(step_sizes(size), setup=setup)
+    static = lambda size: dict(setup=setup, capacity=size[0], rows=size[1])
     return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom),
                    mode_of(config.compile_ahead))
 
@@ -127,9 +121,6 @@ def _refine(run: _Run) -> int:
     return count
 
 
-_shown = jax.jit(render_gaussians)
-
-
 class _Watch:
     """Calls `fn(step, gaussians, metrics)` with the pool as `render` sees it (inactive slots
     as culled placeholders, every SH band; on one device) when `every` seconds have passed
@@ -143,7 +134,7 @@ class _Watch:
         if self.fn is None or not (force or now - self.last >= self.every):
             return
         pool = state.scene(st)
-        g = _shown(pool.params, pool.active)
+        g = state.shown(pool.params, pool.active)
         if self.devices > 1:  # replicated: one device's copy, no transfer
             g = jax.tree.map(lambda x: x.addressable_data(0), g)
         self.fn(st.step, g, metrics)
@@ -235,23 +226,27 @@ def check_out(config: FitConfig, data_path: str) -> None:
     with this configuration and `data_path` (`rundir.resume_problem`); a checkpoint that
     cannot be read raises `checkpoint.CheckpointError`. Nothing is written but the folder
     itself."""
-    problem = rundir.run_dir_problem(config.out, config.resume, config.overwrite)
-    if problem:
-        raise rundir.RunDirError("out", problem)
-    problem = rundir.writable_problem(config.out)
-    if problem:
-        raise rundir.RunDirError("out", problem)
+    _check_folder(config)
     wrong = rundir.resume_problem(config, data_path)
     if wrong:
         raise wrong
 
 
+def _check_folder(config: FitConfig) -> None:
+    problem = rundir.run_dir_problem(config.out, config.resume, config.overwrite)
+    if problem is None:
+        problem = rundir.writable_problem(config.out)
+    if problem:
+        raise rundir.RunDirError("out", problem)
+
+
 @contextlib.contextmanager
 def _claimed(config: FitConfig, data_path: str):
-    """config.out checked (`check_out`) and locked (`rundir.Lock`) for the block."""
-    check_out(config, data_path)
+    """config.out locked (`rundir.Lock`) for the block, and checked (`check_out`) under the
+    lock (another run may fill it until then)."""
+    _check_folder(config)
     with rundir.Lock(config.out):
-        check_out(config, data_path)  # again: another run may have filled it meanwhile
+        check_out(config, data_path)
         yield
 
 

@@ -63,12 +63,12 @@ def templates(setup: Setup, size: int, rd: RunData, seed: int, g=None):
             view_params.init(recipe, len(rd.train_names), setup.steps, key_head))
 
 
-_shown = jax.jit(render_gaussians)
+shown = jax.jit(render_gaussians)  # the pool as `render` sees it (`pool.render_gaussians`)
 
 
 def pairs(pool: Pool, cam, antialiased: bool = False) -> int:
     """Tile–Gaussian pairs of the pool's active Gaussians in one view (`lgs_jax.count_pairs`)."""
-    return int(count_pairs(_shown(pool.params, pool.active), cam, antialiased=antialiased))
+    return int(count_pairs(shown(pool.params, pool.active), cam, antialiased=antialiased))
 
 
 def walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:

@@ -103,10 +103,12 @@ def over_views(one, devices: int, vectorize: bool = False):
                          out_specs=views, check_vma=False)
 
 
-def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
-                    background, step, idx, per_view=None):
-    """((loss, (mse, stats, visible)), (param grads, screen grads or None, grads of the views'
-    own parameters or None)); `per_view`: the views' own parameters {name: (views, SIZE)}
+def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
+                   background, step, idx, per_view=None):
+    """The loss of `train_step` (module docstring) on views `cams` (stacked, at the images'
+    size) against `targets` (B, H, W, 3) and its gradients: ((loss, (mse, stats, visible)),
+    (param grads, screen grads or None, grads of the views' own parameters or None));
+    `per_view`: the views' own parameters {name: (views, SIZE)}
     (`view_params`), whose rows of the views `idx` move their poses (`camera_opt.adjusted`)
     and correct their renders (`view_params.corrected`: colour maps, bilateral grids), or
     None; their regularizer (the grids' total variation) adds to the loss."""
@@ -168,7 +170,7 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     (active Gaussians)."""
     cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
                                width=targets.shape[2], height=targets.shape[1])
-    (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = _loss_and_grads(
+    (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = loss_and_grads(
         setup, capacity, rows, pool, cams, targets, background, step, idx,
         view_params.params(views))
     opt = optimizer(setup.recipe, setup.steps, setup.scene_scale)

@@ -58,7 +58,8 @@ def _arrays(out, change):
 
 CORRUPTIONS = {
     "truncated": (_truncate, "checkpoint.npz: not a readable .npz file"),
-    "garbled": (_garble, "checkpoint.npz: member pool_0.npy is corrupted"),
+    "garbled": (_garble, "checkpoint.npz: not a readable .npz file (Bad CRC-32 for file "
+                         "'pool_0.npy')"),
     "not json": (lambda out: open(os.path.join(out, "checkpoint.json"), "w").write("{"),
                  "checkpoint.json: not JSON"),
     "no step": (lambda out: _meta(out, lambda m: m.pop("step")),

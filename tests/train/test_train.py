@@ -104,9 +104,9 @@ def test_streamed_views_are_the_steps_views_two_batches_at_most(dtype):
             np.testing.assert_array_equal(np.asarray(idx), views)
             assert targets.dtype == jnp.float32
             np.testing.assert_array_equal(np.asarray(targets), expected[views])
-            assert sorted(source._copies) == [step, step + 1]
+            assert source.held == [step, step + 1]
     streamed.close()
-    assert streamed._worker._shutdown
+    assert streamed.closed
     np.testing.assert_array_equal(np.asarray(streamed.args(3)[0]), expected[views])  # kept
 
 
@@ -459,8 +459,8 @@ def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch,
 
     def wait(s):
         page = urllib.request.urlopen(f"http://127.0.0.1:{s.port}/", timeout=30).read()
-        drawn = [s._server.scene.get_handle_by_name(f"/cameras/{i}") for i in (89, 90)]
-        served.append((b"<html" in page, s._info.content, s._loop.renderer.scene.num,
+        drawn = [s.server.scene.get_handle_by_name(f"/cameras/{i}") for i in (89, 90)]
+        served.append((b"<html" in page, s.status, s.scene.num,
                        [d is not None for d in drawn]))  # the 90 training cameras
         s.stop()
 
