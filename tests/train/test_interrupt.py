@@ -26,7 +26,7 @@ def test_ctrl_c_writes_a_checkpoint_and_prints_how_to_resume(data_dir, tmp_path)
             "32", "--init-points", "100", "--backend", "reference"]
     child = subprocess.Popen([sys.executable, "-m", "lgs_jax", *args], stderr=subprocess.PIPE,
                              stdout=subprocess.PIPE, text=True,
-                             env=dict(os.environ, PYTHONPATH=os.getcwd()))
+                             env=dict(os.environ, PYTHONPATH=os.getcwd(), PYTHONUNBUFFERED="1"))
     deadline, line = time.time() + 300, ""
     while "Gaussians in a pool" not in line and time.time() < deadline:
         line = child.stdout.readline()  # the run's start is logged: its Ctrl-C handler is on
