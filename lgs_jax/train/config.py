@@ -194,5 +194,6 @@ class Setup:
 
     @classmethod
     def of(cls, config: FitConfig, scene_scale: float, backend: str) -> "Setup":
+        """The setup of a run of `config` on data of `scene_scale` with `backend`."""
         return cls(config.recipe, config.strategy, config.steps, scene_scale, backend,
                    config.devices)
