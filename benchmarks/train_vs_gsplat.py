@@ -1,4 +1,4 @@
-"""Training, ours against gsplat 1.5.3's trainer, in one call on one GPU (issue 20).
+"""Training, ours against gsplat 1.5.3's trainer, in one call on one GPU.
 
     python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
         [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
@@ -10,12 +10,12 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
   data     `lgs_jax.load_dataset` (lego: lego_train, 200x200, white background; skull: the COLMAP
            capture, black background), the same split (every 8th image held out; Lego ids
            0, 10, ..., 90), the same views in the same order (`views_for_step`, one per step);
-  start    `init.start_gaussians` (SfM points, or random ones for Lego), the same arrays;
+  start    `init.start_gaussians` (SfM points, or 100,000 random ones for Lego), the same arrays;
   recipe   Adam (eps 1e-15) with lr means 1.6e-4 x scene scale decaying to 1% (ExponentialLR),
            quats 1e-3, scales 5e-3, opacities 5e-2, SH DC 2.5e-3, SH rest 2.5e-3 / 20; loss
-           0.8 L1 + 0.2 (1 - SSIM) with the same 11x11 Gaussian SSIM (zero-padded "same" as the
-           issue asks, or --ssim-padding valid as simple_trainer's fused-ssim; torch conv2d
-           here, checked against ours at start); SH degree +1 every 1000 steps;
+           0.8 L1 + 0.2 (1 - SSIM) with the same 11x11 Gaussian SSIM (zero-padded "same", 3DGS's,
+           or --ssim-padding valid, simple_trainer's fused-ssim; torch conv2d here, checked
+           against ours at start); SH degree +1 every 1000 steps;
   strategy gsplat's `MCMCStrategy(cap_max=cap)` with regularisers 0.01 (opacity, scale) or its
            `DefaultStrategy()`, against ours with the same settings (`lgs_jax.train.strategy`);
   metrics  held-out PSNR / SSIM with scikit-image (`report.heldout_metrics`) every
@@ -25,7 +25,7 @@ Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by defa
 Time per step: the training loop's wall time (one host sync per step in both, as simple_trainer's
 progress bar does) without evaluations; ours also without compilation (both numbers are written;
 compiling ahead in a thread, the default on a GPU, counts only the waits as compilation, so steps
-slowed beside a compile ahead count as steps: use --no-compile-ahead for the steps alone), gsplat's
+slowed beside a compile ahead count as steps: --compile-ahead off for the steps alone), gsplat's
 after one warm-up render (its CUDA extension loaded).
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians), summary.csv
@@ -61,7 +61,7 @@ SCENES = {  # folder in the data root, image downscale, Gaussian cap
 def parse(argv=None) -> argparse.Namespace:
     """The command line (module docstring)."""
     from lgs_jax.config import CONVENTIONS
-    from lgs_jax.train.settings import Settings
+    from lgs_jax.train import FitConfig
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data-root", default=os.environ.get(
@@ -77,30 +77,26 @@ def parse(argv=None) -> argparse.Namespace:
                          "refinement, to tell its effect apart; default: the strategy's)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--backend", help="our differentiable backend (default: pallas on a GPU, "
-                                      "tiles elsewhere; e.g. pallas_vanilla)")
+    ap.add_argument("--backend", help="our backend (default: pallas on a GPU, tiles elsewhere)")
     ap.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
-                    help="our compositing rule (gsplat's trainer always renders as gsplat: "
-                         "alpha cap 0.999)")
+                    help="our compositing rule (gsplat's trainer's: always gsplat's)")
     ap.add_argument("--ssim-padding", choices=["same", "valid"], default="same",
-                    help="the loss's SSIM (both trainers): same (the issue's recipe, 3DGS) or "
-                         "valid (gsplat's simple_trainer)")
+                    help="both trainers' loss SSIM: same (3DGS's) or valid (simple_trainer's)")
     ap.add_argument("--out", default="train_vs_gsplat_out", help="CSVs, JSON and figures")
-    ap.add_argument("--run-dir", help="our runs' directories, checkpoints included (large; "
-                                      "default: a temporary folder)")
+    ap.add_argument("--run-dir", help="our runs' folders (large; default: a temporary one)")
     ap.add_argument("--no-gsplat", action="store_true")
     ap.add_argument("--no-ours", action="store_true")
-    ahead = ap.add_mutually_exclusive_group()
-    ahead.add_argument("--no-compile-ahead", action="store_true",
-                       help="our trainer without compiling ahead of pair-capacity growths")
-    ahead.add_argument("--compile-ahead-process", action="store_true",
-                       help="our trainer compiling ahead in a child process (`fit`'s "
-                            "compile_ahead='process')")
-    ap.add_argument("--pair-headroom", type=float, default=Settings.pair_headroom,
-                    help="our trainer's pair capacity over the pairs needed (Settings."
+    ap.add_argument("--compile-ahead", choices=["thread", "process", "off"],
+                    help="our trainer's compiles ahead of pair-capacity growths "
+                         "(FitConfig.compile_ahead; default: thread on a GPU, off elsewhere)")
+    for flag, mode in (("--no-compile-ahead", "off"), ("--compile-ahead-process", "process")):
+        ap.add_argument(flag, dest="compile_ahead", action="store_const", const=mode,
+                        help=f"the same as --compile-ahead {mode}")
+    ap.add_argument("--pair-headroom", type=float, default=FitConfig.pair_headroom,
+                    help="our trainer's pair capacity over the pairs needed (FitConfig."
                          "pair_headroom; larger: fewer growths and recompiles, larger buffers)")
     ap.add_argument("--row-headroom", type=float, default=None,
-                    help="our trainer's backward rows over the walked pairs (Settings."
+                    help="our trainer's backward rows over the walked pairs (FitConfig."
                          "row_headroom; default: a row per pair slot)")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
@@ -108,8 +104,9 @@ def parse(argv=None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def scene_setup(args, scene: str):
-    """(Dataset, cap, our strategy, our Settings) of a scene."""
+def scene_setup(args, scene: str, out: str = ""):
+    """(Dataset, our FitConfig) of a scene, run into `out`; random starts of gsplat's
+    simple_trainer's size (100,000 points)."""
     import lgs_jax
     from lgs_jax import train
 
@@ -121,10 +118,15 @@ def scene_setup(args, scene: str):
                 else train.DefaultStrategy())
     if args.refine_from is not None:
         strategy = dataclasses.replace(strategy, refine_start_iter=args.refine_from)
-    settings = train.Settings(eval_every=args.eval_every, checkpoint_every=max(args.steps, 1),
-                              ssim_padding=args.ssim_padding, convention=args.convention,
-                              pair_headroom=args.pair_headroom, row_headroom=args.row_headroom)
-    return d, cap, strategy, settings
+    config = train.FitConfig(
+        data=d.path, out=out, steps=args.steps, strategy=strategy,
+        recipe=train.Recipe(ssim_padding=args.ssim_padding, convention=args.convention),
+        max_gaussians=cap, pool_size=cap if args.strategy == "mcmc" else None,
+        init_points=100_000, seed=args.seed, backend=args.backend,
+        pair_headroom=args.pair_headroom, row_headroom=args.row_headroom,
+        compile_ahead=args.compile_ahead, eval_every=args.eval_every,
+        checkpoint_every=max(args.steps, 1), overwrite=True)
+    return d, config
 
 
 def eval_steps(args) -> list[int]:
@@ -139,16 +141,13 @@ def run_ours(args, scene: str) -> dict:
     import jax
 
     from lgs_jax import train
-    from lgs_jax.cli import ahead_mode, use_compile_cache
+    from lgs_jax.cli import use_compile_cache
     from lgs_jax.train import report
 
     use_compile_cache()
-    d, cap, strategy, settings = scene_setup(args, scene)
     out = os.path.join(args.run_dir or tempfile.mkdtemp(prefix="lgs_bench_"), f"{scene}_ours")
-    result = train.fit(d, args.steps, out, strategy=strategy, settings=settings,
-                       max_gaussians=cap, seed=args.seed, overwrite=True, backend=args.backend,
-                       pool_size=cap if args.strategy == "mcmc" else None,
-                       compile_ahead=ahead_mode(args))
+    d, config = scene_setup(args, scene, out)
+    result = train.fit(config, d)
     rows = report.read_metrics(os.path.join(out, "metrics.jsonl"))
     count = {r["step"]: r["gaussians"] for r in rows if "gaussians" in r and "step" in r}
     curve = [dict(step=r["step"], psnr=r["heldout_psnr"], ssim=r["heldout_ssim"],
@@ -206,7 +205,7 @@ def check_torch_ssim() -> float:
     return worst
 
 
-def _gsplat_model(g0, rd, settings, strategy, steps: int, cap: int):
+def _gsplat_model(g0, rd, settings, strategy, steps: int):
     """(params, optimizers, scheduler, gsplat strategy, its state) as simple_trainer builds
     them, from our initial Gaussians and our recipe's rates."""
     import torch
@@ -344,13 +343,14 @@ def run_gsplat(args, scene: str) -> dict:
     torch.backends.cudnn.allow_tf32 = False
     check_torch_ssim()
     torch.manual_seed(args.seed)
-    d, cap, strategy, settings = scene_setup(args, scene)
+    d, config = scene_setup(args, scene)
     rd = prepare(d)
-    g0 = start_gaussians(rd, settings, strategy, args.seed, cap)
+    g0 = start_gaussians(rd, config)
+    settings, strategy = config.recipe, config.strategy
     cuda = DEVICE == "cuda"
     if cuda:
         torch.cuda.reset_peak_memory_stats()
-    model = _gsplat_model(g0, rd, settings, strategy, args.steps, cap)
+    model = _gsplat_model(g0, rd, settings, strategy, args.steps)
     curve, busy = _gsplat_loop(args, rd, model, settings, strategy, print)
     return dict(scene=scene, trainer="gsplat", steps=args.steps, curve=curve,
                 ms_per_step=1e3 * busy / args.steps if args.steps else None,

@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 
 from . import poses
+from .files import written
 from .scene import Camera
 
 
@@ -164,8 +165,15 @@ def render_frames(scene, cameras, output: str = "image", **render_kwargs):
 def write_video(path: str, frames, fps: float = 30.0, quality: float = 8.0) -> int:
     """Write uint8 (height, width, 3) `frames` (an iterable) to `path` as H.264 MP4 (yuv420p,
     imageio-ffmpeg's bundled ffmpeg; `quality` 0–10, its scale); returns the frame count.
+    The video is written under a temporary name beside `path` and renamed at the end
+    (`lgs_jax.files.written`): an error or an interruption leaves no shorter video at `path`.
     Raises `ValueError` for frames of another shape or dtype, or of odd width or height
     (H.264's 4:2:0 chroma needs even sizes; ffmpeg would otherwise rescale them)."""
+    with written(path) as tmp:
+        return _write_frames(tmp, frames, fps, quality)
+
+
+def _write_frames(path: str, frames, fps: float, quality: float) -> int:
     import imageio_ffmpeg
 
     writer, shape, count = None, None, 0

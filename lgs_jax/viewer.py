@@ -94,7 +94,7 @@ def _initial_view(server, cam: Camera, target) -> None:
     server.scene.set_up_direction(tuple(up))
 
 
-def _target(cameras, scene) -> np.ndarray:
+def look_target(cameras, scene) -> np.ndarray:
     """The point the first camera orbits: along its axis, as deep as the opacity-weighted
     centre of the scene's finite means, or without a scene the point nearest the cameras'
     axes (`poses.axes_centre`; one unit ahead where they do not meet), at least 1e-3 ahead."""
@@ -202,10 +202,21 @@ class FrameLoop:
 class Served:
     """A viewer serving in threads (`serve(..., block=False)`): `port`, `show(scene, status)`
     to replace the scene (every browser's view is rendered again; the caller's thread only
-    swaps a reference, so a training loop can call it often) and `stop()`."""
+    swaps a reference, so a training loop can call it often), `scene` and `status` (what it
+    shows), `server` (viser's) and `stop()`."""
 
     def __init__(self, port: int, loop: FrameLoop, server, info, stop):
-        self.port, self._loop, self._server, self._info, self.stop = port, loop, server, info, stop
+        self.port, self._loop, self.server, self._info, self.stop = port, loop, server, info, stop
+
+    @property
+    def scene(self):
+        """The scene shown (None before the first)."""
+        return self._loop.renderer.scene
+
+    @property
+    def status(self) -> str:
+        """The status text above the frame reports."""
+        return self._info.content
 
     def show(self, scene, status: str | None = None) -> None:
         """Render `scene` from now on (Gaussians of any size: a new size compiles once);
@@ -213,7 +224,7 @@ class Served:
         self._loop.renderer.scene = scene
         if status is not None:
             self._info.content = status
-        for client in self._server.get_clients().values():
+        for client in self.server.get_clients().values():
             self._loop.request(client)
 
 
@@ -231,13 +242,15 @@ def serve(scene, cameras, *, start: int = 0, host: str = "0.0.0.0", port: int = 
     the server runs in threads until its `stop()`."""
     if output not in OUTPUTS:
         raise ValueError(f"output: expected one of {OUTPUTS}, got {output!r}")
+    if not (isinstance(port, int) and not isinstance(port, bool) and 1 <= port <= 65535):
+        raise ValueError(f"port: expected a TCP port from 1 to 65535, got {port!r}")
     try:
         import viser
     except ImportError:
         raise RuntimeError('the viewer needs viser: pip install "lgs_jax[viewer]"') from None
     server = viser.ViserServer(host=host, port=port, verbose=False)
     first = [cameras[start]] + [c for i, c in enumerate(cameras) if i != start]
-    _initial_view(server, first[0], _target(first, scene))
+    _initial_view(server, first[0], look_target(first, scene))
     size = server.gui.add_slider("max size", min=64, max=4096, step=16,
                                  initial_value=int(max_size))
     output = server.gui.add_dropdown("output", OUTPUTS, initial_value=output)

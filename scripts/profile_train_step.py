@@ -1,4 +1,4 @@
-"""Where a training step's time goes (issue 18/20): the pieces of `train.step.train_step`
+"""Where a training step's time goes: the pieces of `train.step.train_step`
 timed one by one on a real capture, beside gsplat's forward+backward of the same Gaussians.
 
     python scripts/profile_train_step.py [--data carry/data/skull] [--gaussians 262144]
@@ -14,7 +14,7 @@ size). The per-tile load of the first training view is printed too: pairs in the
 tile and in the busiest 10% of tiles, against the mean (one program per tile runs its pairs
 one after another, so the busiest tiles bound a kernel's time when there are few tiles). The
 pair capacity is `lgs_jax.pair_capacity(pairs, --headroom)` of the view's pairs (1.5: what
-`fit` picks by default, `train.Settings.pair_headroom`; 1: the tightest size, to see what the
+`fit` picks by default, `train.FitConfig.pair_headroom`; 1: the tightest size, to see what the
 stages sized by the capacity cost; below 1 is refused). Rows (median ms of --repeat alternating
 rounds, one training view):
   render        forward image only
@@ -25,7 +25,7 @@ rounds, one training view):
   noise         MCMC's per-step noise on the means
   train_step    `train_step` whole (device time: blocked, no host read)
   train_loop    `train_step` + the host read of its metrics, as `fit` runs it
-  refine        MCMC's refinement (every 100 steps in a run)
+  refine        MCMC's refinement (every 100 steps in a run), its report read back
   gsplat        gsplat's rasterization + backward of Σ image·w (same Gaussians, same view)
 """
 
@@ -45,10 +45,12 @@ def densified_pool(rd, setup, n: int, size: int, seed: int = 0):
     import jax.numpy as jnp
 
     from lgs_jax.scene import Gaussians
-    from lgs_jax.train import init
-    from lgs_jax.train.loop import _templates
+    from lgs_jax.train import FitConfig, init
+    from lgs_jax.train.state import templates
 
-    g0 = init.start_gaussians(rd, setup.settings, setup.strategy, seed, 10**9, log=lambda s: 0)
+    start = FitConfig(data="", out="", strategy=setup.strategy, max_gaussians=10**9, seed=seed,
+                      init_points=100_000)
+    g0 = init.start_gaussians(rd, start, log=lambda s: 0)
     rng = np.random.default_rng(seed)
     k = max(1, -(-n // g0.num))
     idx = np.arange(n) % g0.num
@@ -61,7 +63,7 @@ def densified_pool(rd, setup, n: int, size: int, seed: int = 0):
                   log_scales=jnp.asarray(ls - np.log(k) / 3, jnp.float32),
                   logit_opacities=jnp.asarray(np.asarray(g0.logit_opacities)[idx]),
                   sh=jnp.asarray(sh, jnp.float32))
-    return g, _templates(setup, size, rd, g)[:3]
+    return g, templates(setup, size, rd, seed, g)[:3]
 
 
 def trained_pool(setup, path: str, size: int, rd):
@@ -71,14 +73,14 @@ def trained_pool(setup, path: str, size: int, rd):
 
     from lgs_jax.io.ply import load_ply
     from lgs_jax.scene import Gaussians
-    from lgs_jax.train.loop import _templates
+    from lgs_jax.train.state import templates
 
     g = load_ply(path)
-    bases = (setup.settings.sh_degree + 1) ** 2
+    bases = (setup.recipe.sh_degree + 1) ** 2
     sh = jnp.zeros((g.num, bases, 3), jnp.float32).at[:, :min(bases, g.sh.shape[1])].set(
         g.sh[:, :bases])
     g = Gaussians(g.means, g.quats, g.log_scales, g.logit_opacities, sh)
-    return g, _templates(setup, max(size, g.num), rd, g)[:3]
+    return g, templates(setup, max(size, g.num), rd, 0, g)[:3]
 
 
 def tile_load(pool, cam, capacity: int) -> str:
@@ -119,12 +121,12 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
                             backend=setup.backend, capacity=capacity).image
     fwd = jax.jit(draw)
     bwd = jax.jit(jax.grad(lambda p: jnp.sum(draw(p) * w)))
-    lossg = jax.jit(lambda p: st._loss_and_grads(setup, capacity, None, st.Pool(p, pool.active),
+    lossg = jax.jit(lambda p: st.loss_and_grads(setup, capacity, None, st.Pool(p, pool.active),
                                                   jax.tree.map(lambda x: x[None], cam),
                                                   target[None], bg, jnp.int32(6000),
                                                   jnp.array([0])))
     ssimg = jax.jit(jax.grad(lambda im: losses.loss_fn(im, target, 0.2, "same")))
-    opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
+    opt = optimizer(setup.recipe, setup.steps, setup.scene_scale)
     adam = jax.jit(lambda g_, s_, p_: opt.update(g_, s_, p_))
     noise = jax.jit(lambda p_, k_: ops.inject_noise(p_, k_, 1e-4 * 5e5))
     grads = jax.tree.map(jnp.ones_like, pool.params)
@@ -143,8 +145,8 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
         "noise": lambda: jax.block_until_ready(noise(pool, key)),
         "train_step": lambda: jax.block_until_ready(call()),
         "train_loop": lambda: {k: v.item() for k, v in jax.device_get(call()[4]).items()},
-        "refine": lambda: jax.block_until_ready(st._refine(
-            sstate, pool, opt_state, 6100, key, strategy=setup.strategy, cap=pool.size)),
+        "refine": lambda: st.refine(setup.strategy, sstate, pool, opt_state, 6100, key,
+                                    pool.size),
     }
     if with_gsplat:
         from benchmarks.scale import gsplat_grad_step
@@ -176,20 +178,19 @@ def main(argv=None) -> int:
 
     from benchmarks.common import device_line, median_ms
     from lgs_jax.render import pair_capacity
-    from lgs_jax.train import MCMCStrategy, Settings
+    from lgs_jax.train import MCMCStrategy, Recipe, Setup
     from lgs_jax.train.feed import prepare
-    from lgs_jax.train.loop import _pairs
-    from lgs_jax.train.settings import Setup
+    from lgs_jax.train.state import pairs as pool_pairs
 
     rd = prepare(args.data, args.downscale)
     backend = args.backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
-    setup = Setup(Settings(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, backend)
+    setup = Setup(Recipe(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, backend)
     if args.ply:
         g, (pool, opt_state, sstate) = trained_pool(setup, args.ply, args.pool, rd)
     else:
         g, (pool, opt_state, sstate) = densified_pool(rd, setup, args.gaussians, args.pool)
     cam = jax.tree.map(lambda x: x[0], rd.train_cams)
-    pairs = int(_pairs(pool, cam))
+    pairs = pool_pairs(pool, cam)
     capacity = pair_capacity(pairs, args.headroom)
     fns = rows(rd, setup, g, pool, opt_state, sstate, capacity, not args.no_gsplat)
     ms = median_ms(fns, args.repeat)

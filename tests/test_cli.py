@@ -8,7 +8,7 @@ import pytest
 
 import lgs_jax
 from lgs_jax import cli, video
-from lgs_jax.cli import main
+from lgs_jax.cli import fit as fit_cmd, main
 
 
 def test_render_default_scene_writes_png(tmp_path, capsys):
@@ -82,6 +82,76 @@ def test_unwritable_out_directory_is_refused_before_rendering(tmp_path, capsys, 
     monkeypatch.setattr(lgs_jax, "render", lambda *a, **k: pytest.fail("rendered"))
     assert main(["render", "--out", str(tmp_path / "x.png")]) == 2
     assert "not writable" in _error_line(capsys)
+
+
+@pytest.mark.parametrize("args,match", [
+    (["view", "--port", "70000"], "--port: must be from 1 to 65535, got 70000"),
+    (["fit", "--data", "{tmp}", "--out", "{tmp}/run", "--viewer-port", "0"],
+     "--viewer-port: must be from 1 to 65535, got 0"),
+    (["fit", "--data", "{tmp}", "--out", "{tmp}/run", "--seed", "-1"],
+     "--seed: must be >= 0, got -1"),
+    (["fit", "--data", "{tmp}", "--out", "/proc/lgs_jax_run"], "--out: /proc/lgs_jax_run: "
+                                                               "cannot write there"),
+    (["fit", "--data", "{tmp}", "--out", "{ply}"], "--out: {ply} exists and is not a directory"),
+    (["render", "--out", "/proc/lgs_jax.png"], "--out: /proc/lgs_jax.png: not writable"),
+    (["video", "--out", "/proc/lgs_jax.mp4"], "--out: /proc/lgs_jax.mp4: not writable"),
+    (["eval", "{ply}", "--data", "{tmp}", "--out", "{ply}"], "--out: {ply} is a file, not a "
+                                                              "folder"),
+    (["eval", "{ply}", "--data", "{tmp}", "--out", "/proc/lgs_jax_eval"],
+     "--out: /proc/lgs_jax_eval: cannot make the folder"),
+])
+def test_ports_seeds_and_outputs_are_checked_before_any_work(tmp_path, capsys, monkeypatch,
+                                                            args, match):
+    """Exit code 2 and one line, before anything is loaded, rendered or trained."""
+    from lgs_jax import train
+
+    for owner, name in ((lgs_jax, "load_ply"), (lgs_jax, "default_scene"), (lgs_jax, "render"),
+                        (train, "fit"), (train, "evaluate")):
+        monkeypatch.setattr(owner, name, lambda *a, **k: pytest.fail("work started"))
+    ply = tmp_path / "s.ply"
+    ply.write_text("not read")
+    fill = lambda s: s.format(tmp=tmp_path, ply=ply)
+    try:
+        code = main([fill(a) for a in args])
+    except SystemExit as e:
+        code = e.code
+    assert code == 2
+    assert fill(match) in _error_line(capsys)
+
+
+def test_float64_scenes_render_as_float32_with_a_note(tmp_path, capsys):
+    """Where JAX runs without float64 (the command line's default), a float64 PLY is cast."""
+    import jax
+
+    from lgs_jax.cli.args import load_scene
+
+    ply = tmp_path / "s64.ply"
+    g = lgs_jax.default_scene()
+    lgs_jax.save_ply(ply, jax.tree.map(lambda x: np.asarray(x, np.float64), g))
+    before = jax.config.jax_enable_x64
+    jax.config.update("jax_enable_x64", False)
+    try:
+        scene = load_scene(str(ply))
+    finally:
+        jax.config.update("jax_enable_x64", before)
+    assert scene.means.dtype == np.float32 and scene.num == g.num
+    np.testing.assert_array_equal(scene.means, np.asarray(g.means, np.float32))
+    assert "holds float64 values; rendering them as float32 (JAX_ENABLE_X64=1" in \
+        capsys.readouterr().err
+
+
+def test_a_ply_given_as_cameras_is_named(tmp_path, capsys):
+    ply = tmp_path / "s.ply"
+    lgs_jax.save_ply(ply, lgs_jax.default_scene())
+    assert main(["render", str(ply), "--cameras", str(ply), "--out", str(tmp_path / "x.png")]) == 1
+    assert f"{ply}: not a cameras file (binary, not JSON text" in _error_line(capsys)
+
+
+def test_the_viewer_refuses_ports_out_of_range():
+    from lgs_jax import viewer
+
+    with pytest.raises(ValueError, match="port: expected a TCP port from 1 to 65535, got 70000"):
+        viewer.serve(None, [lgs_jax.default_camera()], port=70000)
 
 
 @pytest.mark.parametrize("content,size,match", [
@@ -204,11 +274,90 @@ def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
         jax.config.update("jax_compilation_cache_dir", session)
 
 
-@pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], False),
-                                        (["--compile-ahead-process"], "process")])
+@pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], "off"),
+                                        (["--compile-ahead-process"], "process"),
+                                        (["--compile-ahead", "thread"], "thread")])
 def test_fit_compile_ahead_flags(flags, want):
     args = cli.parser().parse_args(["fit", "--data", "d", "--out", "o", *flags])
-    assert cli.ahead_mode(args) == want
+    assert fit_cmd.config_of(args).compile_ahead == want
+
+
+def _fit_parser():
+    import argparse
+
+    sub = next(a for a in cli.parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices["fit"]
+
+
+def _changed(o, default):
+    """A value of option `o`'s field other than `default` that its bounds allow."""
+    import typing
+
+    from lgs_jax.train.options import split_optional
+
+    t, _ = split_optional(o.type)
+    meta = o.field.metadata
+    if t is bool:
+        return not default
+    if typing.get_origin(t) is typing.Literal or meta.get("choices"):
+        known = typing.get_args(t) or meta["choices"]
+        return next((v for v in known if v != default), default)
+    if t is str:
+        return f"{o.dest}-x"
+    if typing.get_origin(t) is tuple:
+        return (1, 2, 3, 4)
+    low, high = meta.get("low"), meta.get("high")
+    base = default if default is not None else (low or 0) + 1
+    value = t(base + 1) if t is int else base * 0.5 + 0.25
+    return value if high is None or value <= high else t(high - (high - (low or 0)) / 2)
+
+
+def test_fit_options_and_fit_config_cannot_drift():
+    """The fit command line is FitConfig's: every field (its Recipe's and the strategies'
+    included) has an option of its name, every option sets a field (or is in one of
+    lgs_jax.cli.fit's tables: ALIASES, DERIVED, CLI_ONLY), the defaults agree, and the options
+    of a configuration with every field changed parse back to that configuration."""
+    import typing
+
+    from lgs_jax import train
+
+    fit = _fit_parser()
+    flags = {f for a in fit._actions for f in a.option_strings} - {"-h", "--help"}
+    config, strategy = fit_cmd.config_options(), fit_cmd.strategy_options()
+    made = {o.flag for o in config + strategy} | {"--strategy"}
+    negated = {"--no-" + o.flag[2:] for o in config + strategy if o.type is not bool
+               and typing.get_args(o.type) and bool in typing.get_args(o.type)}
+    negated |= {"--no-" + o.flag[2:] for o in strategy if o.type is bool}
+    assert flags == made | negated | set(fit_cmd.ALIASES) | set(fit_cmd.CLI_ONLY)
+    fields = {f.name for f in dataclasses.fields(train.FitConfig)} - {"recipe", "strategy"}
+    fields |= {f.name for f in dataclasses.fields(train.Recipe)}
+    assert {o.dest for o in config} == fields and len(config) == len(fields)
+    for cls in train.STRATEGIES.values():
+        names = {f.name for f in dataclasses.fields(cls)}
+        assert names <= {o.dest for o in strategy} | set(fit_cmd.DERIVED)
+    dests = [o.dest for o in config + strategy]
+    assert len(dests) == len(set(dests))  # one option per name
+    minimal = ["fit", "--data", "d", "--out", "o"]
+    args = cli.parser().parse_args(minimal)
+    assert fit_cmd.config_of(args) == train.FitConfig(data="d", out="o")
+    for o in config:
+        want = o.field.default if o.field.default is not dataclasses.MISSING else getattr(
+            args, o.dest)
+        assert getattr(args, o.dest) == want, o.flag
+    assert all(getattr(args, o.dest) is None for o in strategy)  # the strategy's own
+    for name, cls in train.STRATEGIES.items():
+        top = {o.dest: _changed(o, o.field.default) for o in config if o.path[0] != "recipe"}
+        top.update(data="d", out="o", resume=True, overwrite=False, devices=2)
+        recipe = train.Recipe(**{o.dest: _changed(o, o.field.default) for o in config
+                                 if o.path[0] == "recipe"} | dict(batch=4))
+        fields = {f.name: _changed(next(o for o in strategy if o.dest == f.name), f.default)
+                  for f in dataclasses.fields(cls) if f.name not in fit_cmd.DERIVED}
+        fields |= {f: top[src] for f, src in fit_cmd.DERIVED.items() if f in
+                   {g.name for g in dataclasses.fields(cls)}}
+        changed = train.FitConfig(**top, recipe=recipe, strategy=cls(**fields))
+        words = fit_cmd.argv(changed)
+        assert fit_cmd.config_of(cli.parser().parse_args(["fit"] + words)) == changed, name
+        assert changed != train.FitConfig(data="d", out="o")
 
 
 def test_fit_compile_ahead_flags_exclude_each_other(capsys):

@@ -101,6 +101,26 @@ def test_written_video_decodes_to_the_frames(tmp_path):
         assert 10 * np.log10(255 ** 2 / mse) > 30
 
 
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError])
+def test_an_interrupted_video_leaves_no_file(tmp_path, stop):
+    """Ctrl-C (or a failure) after two frames: no shorter video under the name asked for, an
+    older one there kept, no temporary left."""
+    def frames():
+        for k in range(4):
+            if k == 2:
+                raise stop("stopped")
+            yield np.full((8, 8, 3), 40 * k, np.uint8)
+
+    with pytest.raises(stop):
+        video.write_video(str(tmp_path / "v.mp4"), frames())
+    assert os.listdir(tmp_path) == []
+    (tmp_path / "old.mp4").write_bytes(b"an older video")
+    with pytest.raises(stop):
+        video.write_video(str(tmp_path / "old.mp4"), frames())
+    assert os.listdir(tmp_path) == ["old.mp4"]
+    assert (tmp_path / "old.mp4").read_bytes() == b"an older video"
+
+
 @pytest.mark.parametrize("frames,match", [
     ([np.zeros((9, 8, 3), np.uint8)], "even width and height, got 8x9"),
     ([np.zeros((8, 8, 3), np.float32)], r"expected \(height, width, 3\) uint8"),

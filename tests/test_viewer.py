@@ -180,11 +180,11 @@ def test_a_growing_scene_grows_the_pair_buffer_with_headroom():
 
 def test_a_viewer_without_a_scene_looks_where_the_cameras_look():
     cams = [lgs_jax.default_camera(v) for v in range(4)]
-    target = viewer._target(cams, None)
+    target = viewer.look_target(cams, None)
     centre, rot = viewer.poses.pose(cams[0])
     np.testing.assert_allclose(target, centre + rot[2] * (rot[2] @ (
         viewer.poses.axes_centre(cams) - centre)), atol=1e-9)
-    np.testing.assert_allclose(viewer._target(cams[:1], None), centre + rot[2])
+    np.testing.assert_allclose(viewer.look_target(cams[:1], None), centre + rot[2])
 
 
 @pytest.mark.parametrize("args,match", [

@@ -7,12 +7,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import tempfile
 
 from ..config import CONVENTIONS
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tiff", ".webp")  # matplotlib.image.imsave writes
 VIDEO_EXTENSIONS = (".mp4",)  # lgs_jax.video.write_video (H.264)
-EXIT_FAILURE, EXIT_USAGE = 1, 2
+EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 
 
 class UsageError(Exception):
@@ -26,8 +27,8 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def number_at_least(low, kind=int):
-    """An argparse type: a finite number of `kind` (int or float) >= `low`."""
+def number_at_least(low, kind=int, high=None):
+    """An argparse type: a finite number of `kind` (int or float) >= `low` (and <= `high`)."""
     name = "an integer" if kind is int else "a number"
 
     def parse(text: str):
@@ -37,8 +38,9 @@ def number_at_least(low, kind=int):
             raise argparse.ArgumentTypeError(f"expected {name}, got {text!r}") from None
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if v < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
+        if v < low or (high is not None and v > high):
+            bound = f">= {low}" if high is None else f"from {low} to {high}"
+            raise argparse.ArgumentTypeError(f"must be {bound}, got {v}")
         return v
     return parse
 
@@ -49,6 +51,7 @@ def int_at_least(low: int):
 
 
 finite_float = number_at_least(-math.inf, float)  # an argparse type: a finite float
+port = number_at_least(1, int, 65535)  # an argparse type: a TCP port
 
 
 def check_input(path: str, what: str) -> None:
@@ -61,7 +64,7 @@ def check_input(path: str, what: str) -> None:
 
 def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") -> None:
     """Raise `UsageError` unless `path` can be written as `kind`: one of `extensions` in an
-    existing, writable directory (checked before rendering, not after)."""
+    existing directory where a file can be written (checked before rendering, not after)."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in extensions:
         raise UsageError(f"--out: {path}: extension {ext or '(none)'!r} is not {kind} format "
@@ -71,8 +74,32 @@ def check_out(path: str, extensions=IMAGE_EXTENSIONS, kind: str = "an image") ->
         raise UsageError(f"--out: {path}: directory {folder} does not exist")
     if os.path.isdir(path):
         raise UsageError(f"--out: {path} is a directory")
-    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)) \
+            or not _writable(folder):
         raise UsageError(f"--out: {path}: not writable")
+
+
+def check_out_dir(path: str) -> None:
+    """Raise `UsageError` unless folder `path` exists or can be made, and takes files (it is
+    made here)."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise UsageError(f"--out: {path} is a file, not a folder")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:
+        raise UsageError(f"--out: {path}: cannot make the folder ({e.strerror or e})") from None
+    if not (os.access(path, os.W_OK) and _writable(path)):
+        raise UsageError(f"--out: {path}: not writable")
+
+
+def _writable(folder: str) -> bool:
+    """Whether a file can be made in `folder` (tried: permission bits do not tell for root,
+    nor on file systems such as /proc)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
 
 
 def view_options(p, sizes: bool = True) -> None:
@@ -105,6 +132,26 @@ def view_options(p, sizes: bool = True) -> None:
                    metavar=("R", "G", "B"), help="background colour (default: 0 0 0, black)")
 
 
+def load_scene(path: str | None):
+    """The scene to render: the PLY at `path` (float64 values cast to float32, with a note,
+    where JAX runs without float64: JAX_ENABLE_X64=1 keeps them), or the bundled default."""
+    import sys
+
+    import jax
+    import numpy as np
+
+    import lgs_jax
+
+    if path is None:
+        return lgs_jax.default_scene()
+    scene = lgs_jax.load_ply(path)
+    if scene.means.dtype == np.float64 and not jax.config.jax_enable_x64:
+        print(f"note: {path} holds float64 values; rendering them as float32 "
+              f"(JAX_ENABLE_X64=1 keeps float64)", file=sys.stderr)
+        scene = jax.tree.map(lambda x: np.asarray(x, np.float32), scene)
+    return scene
+
+
 def capture_cameras(args, purpose: str):
     """--cameras at --width/--height where the command has them (`Camera.resized` rules), or
     None for the default scene; a usage error for a file without cameras, or a scene file
@@ -112,8 +159,12 @@ def capture_cameras(args, purpose: str):
     import lgs_jax
 
     if args.cameras:
-        cams = lgs_jax.load_cameras(args.cameras, width=getattr(args, "width", None),
-                                    height=getattr(args, "height", None))
+        try:
+            cams = lgs_jax.load_cameras(args.cameras, width=getattr(args, "width", None),
+                                        height=getattr(args, "height", None))
+        except UnicodeDecodeError:
+            raise ValueError(f"{args.cameras}: not a cameras file (binary, not JSON text: a "
+                             f"PLY scene?)") from None
         if not cams:
             raise UsageError(f"--cameras: {args.cameras} holds no cameras")
         return cams

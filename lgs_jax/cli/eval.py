@@ -6,7 +6,8 @@ from __future__ import annotations
 import json
 import os
 
-from .args import check_dataset, check_input, int_at_least, raster_config
+from .args import (check_dataset, check_input, check_out_dir, int_at_least, load_scene,
+                   raster_config)
 from ..config import CONVENTIONS
 
 
@@ -39,12 +40,13 @@ def parser(sub, common) -> None:
 
 def run(args) -> int:
     """`eval`: check the paths, load, render, score, print."""
-    import lgs_jax
     from lgs_jax import train
 
     check_input(args.scene, "scene")
     check_dataset(args.data)
-    result = train.evaluate(lgs_jax.load_ply(args.scene), args.data, split=args.split,
+    if args.out:
+        check_out_dir(args.out)
+    result = train.evaluate(load_scene(args.scene), args.data, split=args.split,
                             downscale=args.downscale, backend=args.backend,
                             config=raster_config(args), out=args.out)
     for v in result["views"]:

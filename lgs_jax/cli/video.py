@@ -8,8 +8,8 @@ import time
 import numpy as np
 
 from .args import (VIDEO_EXTENSIONS, UsageError, capture_cameras, check_input, check_out,
-                       finite_float, int_at_least, number_at_least, raster_config,
-                       view_options)
+                   finite_float, int_at_least, load_scene, number_at_least, raster_config,
+                   view_options)
 
 
 def parser(sub, common) -> None:
@@ -54,7 +54,6 @@ def run(args) -> int:
     import jax
     from tqdm import tqdm
 
-    import lgs_jax
     from lgs_jax import video
 
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
@@ -67,7 +66,7 @@ def run(args) -> int:
                 else video.camera_path(cams, args.frames))
     except ValueError as e:
         raise UsageError(f"--path {args.path}: {e}") from None
-    scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
+    scene = load_scene(args.scene)
     frames = video.render_frames(
         scene, tqdm(path, desc="frames", unit="frame"), args.output, backend=args.backend,
         background=np.asarray(args.background, np.float32),

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .args import (capture_cameras, check_input, int_at_least, pick_view, raster_config,
-                       view_options)
+from .args import (capture_cameras, check_input, int_at_least, load_scene, pick_view, port,
+                   raster_config, view_options)
 
 
 def parser(sub, common) -> None:
@@ -23,7 +23,7 @@ def parser(sub, common) -> None:
     v.add_argument("--view", type=int_at_least(0),
                    help="the camera to start at (default: 0 of --cameras; for the default "
                         "scene its framing camera)")
-    v.add_argument("--port", type=int_at_least(1), default=8080,
+    v.add_argument("--port", type=port, default=8080,
                    help="HTTP port (default: 8080; the next free one if taken)")
     v.add_argument("--host", default="0.0.0.0", help="address to listen on (default: all)")
     v.add_argument("--max-size", type=int_at_least(16), default=1024,
@@ -33,14 +33,13 @@ def parser(sub, common) -> None:
 
 def run(args) -> int:
     """`view`: check the arguments, load, serve until Ctrl-C."""
-    import lgs_jax
     from lgs_jax import viewer
 
     for path, what in ((args.scene, "scene"), (args.cameras, "--cameras")):
         if path:
             check_input(path, what)
     cams, start = _cameras(args)
-    scene = lgs_jax.load_ply(args.scene) if args.scene else lgs_jax.default_scene()
+    scene = load_scene(args.scene)
     viewer.serve(scene, cams, start=start, host=args.host, port=args.port,
                  max_size=args.max_size, output=args.output, backend=args.backend,
                  background=np.asarray(args.background, np.float32), config=raster_config(args))
@@ -61,21 +60,21 @@ def _cameras(args):
     return ([chosen] + orbit, 0) if args.view is None else (orbit, args.view)
 
 
-def training_viewer(args, data):
+def training_viewer(args, config, data):
     """(watch, served) for `fit --viewer-port`: a viewer of the training cameras of `data` (a
-    `Dataset`; all of them with --train-on-all), starting at the first, and `fit`'s `watch`
-    that shows each scene it is given, with the step, the active Gaussians and the training
-    loss and PSNR above the frames."""
+    `Dataset`; all of them with config.train_on_all), starting at the first, and `fit`'s
+    `watch` that shows each scene it is given, with the step, the active Gaussians and the
+    training loss and PSNR above the frames."""
     from lgs_jax import viewer
 
-    cams = list(data.cameras) if args.train_on_all else [data.cameras[i] for i in data.train]
+    cams = list(data.cameras) if config.train_on_all else [data.cameras[i] for i in data.train]
     served = viewer.serve(None, cams, host=args.viewer_host, port=args.viewer_port,
-                          max_size=1024, block=False, headroom=2.0, backend=args.backend,
+                          max_size=1024, block=False, headroom=2.0, backend=config.backend,
                           background=np.asarray(data.background, np.float32),
-                          config=raster_config(args))
+                          config=config.recipe.raster)
 
     def watch(step: int, gaussians, metrics: dict) -> None:
-        text = f"step {step} of {args.steps}, {metrics['gaussians']:,} Gaussians"
+        text = f"step {step} of {config.steps}, {metrics['gaussians']:,} Gaussians"
         if "loss" in metrics:
             text += f", loss {metrics['loss']:.4f}, PSNR {metrics['psnr']:.2f} dB"
         served.show(gaussians, text)

@@ -1,4 +1,4 @@
-"""Appearance embeddings (`Settings.app_opt`, `fit --app-opt`): a photo collection whose
+"""Appearance embeddings (`Recipe.app_opt`, `fit --app-opt`): a photo collection whose
 lighting, exposure or processing changes between photos in ways that differ over the scene (a
 cloud's shadow, lamps switched on), which one colour map per view (`color_opt`) or per image
 region (`bilateral_grid`) cannot follow: gsplat simple_trainer's `--app_opt`, in a form that
@@ -54,13 +54,13 @@ SIZE = EMBED  # the `view_params` part "embed": this module
 HIGHEST = jax.lax.Precision.HIGHEST
 
 
-def enabled(settings) -> bool:
-    return settings.app_opt
+def enabled(recipe) -> bool:
+    return recipe.app_opt
 
 
-def optimizer(settings, steps: int):
+def optimizer(recipe, steps: int):
     """The embeddings' optimizer (module docstring; constant over the `steps`)."""
-    return torch_adam(10 * settings.lr_app * math.sqrt(settings.batch), settings.app_reg)
+    return torch_adam(10 * recipe.lr_app * math.sqrt(recipe.batch), recipe.app_reg)
 
 
 def project(p):
@@ -142,14 +142,14 @@ class _Head:
 
     shared = True
 
-    def enabled(self, settings) -> bool:
-        return settings.app_opt
+    def enabled(self, recipe) -> bool:
+        return recipe.app_opt
 
-    def init(self, settings, views: int, key):
+    def init(self, recipe, views: int, key):
         return init_head(key)
 
-    def optimizer(self, settings, steps: int):
-        return torch_adam(settings.lr_app * math.sqrt(settings.batch), settings.app_reg)
+    def optimizer(self, recipe, steps: int):
+        return torch_adam(recipe.lr_app * math.sqrt(recipe.batch), recipe.app_reg)
 
     def project(self, p):
         return p

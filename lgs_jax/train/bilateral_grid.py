@@ -1,4 +1,4 @@
-"""Per-view bilateral grids (`Settings.bilateral_grid`, `fit --bilateral-grid`): gsplat
+"""Per-view bilateral grids (`Recipe.bilateral_grid`, `fit --bilateral-grid`): gsplat
 simple_trainer's `--use_bilateral_grid` (Wang et al. 2024, "Bilateral Guided Radiance Field
 Processing", gsplat's examples/lib_bilagrid.py), for photos whose camera processing (tone
 curves, local exposure, white balance) varies over the image and between photos: a colour map
@@ -53,8 +53,8 @@ WARMUP = 1000  # steps of the linear warm-up
 HIGHEST = jax.lax.Precision.HIGHEST
 
 
-def enabled(settings) -> bool:
-    return settings.bilateral_grid
+def enabled(recipe) -> bool:
+    return recipe.bilateral_grid
 
 
 def _hat(t, n: int):
@@ -99,21 +99,21 @@ def total_variation(p):
     return sum(jnp.mean(jnp.diff(g, axis=axis) ** 2) for axis in (2, 3, 4))
 
 
-def regularizer(settings, p):
+def regularizer(recipe, p):
     """The loss's term of the grids p (views, SIZE): tv_weight · TV(p)."""
-    return settings.grid_tv * total_variation(p)
+    return recipe.grid_tv * total_variation(p)
 
 
-def schedule(settings, steps: int):
+def schedule(recipe, steps: int):
     """The grids' learning rate at update s (module docstring)."""
-    lr = settings.lr_grid * math.sqrt(settings.batch)
+    lr = recipe.lr_grid * math.sqrt(recipe.batch)
     decay = optax.exponential_decay(1.0, max(steps, 1), 0.01)
     return lambda s: lr * (0.01 + 0.99 * jnp.minimum(s, WARMUP) / WARMUP) * decay(s)
 
 
-def optimizer(settings, steps: int) -> optax.GradientTransformation:
+def optimizer(recipe, steps: int) -> optax.GradientTransformation:
     """The grids' optimizer (module docstring)."""
-    return torch_adam(schedule(settings, steps), 0.0, eps=1e-15)
+    return torch_adam(schedule(recipe, steps), 0.0, eps=1e-15)
 
 
 def save(path: str, p, names) -> None:

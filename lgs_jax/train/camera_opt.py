@@ -1,4 +1,4 @@
-"""Camera pose optimization (`Settings.pose_opt`, `fit --pose-opt`): gsplat simple_trainer's
+"""Camera pose optimization (`Recipe.pose_opt`, `fit --pose-opt`): gsplat simple_trainer's
 `--pose_opt` (its CameraOptModule), for captures whose poses are off by a little.
 
 Each training view i has a 9-vector δ_i = (t, r) (zero at the start): t a translation and r a
@@ -59,13 +59,13 @@ def adjusted(cams: Camera, deltas) -> Camera:
 SIZE = 9  # the delta's length (`view_params`)
 
 
-def enabled(settings) -> bool:
-    return settings.pose_opt
+def enabled(recipe) -> bool:
+    return recipe.pose_opt
 
 
-def optimizer(settings, steps: int) -> optax.GradientTransformation:
+def optimizer(recipe, steps: int) -> optax.GradientTransformation:
     """The deltas' optimizer (module docstring; constant over the `steps`)."""
-    return torch_adam(settings.lr_pose * math.sqrt(settings.batch), settings.pose_reg)
+    return torch_adam(recipe.lr_pose * math.sqrt(recipe.batch), recipe.pose_reg)
 
 
 def project(deltas):

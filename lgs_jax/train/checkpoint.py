@@ -1,13 +1,11 @@
-"""Run directories and checkpoints.
-
-A run directory holds one run (`run_dir_problem`): a non-empty one needs resume (and a
-checkpoint) or overwrite (the old run's files are deleted first). A checkpoint is
-`checkpoint.npz` (every array of the pool, active mask and free slots included, of the
-optimizer state and of the strategy state) plus `checkpoint.json` (step, pair capacities, pool
-size, seed, skipped steps, and the run's configuration), written atomically (a temporary file,
-then a rename). Resuming restores those bits exactly: with the same configuration, a resumed run
-continues bit-identically to an uninterrupted one (views and random keys depend only on the step
-and the seed). `scene.ply` beside it holds the active Gaussians.
+"""Checkpoints: `checkpoint.npz` (every array of the pool, active mask and free slots included, of
+the optimizer state, of the strategy state and of the views' own parameters, plus the step)
+and `checkpoint.json` (step, pair capacities, pool size, skipped steps, the run's configuration
+and its data), each written whole (`lgs_jax.files.written`). Resuming restores those bits
+exactly: with the same configuration, a resumed run continues bit-identically to an
+uninterrupted one (views and random keys depend only on the step and the seed). A checkpoint
+that cannot be read, or does not fit the run, raises `CheckpointError` naming the file and the
+problem before anything in the folder changes.
 """
 
 from __future__ import annotations
@@ -15,108 +13,159 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import re
+import zipfile
+import zlib
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-RUN_FILES = ("scene.ply", "checkpoint.npz", "checkpoint.json", "metrics.jsonl", "result.json",
-             "curves.png", "cameras.json", "colors.json", "bilateral_grids.npz",
-             "appearance.npz", "optimizer.npz")  # optimizer.npz: runs of the fixed-count trainer
+from ..files import written
+
 PARTS = ("pool", "opt", "strategy", "views")  # views: `view_params`' state, None without it
+META = dict(step=0, capacity=1, eval_capacity=1, pool_size=1, skipped=0)  # int fields, minimum
 
 
-def run_files(out: str) -> list[str]:
-    """The files a run wrote into `out`: RUN_FILES and the held-out renders."""
-    return [n for n in os.listdir(out)
-            if n in RUN_FILES or re.fullmatch(r"heldout_.+\.png", n)]
+class CheckpointError(ValueError):
+    """A checkpoint file that cannot be resumed from: the file and the problem."""
+
+    def __init__(self, path: str, problem: str):
+        super().__init__(f"{path}: {problem}; fix or remove it, or start a new run (--overwrite)")
+        self.path = path
 
 
-def run_dir_problem(out: str, resume: bool = False, overwrite: bool = False) -> str | None:
-    """Why the run directory `out` cannot take this run, or None if it can.
-
-    A new or empty directory always can; one holding files needs `resume` (and a checkpoint to
-    resume from) or `overwrite` (its previous run's files are deleted), so two runs never mix.
-    """
-    if resume and overwrite:
-        return "resume and overwrite exclude each other"
-    if os.path.exists(out) and not os.path.isdir(out):
-        return f"{out} exists and is not a directory"
-    if not os.path.isdir(out) or not os.listdir(out) or overwrite:
-        return None
-    if resume:
-        if os.path.exists(os.path.join(out, "checkpoint.json")):
-            return None
-        return f"{out} holds files but no checkpoint.json to resume from"
-    return (f"{out} is not empty (it holds {', '.join(sorted(os.listdir(out))[:3])}, ...); "
-            "pass --resume (resume=True) to continue its run or --overwrite (overwrite=True) "
-            "to replace it")
+def config_of(config) -> dict:
+    """What a resumed run must share with the saved one: the recipe, train_on_all, the strategy
+    and the seed (not the run length, the backend, the evaluation and checkpoint periods, the
+    buffers' headrooms, the images' streaming, the start: none changes a resumed run's
+    result)."""
+    settings = dict(dataclasses.asdict(config.recipe), train_on_all=config.train_on_all)
+    return dict(strategy=type(config.strategy).__name__,
+                strategy_settings=dataclasses.asdict(config.strategy), settings=settings,
+                seed=config.seed)
 
 
-def config_of(setup, seed: int) -> dict:
-    """The configuration a resumed run must share with the saved one (all but the run length,
-    the backend, the evaluation/checkpoint periods, the pair and row headrooms, the images'
-    streaming: none changes a result)."""
-    settings = dataclasses.asdict(setup.settings)
-    for k in ("eval_every", "checkpoint_every", "pair_headroom", "row_headroom",
-              "stream_images"):
-        settings.pop(k)
-    return dict(strategy=type(setup.strategy).__name__,
-                strategy_settings=dataclasses.asdict(setup.strategy), settings=settings,
-                seed=seed)
+def default_config(config) -> dict:
+    """`config_of` the default recipe and strategy (of config's strategy type): what a field
+    that a checkpoint predates counts as (`config_mismatch`)."""
+    from .config import Recipe
+
+    return config_of(dataclasses.replace(config, recipe=Recipe(),
+                                         strategy=type(config.strategy)()))
+
+
+def data_of(config, data_path: str) -> dict:
+    """The data a run trains on, as recorded: the dataset folder (real path), downscale, crop
+    and the images' type."""
+    return dict(path=os.path.realpath(data_path), downscale=config.downscale,
+                crop=None if config.crop is None else list(config.crop),
+                uint8_images=config.uint8_images)
+
+
+def describe(data: dict) -> str:
+    """`data_of`'s record in words."""
+    text = f"{data.get('path')} at downscale {data.get('downscale')}"
+    if data.get("crop"):
+        text += f", crop {' '.join(map(str, data['crop']))}"
+    return text + (", 8-bit images" if data.get("uint8_images") else "")
 
 
 def save(out: str, state: tuple, meta: dict) -> None:
-    """Write (pool, opt_state, strategy_state, views) and `meta` (json-able) as the
-    checkpoint."""
+    """Write (pool, opt_state, strategy_state, views) and `meta` (json-able, with its step) as
+    the checkpoint."""
     arrays = {f"{name}_{i}": np.asarray(x) for name, part in zip(PARTS, state)
               for i, x in enumerate(jax.tree.leaves(part))}
-    tmp = os.path.join(out, "checkpoint.tmp.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, os.path.join(out, "checkpoint.npz"))
-    with open(os.path.join(out, "checkpoint.tmp.json"), "w") as f:
+    with written(os.path.join(out, "checkpoint.npz")) as tmp:
+        np.savez(tmp, step=np.int64(meta["step"]), **arrays)
+    with written(os.path.join(out, "checkpoint.json")) as tmp, open(tmp, "w") as f:
         json.dump(meta, f, indent=1)
-    os.replace(os.path.join(out, "checkpoint.tmp.json"), os.path.join(out, "checkpoint.json"))
 
 
 def read_meta(out: str) -> dict:
-    """checkpoint.json; ValueError for a checkpoint this version cannot resume."""
-    with open(os.path.join(out, "checkpoint.json")) as f:
-        meta = json.load(f)
-    if "config" not in meta or not os.path.exists(os.path.join(out, "checkpoint.npz")):
+    """checkpoint.json, checked (`CheckpointError`), beside a zip file of arrays; ValueError for
+    a checkpoint of an older lgs_jax.train."""
+    path = os.path.join(out, "checkpoint.json")
+    try:
+        with open(path) as f:
+            meta = json.load(f)
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise CheckpointError(path, f"not JSON ({e})") from None
+    if not isinstance(meta, dict):
+        raise CheckpointError(path, f"expected a JSON object, got {type(meta).__name__}")
+    arrays = os.path.join(out, "checkpoint.npz")
+    if "config" not in meta:
         raise ValueError(f"resume: {out} holds a checkpoint of an older lgs_jax.train (no "
-                         "checkpoint.npz); start a new run (--overwrite)")
+                         "configuration in checkpoint.json); start a new run (--overwrite)")
+    for key, low in META.items():
+        v = meta.get(key)
+        if not isinstance(v, int) or isinstance(v, bool) or v < low:
+            raise CheckpointError(path, f"{key}: expected an int >= {low}, got {v!r}")
+    if meta.get("rows") is not None and not (isinstance(meta["rows"], int) and meta["rows"] > 0):
+        raise CheckpointError(path, f"rows: expected null or an int >= 1, got {meta['rows']!r}")
+    if not isinstance(meta["config"], dict) or not isinstance(meta.get("data", {}), dict):
+        raise CheckpointError(path, "config and data: expected JSON objects")
+    if not os.path.exists(arrays):
+        raise CheckpointError(arrays, "missing (checkpoint.json names a checkpoint it lacks)")
+    try:
+        with zipfile.ZipFile(arrays):  # its directory (at the end: a truncated file has none);
+            pass  # the members' bytes are checked as `restore` reads them
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as e:
+        raise CheckpointError(arrays, f"not a readable .npz file ({e or type(e).__name__})") \
+            from None
     return meta
 
 
-def restore(out: str, templates: tuple) -> tuple:
-    """(pool, opt_state, strategy_state, views) from the checkpoint, shaped like `templates`
-    (the same structures at the saved pool size)."""
-    saved = np.load(os.path.join(out, "checkpoint.npz"))
+def restore(out: str, templates: tuple, step: int) -> tuple:
+    """(pool, opt_state, strategy_state, views) from the checkpoint of `step`, shaped like
+    `templates` (the same structures at the saved pool size); `CheckpointError` for arrays
+    missing, of other shapes or types, or of another step."""
+    path = os.path.join(out, "checkpoint.npz")
+    try:
+        with np.load(path) as saved:
+            arrays = {k: saved[k] for k in saved.files}
+    except (zipfile.BadZipFile, EOFError, OSError, zlib.error, ValueError) as e:
+        raise CheckpointError(path, f"not a readable .npz file ({e or type(e).__name__})") \
+            from None
+    if "step" in arrays and int(arrays["step"]) != step:  # written before the step's .json
+        raise CheckpointError(path, f"of step {int(arrays['step'])}, but checkpoint.json is "
+                                    f"of step {step}")
     parts = []
     for name, template in zip(PARTS, templates):
         leaves, treedef = jax.tree.flatten(template)
-        parts.append(jax.tree.unflatten(
-            treedef, [jnp.asarray(saved[f"{name}_{i}"]) for i in range(len(leaves))]))
+        have = {k for k in arrays if k.startswith(f"{name}_")}
+        want = {f"{name}_{i}" for i in range(len(leaves))}
+        if have != want:
+            missing = sorted(want - have, key=len)[:1] or ["none"]
+            raise CheckpointError(path, f"holds {len(have)} arrays of the {name} state, this "
+                                        f"run's configuration has {len(leaves)} (missing: "
+                                        f"{missing[0]})")
+        got = []
+        for i, leaf in enumerate(leaves):
+            a = arrays[f"{name}_{i}"]
+            dtype = getattr(leaf, "dtype", a.dtype)
+            if a.shape != np.shape(leaf) or a.dtype != dtype:
+                raise CheckpointError(path, f"{name}_{i} is {a.dtype}{list(a.shape)}, this run's "
+                                            f"is {dtype}{list(np.shape(leaf))}")
+            got.append(jnp.asarray(a))
+        parts.append(jax.tree.unflatten(treedef, got))
     return tuple(parts)
 
 
 def config_mismatch(saved: dict, current: dict, defaults: dict | None = None) -> str | None:
     """A sentence naming what differs between a checkpoint's configuration and this run's, or
-    None. `defaults` (`config_of` a setup of default settings and strategy): a setting or
-    strategy field the saved configuration lacks (it was written before the field existed)
-    counts as its default."""
-    for k, fields in (defaults or {}).items():
-        if isinstance(fields, dict) and isinstance(saved.get(k), dict):
-            saved = dict(saved, **{k: {**fields, **saved[k]}})
-    if saved == current:
-        return None
+    None. Keys the saved configuration lacks (written before they were recorded) are not
+    compared; within the settings and the strategy's, a field it lacks counts as its value in
+    `defaults` (`default_config`)."""
     diff = []
-    for k in current:
-        if isinstance(current[k], dict) and isinstance(saved.get(k), dict):
-            diff += [f"{k}.{f}: {saved[k].get(f)!r} -> {v!r}" for f, v in current[k].items()
-                     if saved[k].get(f) != v]
-        elif saved.get(k) != current[k]:
-            diff.append(f"{k}: {saved.get(k)!r} -> {current[k]!r}")
+    for k, v in current.items():
+        if k not in saved:
+            continue
+        if isinstance(v, dict) and isinstance(saved[k], dict):
+            was = {**(defaults or {}).get(k, {}), **saved[k]}
+            diff += [f"{k}.{f}: {was.get(f)!r} -> {x!r}" for f, x in v.items()
+                     if was.get(f) != x]
+        elif saved[k] != v:
+            diff.append(f"{k}: {saved[k]!r} -> {v!r}")
+    if not diff:
+        return None
     return "the checkpoint was made with other settings (" + "; ".join(diff) + ")"

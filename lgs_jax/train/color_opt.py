@@ -1,4 +1,4 @@
-"""Per-view colour correction (`Settings.color_opt`, `fit --color-opt`), for captures whose
+"""Per-view colour correction (`Recipe.color_opt`, `fit --color-opt`), for captures whose
 exposure or white balance changes from view to view (a phone's automatic exposure): an affine
 colour transform per training view, the lightest form of gsplat simple_trainer's appearance
 options (its `--app_opt` embeddings and `--use_bilateral_grid`, which vary over the image).
@@ -35,8 +35,8 @@ SIZE = 12  # (A row-major, b) per view (`view_params`)
 HIGHEST = jax.lax.Precision.HIGHEST
 
 
-def enabled(settings) -> bool:
-    return settings.color_opt
+def enabled(recipe) -> bool:
+    return recipe.color_opt
 
 
 def corrected(image, p):
@@ -46,9 +46,9 @@ def corrected(image, p):
     return image + change + p[9:].astype(image.dtype)
 
 
-def optimizer(settings, steps: int) -> optax.GradientTransformation:
+def optimizer(recipe, steps: int) -> optax.GradientTransformation:
     """The corrections' optimizer (module docstring; constant over the `steps`)."""
-    return torch_adam(settings.lr_color * math.sqrt(settings.batch), settings.color_reg)
+    return torch_adam(recipe.lr_color * math.sqrt(recipe.batch), recipe.color_reg)
 
 
 def project(p):

@@ -17,6 +17,7 @@ from ..io.datasets import Dataset, as_float, load_dataset
 from ..render import default_backend
 from ..scene import Gaussians
 from . import report
+from ..files import written
 from .pool import from_gaussians
 from .step import render_views
 
@@ -51,6 +52,6 @@ def evaluate(gaussians: Gaussians, data, *, split: str = "test", downscale: int 
     if out:
         os.makedirs(out, exist_ok=True)
         report.save_renders(out, renders, targets, names, prefix="eval")
-        with open(os.path.join(out, "metrics.json"), "w") as f:
+        with written(os.path.join(out, "metrics.json")) as tmp, open(tmp, "w") as f:
             json.dump(result, f, indent=1)
     return result

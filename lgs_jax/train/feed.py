@@ -105,12 +105,14 @@ def _stem(name: str) -> str:
     return os.path.splitext(os.path.basename(name))[0]
 
 
-def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False) -> RunData:
-    """`data` (a folder `load_dataset` reads, or a `Dataset`) ready for training; `crop` =
-    (x0, y0, w, h) trains and evaluates on a window of every image (quick tests);
-    `train_on_all` trains on every view, the split's held-out ones included, and holds out
-    none."""
-    d = data if isinstance(data, Dataset) else load_dataset(data, downscale=downscale)
+def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False,
+            dtype=np.float32) -> RunData:
+    """`data` (a folder `load_dataset` reads at `downscale` as `dtype` images, or a `Dataset`)
+    ready for training; `crop` = (x0, y0, w, h) trains and evaluates on a window of every
+    image (quick tests); `train_on_all` trains on every view, the split's held-out ones
+    included, and holds out none."""
+    d = data if isinstance(data, Dataset) else load_dataset(data, downscale=downscale,
+                                                            dtype=dtype)
     if train_on_all:
         d = dataclasses.replace(d, train=np.arange(len(d.names)), test=np.arange(0))
     elif len(d.train) == 0 or len(d.test) == 0:
@@ -175,7 +177,7 @@ HOST_STREAM_BYTES = 2 << 30
 
 
 def streams(nbytes: int, setting: bool | None, device=None) -> bool:
-    """Whether `fit` streams training images of `nbytes` (`Settings.stream_images`): the
+    """Whether `fit` streams training images of `nbytes` (`FitConfig.stream_images`): the
     setting where it is a bool; None: when they would take more than an eighth of the device's
     memory (`memory_stats()["bytes_limit"]`), or more than `HOST_STREAM_BYTES` where the device
     reports no limit."""
@@ -209,6 +211,12 @@ class TrainViews:
                            else [jnp.asarray(im) for im in images])
         self._worker = ThreadPoolExecutor(1, "lgs_jax-views") if stream else None
         self._copies: dict[int, Future] = {}
+        self.closed = False  # `close` ran: the worker is ended
+
+    @property
+    def held(self) -> list[int]:
+        """The steps whose views are on the device or being copied there."""
+        return sorted(self._copies)
 
     def args(self, step: int):
         """(targets, idx) of 0-based `step`."""
@@ -240,6 +248,7 @@ class TrainViews:
         """End the streaming worker (the copies it made stay valid)."""
         if self._worker is not None:
             self._worker.shutdown()
+        self.closed = True
 
 
 LEVELS = np.arange(256, dtype=np.float32) / np.float32(255)

@@ -56,16 +56,20 @@ def initial_gaussians(points: np.ndarray, colors: np.ndarray, init_opacity: floa
                      f32(np.full(n, np.log(init_opacity / (1 - init_opacity)))), f32(sh))
 
 
-def start_gaussians(rd, settings, strategy, seed: int, cap: int, log=print) -> Gaussians:
-    """The initial Gaussians of a run on `rd` (a `data.RunData`): its SfM points (a random
-    subset of `cap` if it has more) or `settings.init_points` random ones (at most `cap`) in the
-    cube of half-width init_extent · scene_scale (init_extent None: 0.25 for NeRF-synthetic
-    scenes, 3 otherwise), with the strategy's initial opacity and scale."""
+def start_gaussians(rd, config, log=print) -> Gaussians:
+    """The initial Gaussians of a run (`config`: a `FitConfig`) on `rd` (a `feed.RunData`): its
+    SfM points (a random subset of config.max_gaussians if it has more) or
+    `config.start_points` random ones (at most max_gaussians; by default one per
+    `config.PIXELS_PER_POINT` pixels of the largest training image, so a small image starts
+    with few points) in the cube of half-width init_extent · scene_scale (init_extent None:
+    0.25 for NeRF-synthetic scenes, 3 otherwise), with the strategy's initial opacity and
+    scale, drawn from config.seed."""
     points, colors = rd.points, rd.colors
+    cap, seed, strategy = config.max_gaussians, config.seed, config.strategy
     if len(points) == 0:
-        extent = settings.init_extent
+        extent = config.init_extent
         extent = extent if extent is not None else (0.25 if rd.nerf_synthetic else 3.0)
-        n = min(settings.init_points, cap)
+        n = min(config.start_points(max(w * h for w, h in rd.sizes)), cap)
         log(f"no SfM points: {n} random points in a cube of half-width {extent:g} x scene scale")
         points, colors = random_points(n, extent * rd.scene_scale, seed)
     elif len(points) > cap:
@@ -73,4 +77,4 @@ def start_gaussians(rd, settings, strategy, seed: int, cap: int, log=print) -> G
         log(f"{len(points)} SfM points, more than the cap: a random {cap} of them")
         points, colors = points[keep], colors[keep]
     return initial_gaussians(points, colors, strategy.init_opacity, strategy.init_scale, seed,
-                             (settings.sh_degree + 1) ** 2)
+                             (config.recipe.sh_degree + 1) ** 2)

@@ -13,7 +13,7 @@ averaged over pixels and channels. Two boundary rules:
            `structural_similarity(gaussian_weights=True, sigma=1.5,
            use_sample_covariance=False, data_range=1)` (tests compare them).
 `loss_fn`: (1 − λ)·L1 + λ·(1 − SSIM), λ = 0.2 (3DGS, gsplat's simple_trainer), with the "same"
-SSIM by default (the issue's recipe; gsplat's simple_trainer uses "valid": Settings.ssim_padding).
+SSIM by default (3DGS's; gsplat's simple_trainer uses "valid": Recipe.ssim_padding).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ def _blur(x, w, mode: str):
     """Separable filter of (C, H, W) images, output of the input's size: padded by jnp.pad's
     `mode` (e.g. "constant": zeros), then y = Σ_k w_k · x[k : k + H] along rows, then along
     columns: shifted slices that XLA fuses into one elementwise pass each, float32 products
-    throughout (a depthwise convolution took 2x the time on the CPU; BENCHMARKS.md §5)."""
+    throughout (faster on the CPU than a depthwise convolution)."""
     r = (len(w) - 1) // 2
     h, wd = x.shape[1:]
     x = jnp.pad(x, [(0, 0), (r, r), (r, r)], mode=mode)

@@ -1,6 +1,6 @@
 """The optimizer: Adam per parameter group, and how its moments follow the Gaussians.
 
-`optimizer(settings, steps, scene_scale)` is gsplat's simple_trainer recipe: Adam (β = 0.9,
+`optimizer(recipe, steps, scene_scale)` is gsplat's simple_trainer recipe: Adam (β = 0.9,
 0.999, ε = 1e-15) on every group, learning rates means 1.6e-4 · scene_scale decaying
 exponentially to 1% of that over the run (lr_s = lr_0 · 0.01^(s / steps) at update s, torch's
 ExponentialLR with γ = 0.01^(1 / steps)), quats 1e-3, log-scales 5e-3, logit opacities 5e-2,
@@ -45,18 +45,18 @@ def scale_by_group_rates(rates: dict) -> optax.GradientTransformation:
     return optax.GradientTransformation(init, update)
 
 
-def means_schedule(settings, steps: int, scene_scale: float):
+def means_schedule(recipe, steps: int, scene_scale: float):
     """The means' learning rate at update s: lr_means · scene_scale · ratio^(s / steps)."""
-    lr0 = settings.lr_means * scene_scale
-    return optax.exponential_decay(lr0, max(steps, 1), settings.lr_means_decay)
+    lr0 = recipe.lr_means * scene_scale
+    return optax.exponential_decay(lr0, max(steps, 1), recipe.lr_means_decay)
 
 
-def optimizer(settings, steps: int, scene_scale: float) -> optax.GradientTransformation:
+def optimizer(recipe, steps: int, scene_scale: float) -> optax.GradientTransformation:
     """Adam per group with the recipe's rates (module docstring)."""
-    rates = dict(means=means_schedule(settings, steps, scene_scale), quats=settings.lr_quats,
-                 log_scales=settings.lr_log_scales,
-                 logit_opacities=settings.lr_logit_opacities, sh_dc=settings.lr_sh_dc,
-                 sh_rest=settings.lr_sh_rest, features=settings.lr_features)
+    rates = dict(means=means_schedule(recipe, steps, scene_scale), quats=recipe.lr_quats,
+                 log_scales=recipe.lr_log_scales,
+                 logit_opacities=recipe.lr_logit_opacities, sh_dc=recipe.lr_sh_dc,
+                 sh_rest=recipe.lr_sh_rest, features=recipe.lr_features)
     return optax.chain(optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-15),
                        scale_by_group_rates(rates))
 

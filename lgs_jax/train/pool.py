@@ -25,7 +25,7 @@ import numpy as np
 from ..scene import Gaussians
 
 GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")
-OPTIONAL_GROUPS = ("features",)  # `appearance`'s per-Gaussian features, with Settings.app_opt
+OPTIONAL_GROUPS = ("features",)  # `appearance`'s per-Gaussian features, with Recipe.app_opt
 
 
 @jax.tree_util.register_dataclass

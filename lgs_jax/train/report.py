@@ -13,15 +13,32 @@ import jax
 import numpy as np
 import tqdm
 
+from ..files import written
+
+
+class _Bar(tqdm.tqdm):
+    """tqdm whose rate (and so ETA) is `step_rate` where set: the steps' own, compiles left
+    out."""
+
+    step_rate = None
+
+    @property
+    def format_dict(self):
+        d = super().format_dict
+        if self.step_rate:
+            d["rate"] = self.step_rate
+        return d
+
 
 class Progress:
-    """A tqdm progress bar on stderr (step, loss, training PSNR, Gaussian count, it/s, ETA),
+    """A tqdm progress bar on stderr (step, loss, training PSNR, Gaussian count, rate, ETA),
     redrawn every `interval` seconds, also while one step runs (the first step compiles, for
-    a minute or more on a CPU)."""
+    a minute or more on a CPU). Its rate and ETA are the steps' own (`step`'s `rate`), from
+    the first step on: the time spent compiling is not spread over the steps to come."""
 
     def __init__(self, start: int, steps: int, file=None, interval: float = 1.0):
-        self.bar = tqdm.tqdm(total=steps, initial=start, unit="step", file=file,
-                             dynamic_ncols=True, mininterval=interval)
+        self.bar = _Bar(total=steps, initial=start, unit="step", file=file,
+                        dynamic_ncols=True, mininterval=interval)
         self.bar.set_postfix_str("compiling the first step", refresh=False)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._tick, args=(interval,), daemon=True)
@@ -32,13 +49,16 @@ class Progress:
         while not self._stop.wait(interval):
             self.bar.refresh()
 
-    def step(self, loss: float, psnr: float | None = None, count: int | None = None) -> None:
-        """One step done with this loss (and training-view PSNR, active Gaussians)."""
+    def step(self, loss: float, psnr: float | None = None, count: int | None = None,
+             rate: float | None = None) -> None:
+        """One step done with this loss (and training-view PSNR, active Gaussians; `rate`:
+        steps per second so far, compiles left out)."""
         post = dict(loss=f"{loss:.4f}")
         if psnr is not None:
             post["psnr"] = f"{psnr:.2f}"
         if count is not None:
             post["gaussians"] = str(count)
+        self.bar.step_rate = rate
         self.bar.set_postfix(post, refresh=False)
         self.bar.update(1)
 
@@ -122,13 +142,25 @@ def save_renders(out: str, images, targets, names, prefix: str = "heldout") -> N
     import matplotlib.image
 
     for image, target, name in zip(images, targets, names):
-        matplotlib.image.imsave(os.path.join(out, f"{prefix}_{name}.png"),
-                                np.concatenate([image, np.clip(target, 0, 1)], 1))
+        with written(os.path.join(out, f"{prefix}_{name}.png")) as tmp:
+            matplotlib.image.imsave(tmp, np.concatenate([image, np.clip(target, 0, 1)], 1))
 
 
 def read_metrics(path: str) -> list[dict]:
+    """The rows of a metrics.jsonl; a last line without its newline (a write cut short by a
+    kill) is left out, any other line that is not JSON raises `ValueError` naming it."""
     with open(path) as f:
-        return [json.loads(line) for line in f if line.strip()]
+        lines = f.readlines()
+    if lines and not lines[-1].endswith("\n"):
+        lines.pop()
+    rows = []
+    for number, line in enumerate(lines, 1):
+        if line.strip():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{path}: line {number} is not JSON ({e.msg})") from None
+    return rows
 
 
 def plot_curves(rows: list[dict], path: str) -> None:

@@ -5,8 +5,8 @@ views from the pool (inactive slots culled, SH bands beyond the schedule zeroed)
 views of (1 − λ)·L1 + λ·(1 − SSIM) plus the strategy's and the views' own regularisers; gradients
 w.r.t. the parameters (and, for strategies that ask, w.r.t. zero screen offsets of the projected
 means: ∂loss/∂mean2d); one Adam update (and one of the views' own parameters, `view_params`: pose
-deltas with `Settings.pose_opt`, colour corrections with `Settings.color_opt`, bilateral grids with
-`Settings.bilateral_grid`, appearance embeddings and their head with `Settings.app_opt`, each view's
+deltas with `Recipe.pose_opt`, colour corrections with `Recipe.color_opt`, bilateral grids with
+`Recipe.bilateral_grid`, appearance embeddings and their head with `Recipe.app_opt`, each view's
 Gaussians then seen with their band 0 moved, `appearance.seen`); then the strategy's per-step
 update. A step whose loss, gradients or new parameters (active slots) are not finite changes
 nothing: it returns its inputs with ok False (`fit` reports it). A view whose tile pairs overflow
@@ -16,7 +16,7 @@ again, so no pair is ever dropped.
 
 Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
 among kernel configurations, reductions' included, by timing them while it compiles
-(openxla/xla#37902: a `jnp.sum` whose bits depend on the pick), so the same program compiled
+(even a `jnp.sum`, whose bits then depend on the pick), so the same program compiled
 twice, e.g. once ahead in a thread beside running steps (`ahead.py`) and once when the GPU is
 idle, could round differently. Without autotuning a compile picks by fixed rules.
 """
@@ -38,7 +38,7 @@ from . import appearance, camera_opt, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
-from .settings import Setup
+from .config import Setup
 from .strategy import StepInfo
 
 # module docstring; no effect on a CPU; read-only (jit keeps a reference)
@@ -76,13 +76,24 @@ def replicated(devices: int):
     return jax.sharding.NamedSharding(mesh(devices), jax.sharding.PartitionSpec())
 
 
-def _over_views(one, devices: int):
-    """`one(g, cam, target, offsets, look)` mapped over a batch of views (g shared):
-    `jax.vmap`, and with `devices` > 1 the batch split across the first `devices` devices (a
-    `shard_map` over a mesh axis "views", each device rendering its share of the views with
-    the whole scene; the gradient of the shared scene sums the devices' parts, an
-    all-reduce)."""
-    batched = jax.vmap(one, in_axes=(None, 0, 0, 0, 0))
+def over_views(one, devices: int, vectorize: bool = False):
+    """`one(g, cam, target, offsets, look)` over a batch of views (the leading axis of all but
+    g, which they share), stacked outputs: one view after another (`lax.map`; a single view is
+    `one` itself) or with `vectorize` through `jax.vmap` (for the Pallas backends, whose
+    kernels take the views as one more grid axis). Under vmap the XLA backends' loops and
+    conditions on per-view values become selects that run every branch to the pair capacity,
+    which costs far more than the views one by one. With `devices` > 1 the batch is split
+    across the first `devices` devices (a `shard_map` over a mesh axis "views", each device
+    rendering its share of the views with the whole scene; the gradient of the shared scene
+    sums the devices' parts, an all-reduce)."""
+    def batched(g, *per_view):
+        if vectorize:
+            return jax.vmap(one, in_axes=(None, 0, 0, 0, 0))(g, *per_view)
+        if jax.tree.leaves(per_view)[0].shape[0] == 1:
+            out = one(g, *jax.tree.map(lambda x: x[0], per_view))
+            return jax.tree.map(lambda x: jnp.asarray(x)[None], out)
+        return jax.lax.map(lambda views: one(g, *views), per_view)
+
     if devices == 1:
         return batched
     whole, views = jax.sharding.PartitionSpec(), jax.sharding.PartitionSpec("views")
@@ -92,16 +103,18 @@ def _over_views(one, devices: int):
                          out_specs=views, check_vma=False)
 
 
-def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
-                    background, step, idx, per_view=None):
-    """((loss, (mse, stats, visible)), (param grads, screen grads or None, grads of the views'
-    own parameters or None)); `per_view`: the views' own parameters {name: (views, SIZE)}
+def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
+                   background, step, idx, per_view=None):
+    """The loss of `train_step` (module docstring) on views `cams` (stacked, at the images'
+    size) against `targets` (B, H, W, 3) and its gradients: ((loss, (mse, stats, visible)),
+    (param grads, screen grads or None, grads of the views' own parameters or None));
+    `per_view`: the views' own parameters {name: (views, SIZE)}
     (`view_params`), whose rows of the views `idx` move their poses (`camera_opt.adjusted`)
     and correct their renders (`view_params.corrected`: colour maps, bilateral grids), or
     None; their regularizer (the grids' total variation) adds to the loss."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
-    bands = sh_mask(step, num_bases, s.settings.sh_every)
+    bands = sh_mask(step, num_bases, s.recipe.sh_every)
     need2d = s.strategy.needs_screen_grads
 
     def loss_of(params, offsets, per_view):
@@ -118,16 +131,16 @@ def _loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, c
             if "dc" in look:
                 g = appearance.with_dc_change(g, look["dc"])
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
-                       config=s.settings.raster, screen_offsets=off,
+                       config=s.recipe.raster, screen_offsets=off,
                        row_capacity=rows)
             image = view_params.corrected(o.image, look)
-            return (loss_fn(image, target, s.settings.ssim_lambda, s.settings.ssim_padding),
+            return (loss_fn(image, target, s.recipe.ssim_lambda, s.recipe.ssim_padding),
                     jnp.mean((image - target) ** 2), o.stats, o.visible)
 
-        losses, mse, stats, visible = _over_views(one, s.devices)(g, views, targets, offsets,
-                                                                  look)
+        losses, mse, stats, visible = over_views(one, s.devices, s.backend.startswith(
+            "pallas"))(g, views, targets, offsets, look)
         total = (jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
-                 + view_params.regularizer(s.settings, per_view))
+                 + view_params.regularizer(s.recipe, per_view))
         return total, (jnp.mean(mse), stats, visible)
 
     offsets = jnp.zeros((targets.shape[0], pool.size, 2), jnp.float32) if need2d else None
@@ -166,13 +179,13 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     (active Gaussians)."""
     cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
                                width=targets.shape[2], height=targets.shape[1])
-    (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = _loss_and_grads(
+    (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = loss_and_grads(
         setup, capacity, rows, pool, cams, targets, background, step, idx,
         view_params.params(views))
-    opt = optimizer(setup.settings, setup.steps, setup.scene_scale)
+    opt = optimizer(setup.recipe, setup.steps, setup.scene_scale)
     updates, new_opt = opt.update(grads, opt_state, pool.params)
     new_pool = Pool(optax.apply_updates(pool.params, updates), pool.active)
-    lr = means_schedule(setup.settings, setup.steps, setup.scene_scale)(step + 1)
+    lr = means_schedule(setup.recipe, setup.steps, setup.scene_scale)(step + 1)
     info = StepInfo(grads2d, visible, lr, cams.width, cams.height)
     new_state, new_pool, new_opt = setup.strategy.step(strategy_state, new_pool, new_opt, info,
                                                        step, step_keys(key, step)[0])
@@ -182,7 +195,7 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
         ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
     new_views = views
     if views is not None:
-        new_views = view_params.update(setup.settings, setup.steps, views, grads_views)
+        new_views = view_params.update(setup.recipe, setup.steps, views, grads_views)
         ok = ok & jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in
                                      jax.tree.leaves(view_params.params(new_views))]))
     pool, opt_state, strategy_state, views = _select(

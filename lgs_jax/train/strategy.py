@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 
 from . import ops
+from .options import check, option
 from .pool import Pool
 
 
@@ -56,9 +57,13 @@ class Strategy:
     distance that sets the initial scales (gsplat's simple_trainer `init_opa`, `init_scale`).
     """
 
-    init_opacity: float = 0.1
-    init_scale: float = 1.0
+    init_opacity: float = option(0.1, "the starting Gaussians' opacity", low=0, high=1)
+    init_scale: float = option(
+        1.0, "the starting scales: this times the distance to the 3 nearest points", low=0)
     needs_screen_grads = False  # class constant: whether `step` reads info.screen_grads
+
+    def __post_init__(self):
+        check(self, "strategy.")
 
     def init(self, pool: Pool, scene_scale: float):
         """The strategy's state (a pytree) for a new run on `pool`."""
@@ -117,17 +122,28 @@ class DefaultStrategy(Strategy):
     (gsplat PR #776). So it is off by default (`opacity_reset=False`), like gsplat 1.5.3.
     """
 
-    prune_opa: float = 0.005
-    grow_grad2d: float = 0.0002
-    grow_scale3d: float = 0.01
-    prune_scale3d: float = 0.1
-    refine_start_iter: int = 500
-    refine_stop_iter: int = 15_000
-    reset_every: int = 3000
-    refine_every: int = 100
-    pause_refine_after_reset: int = 0
-    revised_opacity: bool = False
-    opacity_reset: bool = False
+    prune_opa: float = option(0.005, "prune below this opacity", low=0, high=1)
+    grow_grad2d: float = option(0.0002, "clone or split above this mean screen gradient",
+                                low=0)
+    grow_scale3d: float = option(
+        0.01, "clone up to this largest scale (times the scene scale), split above", low=0)
+    prune_scale3d: float = option(
+        0.1, "prune above this largest scale (times the scene scale) after the first "
+             "opacity-reset period", low=0)
+    refine_start_iter: int = option(500, "refine after this step", low=0)
+    refine_stop_iter: int = option(15_000, "refine and accumulate gradients before this step",
+                                   low=0)
+    reset_every: int = option(3000, "steps between opacity resets (with --opacity-reset)",
+                              low=1)
+    refine_every: int = option(100, "steps between refinements", low=1)
+    pause_refine_after_reset: int = option(
+        0, "no refinement for this many steps after each reset period starts", low=0)
+    revised_opacity: bool = option(
+        False, "split children get the revised opacity 1 − sqrt(1 − o) (gsplat's "
+               "revised_opacity)")
+    opacity_reset: bool = option(
+        False, "reset opacities every reset_every steps (3DGS; gsplat 1.5.3 never does, "
+               "through a bug)")
     needs_screen_grads = True
 
     def init(self, pool: Pool, scene_scale: float):
@@ -202,16 +218,19 @@ class MCMCStrategy(Strategy):
     the run's pool cap (`fit`'s max_gaussians).
     """
 
-    init_opacity: float = 0.5
-    init_scale: float = 0.1
-    cap_max: int = 1_000_000
-    noise_lr: float = 5e5
-    refine_start_iter: int = 500
-    refine_stop_iter: int = 25_000
-    refine_every: int = 100
-    min_opacity: float = 0.005
-    opacity_reg: float = 0.01
-    scale_reg: float = 0.01
+    init_opacity: float = option(0.5, "the starting Gaussians' opacity", low=0, high=1)
+    init_scale: float = option(
+        0.1, "the starting scales: this times the distance to the 3 nearest points", low=0)
+    cap_max: int = option(1_000_000, "the number of Gaussians the additions stop at", low=1)
+    noise_lr: float = option(5e5, "noise on the means: this times the means' learning rate",
+                             low=0)
+    refine_start_iter: int = option(500, "refine after this step", low=0)
+    refine_stop_iter: int = option(25_000, "refine before this step", low=0)
+    refine_every: int = option(100, "steps between refinements", low=1)
+    min_opacity: float = option(0.005, "relocate Gaussians at or below this opacity", low=0,
+                                high=1)
+    opacity_reg: float = option(0.01, "weight of the mean opacity in the loss", low=0)
+    scale_reg: float = option(0.01, "weight of the mean scale in the loss", low=0)
 
     def regularizer(self, params: dict, active):
         n = jnp.maximum(jnp.sum(active), 1).astype(params["means"].dtype)
@@ -237,3 +256,6 @@ class MCMCStrategy(Strategy):
         pool, opt_state, added = ops.sample_add(pool, opt_state, want, k_add, self.min_opacity)
         return state, pool, opt_state, dict(relocated=_count(moved), added=_count(added),
                                             needed=want, free=free)
+
+
+STRATEGIES = {"default": DefaultStrategy, "mcmc": MCMCStrategy}  # the command line's names

@@ -1,12 +1,12 @@
 """The training views' own parameters, optimized beside the scene's: each view's pose delta
-(`camera_opt`, `Settings.pose_opt`), colour correction (`color_opt`, `Settings.color_opt`),
-bilateral grid (`bilateral_grid`, `Settings.bilateral_grid`) and appearance embedding with the
-head the views share (`appearance`, `Settings.app_opt`).
+(`camera_opt`, `Recipe.pose_opt`), colour correction (`color_opt`, `Recipe.color_opt`),
+bilateral grid (`bilateral_grid`, `Recipe.bilateral_grid`) and appearance embedding with the
+head the views share (`appearance`, `Recipe.app_opt`).
 
 The state is a dict, part name -> (params, their optimizer state), holding the parts switched
 on, or None with none (`init`): a part's params are (views, SIZE) float32, zero at the start,
 or, for a part marked `shared` (the appearance head), one pytree every view uses, from the
-part's `init(settings, views, key)`. A step's views take their rows as onehot(idx) · P
+part's `init(recipe, views, key)`. A step's views take their rows as onehot(idx) · P
 (`rows`: exact, one nonzero term a row; a shared part whole), so each view's
 gradient is onehot(idx)ᵀ times the rows' gradients: a dot, summed in one order where a view
 comes twice in a batch, with no scatter-add (deterministic on GPUs). The other views' rows get
@@ -27,24 +27,24 @@ from . import appearance, bilateral_grid, camera_opt, color_opt
 
 PARTS = {"color": color_opt, "grid": bilateral_grid, "pose": camera_opt, "embed": appearance,
          "head": appearance.HEAD}
-"""name -> module (or object) with SIZE, enabled(settings), optimizer(settings, steps),
-project(params), and optionally regularizer(settings, params); a `shared` part has init
+"""name -> module (or object) with SIZE, enabled(recipe), optimizer(recipe, steps),
+project(params), and optionally regularizer(recipe, params); a `shared` part has init
 instead of SIZE."""
 APPEARANCE = ("color", "grid")  # the parts that correct a render, in the order they apply
 
 
-def init(settings, views: int, steps: int, key=None):
-    """{name: (params, optimizer state)} of the parts `settings` switches on, for a run of
+def init(recipe, views: int, steps: int, key=None):
+    """{name: (params, optimizer state)} of the parts `recipe` switches on, for a run of
     `steps`, or None: zeros (views, SIZE), a shared part's from its init with `key` (a JAX key;
     the run's seed's)."""
     state = {}
     for name, part in PARTS.items():
-        if part.enabled(settings):
+        if part.enabled(recipe):
             if _shared(part):
-                p = part.init(settings, views, jax.random.key(0) if key is None else key)
+                p = part.init(recipe, views, jax.random.key(0) if key is None else key)
             else:
                 p = jnp.zeros((views, part.SIZE), jnp.float32)
-            state[name] = (p, part.optimizer(settings, steps).init(p))
+            state[name] = (p, part.optimizer(recipe, steps).init(p))
     return state or None
 
 
@@ -70,9 +70,9 @@ def rows(params_, idx):
             for name, p in params_.items()}
 
 
-def regularizer(settings, params_):
+def regularizer(recipe, params_):
     """The loss's terms of the views' parameters {name: (views, SIZE)} (or None): 0 without."""
-    return sum(PARTS[name].regularizer(settings, p) for name, p in (params_ or {}).items()
+    return sum(PARTS[name].regularizer(recipe, p) for name, p in (params_ or {}).items()
                if hasattr(PARTS[name], "regularizer"))
 
 
@@ -85,12 +85,12 @@ def corrected(image, own: dict):
     return image
 
 
-def update(settings, steps: int, state, grads):
+def update(recipe, steps: int, state, grads):
     """`state` after one step of a run of `steps` with the gradients {name: (views, SIZE)} of
     its params."""
     new = {}
     for name, (p, opt_state) in state.items():
         part = PARTS[name]
-        updates, opt_state = part.optimizer(settings, steps).update(grads[name], opt_state, p)
+        updates, opt_state = part.optimizer(recipe, steps).update(grads[name], opt_state, p)
         new[name] = (part.project(optax.apply_updates(p, updates)), opt_state)
     return new

@@ -12,7 +12,7 @@ import pytest
 from lgs_jax import Camera
 from lgs_jax.projection import project
 from lgs_jax.scene import Gaussians
-from lgs_jax.train import Settings, appearance, view_params
+from lgs_jax.train import Recipe, appearance, view_params
 from lgs_jax.train.ops import duplicate
 from lgs_jax.train.optim import optimizer
 from lgs_jax.train.pool import Pool, render_gaussians
@@ -84,7 +84,7 @@ def test_the_start_and_the_views_average_are_plain_scenes():
 
 
 def test_the_shared_head_is_whole_in_every_step_and_moves():
-    settings = Settings(app_opt=True)
+    settings = Recipe(app_opt=True)
     state = view_params.init(settings, 3, 10, jax.random.key(5))
     assert sorted(state) == ["embed", "head"] and state["embed"][0].shape == (3, 16)
     rows = view_params.rows(view_params.params(state), jnp.asarray([2, 0]))
@@ -102,7 +102,7 @@ def test_densification_carries_the_features_and_their_moments():
     params = _params(8)
     active = jnp.arange(8) < 5
     pool = Pool(params, active)
-    opt = optimizer(Settings(app_opt=True), 100, 1.0)
+    opt = optimizer(Recipe(app_opt=True), 100, 1.0)
     state = opt.init(params)
     grads = jax.tree.map(jnp.ones_like, params)
     _, state = opt.update(grads, state, params)  # nonzero moments

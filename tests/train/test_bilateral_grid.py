@@ -11,7 +11,7 @@ import numpy as np
 import optax
 import pytest
 
-from lgs_jax.train import Settings, bilateral_grid as bg
+from lgs_jax.train import Recipe, bilateral_grid as bg
 
 SHAPE = (bg.COEFFS, bg.L, bg.Y, bg.X)
 
@@ -91,7 +91,7 @@ def test_total_variation_and_schedule_are_gsplats():
                for a in (2, 3, 4))  # gsplat: per axis the sum over the batch / count / batch
     assert float(bg.total_variation(jnp.asarray(g.reshape(3, -1)))) == pytest.approx(want,
                                                                                      rel=1e-12)
-    lr = bg.schedule(Settings(batch=4), 30_000)
+    lr = bg.schedule(Recipe(batch=4), 30_000)
     base = 2e-3 * 2
     assert float(lr(0)) == pytest.approx(0.01 * base, rel=1e-6)
     assert float(lr(500)) == pytest.approx(0.505 * base * 0.01 ** (500 / 30_000), rel=1e-6)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lgs_jax.train import Settings, color_opt, view_params
+from lgs_jax.train import Recipe, color_opt, view_params
 
 
 def test_correction_is_the_affine_map_and_zero_is_the_identity():
@@ -29,7 +29,7 @@ def test_projection_centres_the_corrections():
 
 @pytest.mark.parametrize("idx", [[2, 0], [1, 1], [3, 1, 3]])
 def test_rows_are_exact_and_their_gradient_sums_per_view(idx):
-    settings = Settings(pose_opt=True, color_opt=True)
+    settings = Recipe(pose_opt=True, color_opt=True)
     state = view_params.init(settings, 4, 10)
     assert sorted(state) == ["color", "pose"] and state["pose"][0].shape == (4, 9)
     rng = np.random.default_rng(2)
@@ -47,11 +47,11 @@ def test_rows_are_exact_and_their_gradient_sums_per_view(idx):
         for b, v in enumerate(np.asarray(idx)):
             want[v] += np.asarray(weights[k])[b]
         np.testing.assert_allclose(np.asarray(grads[k]), want, rtol=1e-6, atol=0)
-    assert view_params.init(Settings(), 4, 10) is None and view_params.rows(None, idx) is None
+    assert view_params.init(Recipe(), 4, 10) is None and view_params.rows(None, idx) is None
 
 
 def test_update_moves_the_corrections_and_keeps_them_centred():
-    settings = Settings(color_opt=True)
+    settings = Recipe(color_opt=True)
     state = view_params.init(settings, 3, 10)
     grads = {"color": jnp.zeros((3, 12)).at[0].set(1.0)}
     new = view_params.update(settings, 10, state, grads)

@@ -1,4 +1,4 @@
-"""Data-parallel training (`fit(..., devices=N)`, `step._over_views`): on two CPU devices
+"""Data-parallel training (`fit(..., devices=N)`, `step.over_views`): on two CPU devices
 (`--xla_force_host_platform_device_count`, set before JAX starts, so in a child process) a run
 with refinements follows the one-device run to float rounding (the gradients' sum is taken in
 another order), compiles its step no more often, and repeats itself to the bit, watched or
@@ -31,17 +31,18 @@ CHILD = textwrap.dedent("""
                             test=d.test[:1])
     strategy = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=1e-4,
                                      prune_opa=0.02)
-    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100, pose_opt=True,
-                              color_opt=True, app_opt=True)
+    recipe = train.Recipe(batch=2, pose_opt=True, color_opt=True, app_opt=True)
     out, watched = {}, []
     watch = lambda step, g, m: watched.append(
         (step, len(g.means.devices()), int(np.isfinite(np.asarray(g.logit_opacities)).sum()),
          m["gaussians"]))
     for run, devices in (("one", 1), ("two", 2), ("again", 2)):
         before = len(compiles)
-        result = train.fit(d, 6, os.path.join(sys.argv[2], run), strategy=strategy,
-                           settings=settings, max_gaussians=512, pool_size=512,
-                           backend="reference", devices=devices, log=lambda m: None,
+        config = train.FitConfig(data=d.path, out=os.path.join(sys.argv[2], run), steps=6,
+                                 strategy=strategy, recipe=recipe, max_gaussians=512,
+                                 pool_size=512, backend="reference", devices=devices,
+                                 eval_every=100, checkpoint_every=100)
+        result = train.fit(config, d, log=lambda m: None,
                            watch=watch if run == "again" else None, watch_every=0)
         rows = [json.loads(line) for line in open(os.path.join(sys.argv[2], run,
                                                                "metrics.jsonl"))]
@@ -82,19 +83,16 @@ def test_two_devices_follow_one_and_repeat_themselves(data_dir, tmp_path):
     assert [w[3] for w in out["watched"][1:]] == [r["gaussians"] for r in again["rows"]]
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    (dict(devices=0), "devices: expected an int from 1 to"),
-    (dict(devices=64), "devices: expected an int from 1 to"),
-    (dict(devices=True), "devices: expected an int"),
-])
-def test_bad_device_counts_are_refused(tmp_path, kwargs, match):
+@pytest.mark.parametrize("devices,match", [
+    (0, "devices: expected an int >= 1"), (64, "devices: expected an int from 1 to"),
+    (True, "devices: expected an int")])
+def test_bad_device_counts_are_refused(tmp_path, devices, match):
     with pytest.raises(ValueError, match=match):
-        train.fit("unused", 1, str(tmp_path / "o"), **kwargs)
+        train.fit(train.FitConfig(data="unused", out=str(tmp_path / "o"), devices=devices,
+                                  recipe=train.Recipe(batch=64)))
 
 
-def test_the_batch_must_split_evenly(monkeypatch, tmp_path):
-    monkeypatch.setattr("jax.devices", lambda *a: ["d0", "d1"])
-    with pytest.raises(ValueError, match="devices: 2 devices split settings.batch = 3 views "
+def test_the_batch_must_split_evenly():
+    with pytest.raises(ValueError, match="devices: 2 devices split recipe.batch = 3 views "
                                          "unevenly"):
-        train.fit("unused", 1, str(tmp_path / "o"), settings=train.Settings(batch=3),
-                  devices=2)
+        train.FitConfig(data="unused", out="o", recipe=train.Recipe(batch=3), devices=2)

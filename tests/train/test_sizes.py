@@ -14,8 +14,8 @@ import pytest
 import lgs_jax
 from lgs_jax import train
 from lgs_jax.io.datasets import Dataset
-from lgs_jax.train import ahead, data as train_data, losses, optim, pool as train_pool
-from lgs_jax.train.settings import Setup
+from lgs_jax.train import ahead, feed as train_data, losses, optim, pool as train_pool
+from lgs_jax.train.config import Setup
 from lgs_jax.train.step import train_step
 
 SIZES = ((32, 24), (24, 32))  # landscape and portrait, alternating over the views
@@ -111,9 +111,9 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
     against its own image (a view paired with another's camera or image, or rendered at the
     other size, would not be)."""
     rd = train_data.prepare(capture)
-    setup = Setup(train.Settings(sh_degree=0), train.Strategy(), 10, rd.scene_scale, "reference")
+    setup = Setup(train.Recipe(sh_degree=0), train.Strategy(), 10, rd.scene_scale, "reference")
     pool = train_pool.from_gaussians(jax.tree.map(jnp.asarray, _scene(seed=1)), 64)
-    opt_state = optim.optimizer(setup.settings, 10, rd.scene_scale).init(pool.params)
+    opt_state = optim.optimizer(setup.recipe, 10, rd.scene_scale).init(pool.params)
     views = [5, 1]  # 24x32 (the first size is 24x32, view 2 is 32x24)
     targets = jnp.stack([jnp.asarray(rd.train_images[v]) for v in views])
     m = train_step(pool, opt_state, setup.strategy.init(pool, 1.0), None, rd.train_cams,
@@ -127,14 +127,15 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
 
 def test_fit_trains_on_two_sizes_to_the_same_bits_streamed_or_not(capture, tmp_path):
     """With bilateral grids, which slice each view at its own size."""
-    settings = train.Settings(batch=2, eval_every=100, checkpoint_every=100, sh_degree=0,
-                              bilateral_grid=True)
+    recipe = train.Recipe(batch=2, sh_degree=0, bilateral_grid=True)
     runs = {}
     for stream in (False, True):
         lines = []
         out = tmp_path / f"stream{stream}"
-        runs[stream] = train.fit(capture, 4, str(out), backend="reference", log=lines.append,
-                                 settings=dataclasses.replace(settings, stream_images=stream))
+        config = train.FitConfig(data=capture.path, out=str(out), steps=4, recipe=recipe,
+                                 backend="reference", eval_every=100, checkpoint_every=100,
+                                 stream_images=stream)
+        runs[stream] = train.fit(config, capture, log=lines.append)
         assert any("2 sizes (24x32, 32x24)" in m for m in lines), lines
     assert runs[True]["heldout_psnr"] == runs[False]["heldout_psnr"] > 10
     a, b = (np.load(tmp_path / f"stream{s}" / "checkpoint.npz") for s in (False, True))
@@ -161,10 +162,14 @@ def test_each_size_keeps_its_own_compile_ahead():
             lowered.append(self.n)
             return lambda *args: ("executable", self.n, self.size)
 
-    def lower(args, size):
-        return Lowered(size, args[0].shape[0])
+    class Jitted:
+        def __call__(self, *args, size):
+            return ("jit", size)
 
-    stepper = ahead.Stepper(lambda a, c: ("jit", c), lower, ahead.Sizes(1.5))
+        def lower(self, x, size):
+            return Lowered(size, x.shape[0])
+
+    stepper = ahead.Stepper(Jitted(), lambda size: dict(size=size), ahead.Sizes(1.5))
     small, large = (jnp.zeros(3),), (jnp.zeros(4),)
     sigs = [ahead.signature(a) for a in (small, large)]
     for _ in range(3):  # the sizes in turn, each preparing the same following size
@@ -183,9 +188,14 @@ def test_compiles_ahead_of_shapes_no_longer_run_are_dropped(monkeypatch):
     """Only the `KEPT_SIGNATURES` latest signatures keep their compile ahead (a pool that grew
     leaves its old shapes behind for good)."""
     monkeypatch.setattr(ahead, "KEPT_SIGNATURES", 2)
-    stepper = ahead.Stepper(lambda a, c: ("jit", c),
-                            lambda a, c: type("L", (), {"compile": lambda self: print})(),
-                            ahead.Sizes(1.5))
+    class Jitted:
+        def __call__(self, *args, size):
+            return ("jit", size)
+
+        def lower(self, *args, size):
+            return type("L", (), {"compile": lambda self: print})()
+
+    stepper = ahead.Stepper(Jitted(), lambda size: dict(size=size), ahead.Sizes(1.5))
     args = [(jnp.zeros(n),) for n in (3, 4, 5)]
     sigs = [ahead.signature(a) for a in args]
     for a, sig in zip(args[:2], sigs[:2]):

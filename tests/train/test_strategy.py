@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lgs_jax.projection import quat_to_rotmat
-from lgs_jax.train import Settings, ops, optim, pool as P, step as S
+from lgs_jax.train import Recipe, ops, optim, pool as P, step as S
 from lgs_jax.train.strategy import DefaultStrategy, MCMCStrategy, StepInfo
 
 F32 = np.float32
@@ -33,7 +33,7 @@ def _pool(n_active=4, size=8, opacities=None, log_scales=None):
 
 def _opt_state(pool):
     """Adam state whose moments are recognisable: mu = 1000 + slot, nu = 2000 + slot."""
-    state = optim.optimizer(Settings(), 100, 1.0).init(pool.params)
+    state = optim.optimizer(Recipe(), 100, 1.0).init(pool.params)
     rows = lambda base: (lambda g, m: jnp.broadcast_to(
         P.rows(jnp.arange(pool.size), m) + base, m.shape).astype(m.dtype))
     adam = state[0]

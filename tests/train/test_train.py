@@ -8,6 +8,7 @@ import dataclasses
 import io
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -22,7 +23,9 @@ from skimage.metrics import structural_similarity
 import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
-from lgs_jax.train import ahead, data as train_data, init, report
+from lgs_jax.train import ahead, feed as train_data, init, report
+
+from .captures import tiny_capture
 
 
 def test_ssim_equals_scikit_image():
@@ -64,14 +67,14 @@ def test_learning_rates_are_the_recipe():
     """Adam's first update moves each parameter by its group's rate (m̂/√v̂ = ±1); the means'
     rate at update s is 1.6e-4 · scene_scale · 0.01^(s / steps)."""
     params = {k: jnp.zeros((1, 3)) for k in train.pool.GROUPS}
-    opt = train.optimizer(train.Settings(), 1000, 2.0)
+    opt = train.optimizer(train.Recipe(), 1000, 2.0)
     grads = {k: jnp.ones((1, 3)) for k in params}
     updates, state = opt.update(grads, opt.init(params), params)
     want = dict(means=1.6e-4 * 2.0, quats=1e-3, log_scales=5e-3, logit_opacities=5e-2,
                 sh_dc=2.5e-3, sh_rest=2.5e-3 / 20)
     for k, v in want.items():
         np.testing.assert_allclose(np.asarray(updates[k]), -v, rtol=1e-6)
-    sched = train.optim.means_schedule(train.Settings(), 1000, 2.0)
+    sched = train.optim.means_schedule(train.Recipe(), 1000, 2.0)
     np.testing.assert_allclose(float(sched(500)), 3.2e-4 * 0.1, rtol=1e-6)
     np.testing.assert_allclose(float(sched(1000)), 3.2e-6, rtol=1e-6)
 
@@ -101,9 +104,9 @@ def test_streamed_views_are_the_steps_views_two_batches_at_most(dtype):
             np.testing.assert_array_equal(np.asarray(idx), views)
             assert targets.dtype == jnp.float32
             np.testing.assert_array_equal(np.asarray(targets), expected[views])
-            assert sorted(source._copies) == [step, step + 1]
+            assert source.held == [step, step + 1]
     streamed.close()
-    assert streamed._worker._shutdown
+    assert streamed.closed
     np.testing.assert_array_equal(np.asarray(streamed.args(3)[0]), expected[views])  # kept
 
 
@@ -150,20 +153,26 @@ STRATEGY = train.DefaultStrategy(refine_start_iter=3, refine_every=4, grow_grad2
                                  prune_opa=0.02)
 
 
-def _fit(data, out, **kwargs):
+def _config(data, out, **kwargs) -> train.FitConfig:
     """One configuration for every fit below, so they share one compiled step; headroom 1.5
     (not the default 3), so that the pairs outgrow the first capacity (at step 10)."""
-    settings = train.Settings(eval_every=kwargs.pop("eval_every", 100), checkpoint_every=3,
-                              pair_headroom=1.5, stream_images=kwargs.pop("stream", None),
-                              pose_opt=kwargs.pop("pose_opt", False),
-                              color_opt=kwargs.pop("color_opt", False),
-                              app_opt=kwargs.pop("app_opt", False))
-    return train.fit(data, STEPS, str(out), strategy=STRATEGY, settings=settings,
-                     max_gaussians=1024, pool_size=1024, backend="reference",
-                     log=kwargs.pop("log", lambda m: None), **kwargs)
+    recipe = train.Recipe(**{k: kwargs.pop(k) for k in ("pose_opt", "color_opt", "app_opt")
+                             if k in kwargs})
+    return train.FitConfig(data=data.path, out=str(out), steps=STEPS, recipe=recipe,
+                           strategy=STRATEGY, max_gaussians=1024, pool_size=1024,
+                           backend="reference", eval_every=kwargs.pop("eval_every", 100),
+                           checkpoint_every=3, pair_headroom=1.5,
+                           stream_images=kwargs.pop("stream", None), **kwargs)
+
+
+def _fit(data, out, **kwargs):
+    hooks = {k: kwargs.pop(k) for k in ("watch", "watch_every", "log") if k in kwargs}
+    hooks.setdefault("log", lambda m: None)
+    return train.fit(_config(data, out, **kwargs), data, **hooks)
 
 
 def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
+    train.train_step.clear_cache()  # another test of this process may have compiled it
     seen = []
     result = _fit(skull, tmp_path, eval_every=2, watch=lambda *a: seen.append(a), watch_every=0)
     rows = report.read_metrics(str(tmp_path / "metrics.jsonl"))
@@ -222,8 +231,9 @@ def test_resume_is_bit_identical(skull, tmp_path):
     own parameters (pose deltas, colour corrections and appearance embeddings with their head,
     `view_params`) and their Adam states (both runs optimize them). The uninterrupted run is watched
     (`fit`'s `watch`, at its start and end only) and the other streams its training images
-    (`Settings.stream_images`), which change nothing. The first training view's photo is darkened
-    (x0.6), so that its colour correction darkens against the other's."""
+    (`FitConfig.stream_images`), which change nothing; a third is stopped by Ctrl-C and resumed.
+    The first training view's photo is darkened (x0.6), so that its colour correction darkens
+    against the other's."""
     images = skull.images.copy()
     images[skull.train[0]] *= 0.6
     skull = dataclasses.replace(skull, images=images)
@@ -244,7 +254,20 @@ def test_resume_is_bit_identical(skull, tmp_path):
     assert any(m.startswith("training images streamed") for m in lines), lines
     assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
     _fit(skull, tmp_path / "b", resume=True, stream=True, **own)
-    a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "ab")
+    # Ctrl-C (SIGINT, here during the watch after step 4): the run stops at that step's
+    # boundary, writes its checkpoint (step 4, between the periodic ones at 3 and 6) and raises
+    # `Interrupted`; resumed, it ends with the same bits
+    interrupt = lambda step, *_: step == 4 and os.kill(os.getpid(), signal.SIGINT)
+    with pytest.raises(train.Interrupted) as stopped:
+        _fit(skull, tmp_path / "c", watch=interrupt, watch_every=0, **own)
+    assert (stopped.value.step, stopped.value.steps) == (4, STEPS)
+    assert json.load(open(tmp_path / "c" / "checkpoint.json"))["step"] == 4
+    assert not (tmp_path / "c" / "result.json").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+    _fit(skull, tmp_path / "c", resume=True, **own)
+    a, b, c = (np.load(tmp_path / r / "checkpoint.npz") for r in "abc")
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], c[name], err_msg=name)
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
     # views' leaves: colour (corrections, Adam count, mu, nu), embed (the same), head (its
     # six weights, Adam count, mu, nu), then pose (deltas, ...)
@@ -271,8 +294,9 @@ def test_resume_is_bit_identical(skull, tmp_path):
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     ply = [(tmp_path / r / "scene.ply").read_bytes() for r in "ab"]
     assert ply[0] == ply[1]
-    rows = report.read_metrics(str(tmp_path / "b" / "metrics.jsonl"))
-    assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
+    for run in "bc":
+        rows = report.read_metrics(str(tmp_path / run / "metrics.jsonl"))
+        assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
 
 
 def test_compiling_ahead_changes_no_bit(skull, tmp_path):
@@ -281,13 +305,13 @@ def test_compiling_ahead_changes_no_bit(skull, tmp_path):
     pairs grow past the capacity (at step 10 here); without it the step is compiled there. Same
     bits at the end, though the capacities may differ (`ahead.Stepper` takes the smallest one
     that holds the pairs): nothing depends on the capacity but drops."""
-    logs = {True: [], "process": [], False: []}
+    logs = {"thread": [], "process": [], "off": []}
     for on, log in logs.items():
-        _fit(skull, tmp_path / str(on), log=log.append, compile_ahead=on)
-    for on in (True, "process"):
+        _fit(skull, tmp_path / on, log=log.append, compile_ahead=on)
+    for on in ("thread", "process"):
         assert any("grown" in m and "(compiled ahead;" in m for m in logs[on]), logs[on]
-    assert any("grown" in m and "(one recompile)" in m for m in logs[False]), logs[False]
-    a, b, c = (np.load(tmp_path / r / "checkpoint.npz") for r in ("True", "process", "False"))
+    assert any("grown" in m and "(one recompile)" in m for m in logs["off"]), logs["off"]
+    a, b, c = (np.load(tmp_path / r / "checkpoint.npz") for r in ("thread", "process", "off"))
     for name in a.files:
         np.testing.assert_array_equal(a[name], c[name], err_msg=name)
         np.testing.assert_array_equal(b[name], c[name], err_msg=name)
@@ -303,6 +327,20 @@ class _Lowered:
         return lambda *args: ("executable", self.capacity)
 
 
+class _Jitted:
+    """A stand-in for a jitted function of static `size`: called, ("jit", size); lowered, a
+    `_Lowered` (failing to compile with `fail`)."""
+
+    def __init__(self, fail=False):
+        self.fail = fail
+
+    def __call__(self, *args, size):
+        return ("jit", size)
+
+    def lower(self, *args, size):
+        return _Lowered(size, self.fail)
+
+
 @pytest.mark.parametrize("need,same_shapes,fail,want", [
     # the prepared size holds the pairs and walked pairs: taken
     ((1100, 600), True, False, ("executable", (2048, 800))),
@@ -314,7 +352,7 @@ class _Lowered:
 def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(need, same_shapes, fail,
                                                                   want):
     sizes = ahead.Sizes(1.5, row_headroom=2.0)
-    stepper = ahead.Stepper(lambda a, c: ("jit", c), lambda a, c: _Lowered(c, fail), sizes)
+    stepper = ahead.Stepper(_Jitted(fail), lambda size: dict(size=size), sizes)
     args = (jnp.zeros(3), 7)
     sig = ahead.signature(args)
     assert stepper.run(args, (1024, 800), sig) == ("jit", (1024, 800))
@@ -421,8 +459,8 @@ def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch,
 
     def wait(s):
         page = urllib.request.urlopen(f"http://127.0.0.1:{s.port}/", timeout=30).read()
-        drawn = [s._server.scene.get_handle_by_name(f"/cameras/{i}") for i in (89, 90)]
-        served.append((b"<html" in page, s._info.content, s._loop.renderer.scene.num,
+        drawn = [s.server.scene.get_handle_by_name(f"/cameras/{i}") for i in (89, 90)]
+        served.append((b"<html" in page, s.status, s.scene.num,
                        [d is not None for d in drawn]))  # the 90 training cameras
         s.stop()
 
@@ -437,33 +475,33 @@ def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch,
 
 def test_fit_cli_passes_the_strategy_and_cap(tmp_path, monkeypatch):
     seen = {}
-    monkeypatch.setattr(train, "fit", lambda *a, **k: seen.update(k) or {})
+    monkeypatch.setattr(train, "fit", lambda config, *a, **k: seen.update(config=config) or {})
     base = ["fit", "--data", str(tmp_path), "--out", str(tmp_path / "o")]
     assert cli.main(base + ["--strategy", "mcmc", "--max-gaussians", "5000"]) == 0
-    assert seen["strategy"] == train.MCMCStrategy(cap_max=5000)
-    assert seen["max_gaussians"] == 5000 and seen["downscale"] == 1
+    c = seen["config"]
+    assert c.strategy == train.MCMCStrategy(cap_max=5000)
+    assert c.max_gaussians == 5000 and c.downscale == 1
     assert cli.main(base + ["--downscale", "4", "--opacity-reset", "--steps", "7"]) == 0
-    assert seen["strategy"] == train.DefaultStrategy(opacity_reset=True)
-    assert seen["downscale"] == 4 and seen["settings"].convention == "3dgs"
-    assert seen["settings"].sh_degree == 3
-    assert seen["compile_ahead"] is None  # fit's default: on a GPU
-    assert not seen["settings"].antialiased and seen["settings"].stream_images is None
-    assert not (seen["settings"].train_on_all or seen["settings"].color_opt
-                or seen["settings"].bilateral_grid or seen["settings"].app_opt)
+    c = seen["config"]
+    assert c.strategy == train.DefaultStrategy(opacity_reset=True)
+    assert c.downscale == 4 and c.recipe.convention == "3dgs" and c.recipe.sh_degree == 3
+    assert c.compile_ahead is None  # fit's default: on a GPU
+    assert not c.recipe.antialiased and c.stream_images is None
+    assert not (c.train_on_all or c.recipe.color_opt or c.recipe.bilateral_grid
+                or c.recipe.app_opt or c.uint8_images)
     assert cli.main(base + ["--no-stream-images", "--pose-opt", "--train-on-all",
-                            "--color-opt", "--bilateral-grid", "--app-opt",
-                            "--sh-degree", "1"]) == 0
-    assert seen["settings"].sh_degree == 1
-    assert seen["settings"].stream_images is False and seen["settings"].pose_opt
-    assert seen["settings"].train_on_all and seen["settings"].color_opt
-    assert seen["settings"].bilateral_grid and seen["settings"].app_opt
-    with pytest.raises(lgs_jax.DatasetError):  # --uint8-images loads here: an empty folder
-        cli.main(base + ["--uint8-images", "--debug"])
-    assert seen["settings"].stream_images is False and seen["settings"].pose_opt
-    assert seen["settings"].train_on_all
+                            "--color-opt", "--bilateral-grid", "--app-opt", "--uint8-images",
+                            "--sh-degree", "1", "--checkpoint-every", "20"]) == 0
+    c = seen["config"]
+    assert c.recipe.sh_degree == 1 and c.stream_images is False and c.recipe.pose_opt
+    assert c.train_on_all and c.recipe.color_opt and c.recipe.bilateral_grid
+    assert c.recipe.app_opt and c.uint8_images and c.checkpoint_every == 20
     assert cli.main(base + ["--convention", "gsplat", "--no-compile-ahead", "--antialiased"]) == 0
-    assert seen["settings"].convention == "gsplat" and seen["compile_ahead"] is False
-    assert seen["settings"].raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
+    c = seen["config"]
+    assert c.recipe.convention == "gsplat" and c.compile_ahead == "off"
+    assert c.recipe.raster == lgs_jax.RasterConfig("gsplat", antialiased=True)
+    assert cli.main(base + ["--compile-ahead-process"]) == 0
+    assert seen["config"].compile_ahead == "process"
 
 
 def test_run_dir_rules(tmp_path):
@@ -476,11 +514,11 @@ def test_run_dir_rules(tmp_path):
     assert "exclude" in train.run_dir_problem(str(tmp_path), resume=True, overwrite=True)
     assert "not a directory" in train.run_dir_problem(str(tmp_path / "metrics.jsonl"))
     with pytest.raises(ValueError, match="out: .* is not empty"):
-        train.fit("unused", 1, str(tmp_path))
+        train.fit(train.FitConfig(data="unused", out=str(tmp_path), steps=1))
 
 
 def test_training_renders_follow_the_settings():
-    """Settings.convention and .antialiased reach the renders: an opaque Gaussian over a white
+    """Recipe.convention and .antialiased reach the renders: an opaque Gaussian over a white
     background leaves 1 − 0.99 of it under "3dgs" and 1 − 0.999 under "gsplat"; a Gaussian
     smaller than a pixel in front of it is fainter antialiased."""
     from lgs_jax.train import pool as P, step as S
@@ -494,9 +532,9 @@ def test_training_renders_follow_the_settings():
                          width=16, height=16)
     pool = P.from_gaussians(g)
     images = {}
-    for name, settings in (("3dgs", train.Settings()),
-                           ("gsplat", train.Settings(convention="gsplat")),
-                           ("antialiased", train.Settings(antialiased=True))):
+    for name, settings in (("3dgs", train.Recipe()),
+                           ("gsplat", train.Recipe(convention="gsplat")),
+                           ("antialiased", train.Recipe(antialiased=True))):
         (image,), _ = S.render_views(pool, [cam], jnp.ones(3), "tiles", 64, settings.raster)
         want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64,
                               config=lgs_jax.RasterConfig(settings.convention,
@@ -510,24 +548,44 @@ def test_training_renders_follow_the_settings():
     assert 0 < small(images["antialiased"]) < 0.5 * small(images["3dgs"])
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    (dict(steps=-1), "steps: expected an int >= 0"), (dict(max_gaussians=0), "max_gaussians"),
-    (dict(settings=train.Settings(convention="inria")), "settings.convention"),
-    (dict(settings=train.Settings(ssim_padding="full")), "settings.ssim_padding"),
-    (dict(settings=train.Settings(pair_headroom=0.9)), "settings.pair_headroom: expected a "
-                                                       "number >= 1"),
-    (dict(settings=train.Settings(pair_headroom=float("nan"))), "settings.pair_headroom"),
-    (dict(settings=train.Settings(row_headroom=0.5)), "settings.row_headroom: expected None "
-                                                      "or a number >= 1"),
-    (dict(settings=train.Settings(row_headroom=float("nan"))), "settings.row_headroom"),
-    (dict(watch=3), "watch: expected None or a callable, got int"),
-    (dict(settings=train.Settings(stream_images=1)), "settings.stream_images: expected a bool "
-                                                     "or None, got 1"),
-    (dict(settings=train.Settings(antialiased=None)), "settings.antialiased: expected a bool"),
-    (dict(watch_every=float("nan")), "watch_every: expected seconds >= 0, got nan")])
-def test_fit_refuses_bad_settings(tmp_path, kwargs, match):
+C, R = train.FitConfig, train.Recipe
+
+
+@pytest.mark.parametrize("make,match", [
+    (lambda: C("d", "o", steps=-1), "steps: expected an int >= 0"),
+    (lambda: C("d", "o", max_gaussians=0), "max_gaussians"),
+    (lambda: R(convention="inria"), "convention: expected one of"),
+    (lambda: R(ssim_padding="full"), "ssim_padding"),
+    (lambda: C("d", "o", pair_headroom=0.9), "pair_headroom: expected a number >= 1"),
+    (lambda: C("d", "o", pair_headroom=float("nan")), "pair_headroom: expected a finite"),
+    (lambda: C("d", "o", row_headroom=0.5), "row_headroom: expected a number >= 1"),
+    (lambda: C("d", "o", row_headroom=float("nan")), "row_headroom"),
+    (lambda: C("d", "o", stream_images=1), "stream_images: expected a bool, got 1"),
+    (lambda: R(antialiased=None), "antialiased: expected a bool, got None"),
+    (lambda: C("d", "o", seed=-1), "seed: expected an int >= 0"),
+    (lambda: C("d", "o", crop=(1, 2)), "crop: expected a tuple"),
+    (lambda: C("d", "o", compile_ahead="threads"), "compile_ahead: expected one of"),
+    (lambda: C("d", "o", resume=True, overwrite=True), "resume, overwrite: they exclude"),
+    (lambda: train.MCMCStrategy(cap_max=0), "strategy.cap_max: expected an int >= 1"),
+    (lambda: C("d", "o", strategy="mcmc"), "strategy: expected a Strategy, got str"),
+    (lambda: C("d", "o", devices=0), "devices: expected an int >= 1"),
+    (lambda: C("d", "o", devices=True), "devices: expected an int, got True"),
+    (lambda: C("d", "o", devices=2, recipe=R(batch=3)), "devices: 2 devices split "
+                                                        "recipe.batch = 3 views unevenly")])
+def test_bad_configurations_are_refused(make, match):
     with pytest.raises(ValueError, match=match):
-        train.fit("unused", **{"steps": 1, "out": str(tmp_path), **kwargs})
+        make()
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(watch=3), "watch: expected None or a callable, got int"),
+    (dict(watch_every=float("nan")), "watch_every: expected seconds >= 0, got nan")])
+def test_fit_refuses_bad_arguments(tmp_path, kwargs, match):
+    config = train.FitConfig(data="unused", out=str(tmp_path), **kwargs.pop("config", {}))
+    with pytest.raises(ValueError, match=match):
+        train.fit(config, **kwargs)
+    with pytest.raises(ValueError, match="config: expected a FitConfig"):
+        train.fit("unused")
 
 
 def test_fit_usage_errors_exit_2(tmp_path, capsys):
@@ -551,19 +609,18 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
 @pytest.mark.slow
 def test_rows_sized_to_the_walked_pairs_change_no_bit(skull, tmp_path, monkeypatch):
     """Training with the Pallas backward (interpret mode on a CPU) and its rows sized to the
-    walked pairs (`Settings.row_headroom`), started at one row (as if the first view walked
+    walked pairs (`FitConfig.row_headroom`), started at one row (as if the first view walked
     one pair): the first step overflows them, they grow and the step runs again, and the run
     ends with the same bits as with a row per pair slot."""
-    from lgs_jax.train import loop
+    from lgs_jax.train import state
 
-    monkeypatch.setattr(loop, "_walked", lambda *args: 1)
+    monkeypatch.setattr(state, "walked", lambda *args: 1)
     sums = {}
     for h in (None, 1.5):
         logs = []
-        settings = train.Settings(eval_every=100, checkpoint_every=3, pair_headroom=1.5,
-                                  row_headroom=h)
-        train.fit(skull, 6, str(tmp_path / str(h)), strategy=STRATEGY, settings=settings,
-                  max_gaussians=1024, pool_size=1024, backend="pallas", log=logs.append)
+        config = dataclasses.replace(_config(skull, tmp_path / str(h)), steps=6,
+                                     backend="pallas", row_headroom=h)
+        train.fit(config, skull, log=logs.append)
         z = np.load(tmp_path / str(h) / "checkpoint.npz")
         sums[h] = {k: z[k] for k in z.files}
         meta = json.loads((tmp_path / str(h) / "checkpoint.json").read_text())
@@ -589,6 +646,43 @@ def test_progress_bar_redraws_while_a_step_runs():
     assert "psnr=21.50" in last and "gaussians=120" in last
 
 
+def test_metrics_cut_short_by_a_kill_read_without_their_last_line(tmp_path):
+    path = tmp_path / "metrics.jsonl"
+    path.write_text('{"step": 1}\n{"step": 2}\n{"st')
+    assert report.read_metrics(str(path)) == [{"step": 1}, {"step": 2}]
+    path.write_text('{"step": 1}\n{"st\n{"step": 2}\n')
+    with pytest.raises(ValueError, match="metrics.jsonl: line 2 is not JSON"):
+        report.read_metrics(str(path))
+
+
+def test_progress_rate_and_eta_leave_out_the_compile():
+    """After a first step that compiled for a while, the rate and ETA are the steps' own (the
+    loop's `rate`), not the compile's spread over the steps to come."""
+    stream = io.StringIO()
+    bar = report.Progress(0, 100, file=stream, interval=10)
+    time.sleep(0.3)  # compiling
+    bar.step(0.25, 20.0, 100, rate=50.0)
+    bar.bar.refresh()
+    bar.close()
+    last = stream.getvalue().split("\r")[-1]
+    assert "1/100" in last and "<00:01" in last and "50.00step/s" in last, last
+
+
+def test_random_starts_scale_with_the_images(tmp_path):
+    """Without SfM points, a point per 4 pixels of the largest training image (at most
+    100,000): 50x50 images start with 625 (a CPU step at 100,000 takes far longer)."""
+    from lgs_jax.train import feed, init
+
+    config = train.FitConfig(data=tiny_capture(tmp_path / "d", size=50), out="o")
+    assert [config.start_points(p) for p in (2500, 200 * 200, 800 * 800)] == [625, 10_000,
+                                                                            100_000]
+    assert dataclasses.replace(config, init_points=7).start_points(2500) == 7
+    lines = []
+    g = init.start_gaussians(feed.prepare(config.data), config, lines.append)
+    assert g.num == 625 and lines == ["no SfM points: 625 random points in a cube of "
+                                      "half-width 0.25 x scene scale"]
+
+
 def test_8_bit_images_train_to_the_same_bits(tmp_path):
     """A capture at full size without alpha or distortion: its images held as uint8
     (`load_dataset(dtype=np.uint8)`, `fit --uint8-images`) train to the float32 run's bits,
@@ -607,14 +701,12 @@ def test_8_bit_images_train_to_the_same_bits(tmp_path):
         frames.append(dict(file_path=f"./train/r_{i}", transform_matrix=pose.tolist()))
     (data / "transforms_train.json").write_text(json.dumps(dict(camera_angle_x=0.7,
                                                                 frames=frames)))
-    settings = train.Settings(eval_every=100, init_points=64, checkpoint_every=100)
     results = {}
-    for name, dtype, stream in (("f32", np.float32, None), ("u8", np.uint8, None),
-                                ("u8s", np.uint8, True)):
-        d = lgs_jax.load_dataset(str(data), dtype=dtype)
-        results[name] = train.fit(d, 4, str(tmp_path / name), backend="reference",
-                                  settings=dataclasses.replace(settings, stream_images=stream),
-                                  log=lambda m: None)
+    for name, uint8, stream in (("f32", False, None), ("u8", True, None), ("u8s", True, True)):
+        config = train.FitConfig(data=str(data), out=str(tmp_path / name), steps=4,
+                                 backend="reference", eval_every=100, init_points=64,
+                                 checkpoint_every=100, uint8_images=uint8, stream_images=stream)
+        results[name] = train.fit(config, log=lambda m: None)
     a = np.load(tmp_path / "f32" / "checkpoint.npz")
     for name in ("u8", "u8s"):
         b = np.load(tmp_path / name / "checkpoint.npz")
@@ -635,12 +727,12 @@ def test_fit_needs_held_out_views(tmp_path):
     (data / "transforms_train.json").write_text(json.dumps(dict(camera_angle_x=0.7,
                                                                 frames=frames)))
     with pytest.raises(ValueError, match="needs training views and held-out views"):
-        train.fit(str(data), 1, str(tmp_path / "out"))
+        train.fit(train.FitConfig(data=str(data), out=str(tmp_path / "out"), steps=1))
     # ... unless it trains on every view: then nothing is evaluated
     lines = []
-    result = train.fit(str(data), 2, str(tmp_path / "all"), backend="reference",
-                       settings=train.Settings(train_on_all=True, eval_every=1,
-                                               init_points=50), log=lines.append)
+    result = train.fit(train.FitConfig(data=str(data), out=str(tmp_path / "all"), steps=2,
+                                       backend="reference", train_on_all=True, eval_every=1,
+                                       init_points=50), log=lines.append)
     assert result["heldout_psnr"] is None and result["heldout_ssim"] is None
     assert any("no held-out views to evaluate" in m for m in lines), lines
     rows = report.read_metrics(str(tmp_path / "all" / "metrics.jsonl"))
@@ -671,7 +763,7 @@ def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
     assert "PSNR +0.50 dB, SSIM +0.0000, time per step x2.00, peak memory x1.50" in \
         capsys.readouterr().out
     args = bench.parse(["--data-root", data_dir, "--downscale", "32", "--refine-from", "7"])
-    assert bench.scene_setup(args, "skull")[2].refine_start_iter == 7  # gsplat's takes it too
+    assert bench.scene_setup(args, "skull")[1].strategy.refine_start_iter == 7  # gsplat's too
 
 
 def test_gsplat_comparison_workers_import_the_package_their_parent_would(tmp_path):
@@ -720,26 +812,29 @@ def test_seed_summary_pairs_the_trainers_by_step(tmp_path, capsys):
 def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
     from lgs_jax.train import checkpoint
 
-    setup = train.Setup(strategy=train.MCMCStrategy())
-    saved = checkpoint.config_of(setup, seed=0)
+    config = train.FitConfig(data="d", out="o", strategy=train.MCMCStrategy())
+    saved = checkpoint.config_of(config)
     assert checkpoint.config_mismatch(saved, json.loads(json.dumps(saved))) is None
     other = checkpoint.config_of(dataclasses.replace(
-        setup, steps=5, backend="pallas",
-        settings=train.Settings(pair_headroom=1.5, row_headroom=2.0)), 0)
-    # run length, backend, pair and row headrooms may change
+        config, steps=5, backend="pallas", pair_headroom=1.5, row_headroom=2.0, eval_every=3,
+        checkpoint_every=4, init_points=9, stream_images=True, compile_ahead="off"))
+    # run length, backend, periods, headrooms, streaming, the start may change
     assert checkpoint.config_mismatch(saved, other) is None
     changed = checkpoint.config_of(
-        dataclasses.replace(setup, strategy=train.MCMCStrategy(cap_max=7)), 1)
+        dataclasses.replace(config, strategy=train.MCMCStrategy(cap_max=7), seed=1))
     problem = checkpoint.config_mismatch(saved, changed)
     assert "strategy_settings.cap_max: 1000000 -> 7" in problem and "seed: 0 -> 1" in problem
-    # a setting the checkpoint predates counts as its default
-    defaults = checkpoint.config_of(train.Setup(strategy=train.MCMCStrategy()), 0)
+    # a setting the checkpoint predates counts as its default; one it has that this version
+    # lacks (init_points, in settings before) is not compared
+    defaults = checkpoint.default_config(config)
     older = json.loads(json.dumps(saved))
     del older["settings"]["color_opt"], older["strategy_settings"]["cap_max"]
+    del older["settings"]["name"]
+    older["settings"].update(init_points=100_000, init_extent=None)
     assert checkpoint.config_mismatch(older, saved) is not None
     assert checkpoint.config_mismatch(older, saved, defaults) is None
     colour = checkpoint.config_of(dataclasses.replace(
-        setup, settings=train.Settings(color_opt=True)), 0)
+        config, recipe=train.Recipe(color_opt=True)))
     assert "settings.color_opt: False -> True" in checkpoint.config_mismatch(older, colour,
                                                                              defaults)
     (tmp_path / "checkpoint.json").write_text(json.dumps(dict(step=3, capacity=8)))
@@ -747,19 +842,22 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
         checkpoint.read_meta(str(tmp_path))
 
 
-def test_sized_rows_start_at_the_first_views_walked_pairs(skull):
-    """`Settings.row_headroom`: a run's rows start at `pair_capacity(walked, headroom)` of the
+def test_sized_rows_start_at_the_first_views_walked_pairs(skull, tmp_path):
+    """`FitConfig.row_headroom`: a run's rows start at `pair_capacity(walked, headroom)` of the
     first training view's walked pairs (a forward render), at most its pairs; None: no rows."""
-    from lgs_jax.train import loop
+    from lgs_jax.train import state
 
     rd = train_data.prepare(skull, 1, None)
     for h in (None, 2.0):
-        setup = train.Setup(settings=train.Settings(row_headroom=h), backend="tiles", steps=10)
-        st = loop._fresh(setup, rd, 0, 1024, 1024, lambda m: None)
+        config = train.FitConfig(data=skull.path, out=str(tmp_path), steps=10, row_headroom=h,
+                                 pool_size=1024)
+        setup = train.Setup.of(config, rd.scene_scale, "tiles")
+        st = state.fresh(config, setup, rd, lambda m: None)
         if h is None:
             assert st.rows is None
             continue
         first = jax.tree.map(lambda x: x[0], rd.train_cams)
-        walked = loop._walked(setup, st.pool, first, jnp.asarray(rd.background), st.capacity)
-        assert 0 < walked <= int(loop._pairs(st.pool, first))
+        walked = state.walked(setup, st.pool, first, jnp.asarray(rd.background), st.capacity)
+        pairs = lgs_jax.count_pairs(train.render_gaussians(st.pool.params, st.pool.active), first)
+        assert 0 < walked <= int(pairs) and int(pairs) == state.pairs(st.pool, first)
         assert st.rows == lgs_jax.pair_capacity(walked, 2.0)

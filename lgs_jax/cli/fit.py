@@ -1,0 +1,214 @@
+"""`python -m lgs_jax fit`: the command line of `lgs_jax.train.FitConfig`, generated from its
+fields (`options`): an option per field of FitConfig and of its `Recipe`, named after the field;
+`--strategy NAME` (`train.STRATEGIES`) with an option per field of the strategies (default: the
+chosen strategy's own). The names that are not the fields' are in one place: `ALIASES` (older
+options, still read), `DERIVED` (a field set from another option), `CLI_ONLY` (options that
+are not configuration).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shlex
+
+import numpy as np
+
+from . import options, view as view_cmd
+from .args import UsageError, check_dataset, port
+
+ALIASES = {"--no-compile-ahead": ("compile_ahead", "off"),  # older options: flag -> (field,
+           "--compile-ahead-process": ("compile_ahead", "process")}  # value they set)
+DERIVED = {"cap_max": "max_gaussians"}  # strategy field -> the FitConfig field it takes
+CLI_ONLY = ("--viewer-port", "--viewer-host", "--debug")  # not configuration
+
+
+def config_options() -> list:
+    """The options of FitConfig's fields and its Recipe's (not the strategy's)."""
+    from ..train import FitConfig, Recipe
+
+    return options.fields_of(FitConfig, nested=(Recipe,), skip=("strategy",))
+
+
+def strategy_options() -> list:
+    """An option per field of the strategies of `train.STRATEGIES` (the first declaring it
+    gives its type and help), `DERIVED` fields left out."""
+    from ..train import STRATEGIES
+
+    found = {}
+    for cls in STRATEGIES.values():
+        for f in dataclasses.fields(cls):
+            if f.name not in DERIVED and f.name not in found:
+                found[f.name] = options.Option(options.flag_of(f), ("strategy", f.name), f, cls)
+    return list(found.values())
+
+
+def _strategy_help(o: options.Option) -> str:
+    from ..train import STRATEGIES
+
+    has = [f"{name} {getattr(cls(), o.dest)}" for name, cls in STRATEGIES.items()
+           if o.dest in {f.name for f in dataclasses.fields(cls)}]
+    return f"{o.field.metadata.get('help', '')} (strategy default: {', '.join(has)})"
+
+
+def parser(sub, common) -> None:
+    """The `fit` subcommand's options."""
+    from ..train import STRATEGIES, FitConfig
+
+    f = sub.add_parser(
+        "fit", parents=[common], help="train Gaussians on a capture (COLMAP, transforms.json, "
+                                      "NeRF-synthetic) with densification",
+        description="Train Gaussians on a dataset (lgs_jax.load_dataset: every 8th image held "
+                    "out, NeRF-synthetic ids 0,10,..,90) with gsplat's recipe and a densification "
+                    "strategy. Writes into OUT: metrics.jsonl, checkpoints (resume continues "
+                    "bit-identically), scene.ply (INRIA PLY), heldout_*.png (render beside ground "
+                    "truth), curves.png, result.json. Ctrl-C stops after the current step, "
+                    "writes a checkpoint and prints the command that resumes (exit code 130).")
+    groups = options.add(f, config_options())
+    strategy = next(x for x in dataclasses.fields(FitConfig) if x.name == "strategy")
+    f.add_argument("--strategy", choices=list(STRATEGIES), default="default",
+                   help=strategy.metadata["help"] + " (default: default)")
+    for o in strategy_options():
+        kw = options.argument(o.type, o.field, None)
+        f.add_argument(o.flag, dest=o.dest, **dict(kw, help=_strategy_help(o)))
+    for flag, (dest, value) in ALIASES.items():
+        groups[dest].add_argument(flag, dest=dest, action="store_const", const=value,
+                                  help=f"the same as --{dest.replace('_', '-')} {value}")
+    f.add_argument("--viewer-port", type=port,
+                   help="show the scene in training in a browser at this port (viser, "
+                        "`pip install \"lgs_jax[viewer]\"`), updated about once a second, "
+                        "and keep serving the trained scene after the run until Ctrl-C")
+    f.add_argument("--viewer-host", default="0.0.0.0",
+                   help="address the viewer listens on (default: all)")
+    f.set_defaults(func=run)
+
+
+def _strategy(args):
+    """The strategy --strategy names with the strategy options given (`DERIVED` fields from
+    their options); a usage error for an option of another strategy."""
+    from ..train import STRATEGIES
+
+    cls = STRATEGIES[args.strategy]
+    names = {f.name for f in dataclasses.fields(cls)}
+    given = {}
+    for o in strategy_options():
+        value = getattr(args, o.dest)
+        if value is None:
+            continue
+        if o.dest not in names:
+            raise UsageError(f"{o.flag}: the {args.strategy} strategy has no {o.dest}")
+        given[o.dest] = value
+    given.update({k: getattr(args, v) for k, v in DERIVED.items() if k in names})
+    return cls(**given)
+
+
+def config_of(args):
+    """The `FitConfig` of parsed arguments; a usage error naming the option for a value the
+    configuration refuses."""
+    from ..train import FitConfig, Recipe
+
+    top, recipe = {}, {}
+    for path, value in options.values(args, config_options()).items():
+        (recipe if path[0] == "recipe" else top)[path[-1]] = value
+    try:
+        return FitConfig(**top, recipe=Recipe(**recipe), strategy=_strategy(args))
+    except ValueError as e:
+        field, _, message = str(e).partition(": ")
+        raise UsageError(f"--{field.split('.')[-1].replace('_', '-')}: {message}") from None
+
+
+def argv(config) -> list[str]:
+    """The `fit` options that make `config` (`config_of` of them gives it back); ValueError
+    for a configuration the command line cannot express (a strategy of another class, a
+    `DERIVED` field unlike its option)."""
+    from ..train import STRATEGIES
+
+    words = []
+    for o in config_options():
+        value = config
+        for name in o.path:
+            value = getattr(value, name)
+        words += options.argv(value, o, o.field.default)
+    names = [n for n, cls in STRATEGIES.items() if type(config.strategy) is cls]
+    if not names:
+        raise ValueError(f"strategy: {type(config.strategy).__name__} has no command-line name")
+    cls = STRATEGIES[names[0]]
+    if names[0] != "default":
+        words += ["--strategy", names[0]]
+    for o in strategy_options():
+        if o.dest in {f.name for f in dataclasses.fields(cls)}:
+            words += options.argv(getattr(config.strategy, o.dest), o,
+                                  getattr(cls(), o.dest))
+    for field, source in DERIVED.items():
+        if hasattr(config.strategy, field) and \
+                getattr(config.strategy, field) != getattr(config, source):
+            raise ValueError(f"strategy.{field}: the command line sets it to {source}")
+    return words
+
+
+def resume_command(config) -> str:
+    """The command that resumes `config`'s run (or a note where the command line cannot say
+    it)."""
+    try:
+        words = argv(dataclasses.replace(config, resume=True, overwrite=False))
+    except ValueError as e:
+        return f"fit(dataclasses.replace(config, resume=True)) ({e})"
+    return "python -m lgs_jax fit " + shlex.join(words)
+
+
+def _stopped(config, e: KeyboardInterrupt) -> str:
+    """What a Ctrl-C left: the step of OUT's checkpoint and the command that resumes it."""
+    import os
+
+    from .. import train
+
+    if isinstance(e, train.Interrupted):
+        step = e.step
+    else:  # a second Ctrl-C, or one outside the steps: the last checkpoint written
+        try:
+            with open(os.path.join(config.out, "checkpoint.json")) as f:
+                step = json.load(f)["step"]
+        except (OSError, ValueError, KeyError):
+            return f"interrupted before {config.out} held a checkpoint"
+    return (f"stopped after step {step} of {config.steps}; the checkpoint in {config.out} "
+            f"resumes it:\n  {resume_command(config)}")
+
+
+def run(args) -> int:
+    """`fit`: the configuration and OUT checked before any work, then train; Ctrl-C: exit 130
+    with the command that resumes."""
+    import sys
+
+    from .. import train
+
+    config = config_of(args)
+    check_dataset(config.data)
+    try:
+        train.check_out(config, config.data)
+    except train.RunDirError as e:
+        raise UsageError(f"--{e.field.replace('_', '-')}: {e.message}") from None
+    data, watch, served = None, None, None
+    if args.viewer_port is not None:
+        from ..io.datasets import load_dataset
+
+        data = load_dataset(config.data, downscale=config.downscale,
+                            dtype=np.uint8 if config.uint8_images else np.float32)
+        watch, served = view_cmd.training_viewer(args, config, data)
+    try:
+        result = train.fit(config, data, watch=watch)
+    except BaseException as e:
+        if served is not None:
+            served.stop()  # the viewer's threads would keep the process alive
+        if isinstance(e, train.RunDirError):  # another fit took OUT meanwhile
+            raise UsageError(f"--{e.field.replace('_', '-')}: {e.message}") from None
+        if not isinstance(e, KeyboardInterrupt):
+            raise
+        print("\n" + _stopped(config, e), file=sys.stderr)
+        return 130
+    print(json.dumps(result, indent=1))
+    if served is not None:
+        from ..viewer import wait
+
+        print("training done; the viewer shows the trained scene (Ctrl-C stops)", flush=True)
+        wait(served)
+    return 0

@@ -1,0 +1,199 @@
+"""A training run's whole configuration: `FitConfig` (what `fit` takes and the `fit` command line
+is generated from, `lgs_jax.cli.options`), with `Recipe` (what each training step computes) and
+the densification strategy (`strategy.Strategy`, a frozen dataclass of its own) nested in it;
+`Setup`, the part the jitted functions depend on statically. Every field documents itself
+(`options.option`: help, bounds) and is checked when the configuration is made.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+from ..config import CONVENTIONS, RasterConfig
+from .losses import PADDINGS
+from .options import check, option
+from .strategy import DefaultStrategy, Strategy
+
+TRAIN_BACKENDS = ("reference", "tiles", "pallas", "pallas_vanilla")  # differentiable ones
+PIXELS_PER_POINT = 4  # random start: a point per this many pixels of a training image ...
+MAX_INIT_POINTS = 100_000  # ... at most this many (gsplat's count for NeRF-synthetic scenes)
+
+
+@dataclasses.dataclass(frozen=True)
+class Recipe:
+    """What each training step computes: gsplat simple_trainer's recipe (3DGS's rates).
+
+    Adam per parameter group (`optim.optimizer`); the views' own parameters (poses, colour
+    corrections, bilateral grids, appearance embeddings: `view_params`) at their rates times
+    sqrt(batch). A checkpoint records the recipe: a resumed run must share it.
+    """
+
+    name: Literal["default"] = option(
+        "default", "the recipe whose values the options below change (today only default: "
+                   "gsplat simple_trainer's)", flag="--recipe")
+    lr_means: float = option(1.6e-4, "means' learning rate, times the scene scale", low=0)
+    lr_means_decay: float = option(
+        0.01, "the means' rate decays exponentially to this fraction over the run", low=0)
+    lr_quats: float = option(1e-3, "rotations' learning rate", low=0)
+    lr_log_scales: float = option(5e-3, "log-scales' learning rate", low=0)
+    lr_logit_opacities: float = option(5e-2, "opacity logits' learning rate", low=0)
+    lr_sh_dc: float = option(2.5e-3, "SH band 0's learning rate", low=0)
+    lr_sh_rest: float = option(2.5e-3 / 20, "higher SH bands' learning rate", low=0)
+    ssim_lambda: float = option(0.2, "weight of 1 − SSIM in the loss, (1 − λ)·L1 + λ·(1 − SSIM)",
+                                low=0, high=1)
+    ssim_padding: str = option(
+        "same", "SSIM of the loss: same (3DGS: zero-padded, every pixel) or valid (gsplat's "
+                "simple_trainer)", choices=PADDINGS)
+    convention: str = option(
+        "3dgs", "compositing rule of training and evaluation renders (alpha cap 0.99, or "
+                "gsplat's 0.999)", choices=CONVENTIONS)
+    antialiased: bool = option(
+        False, "train and evaluate with antialiased renders (gsplat's --antialiased: "
+               "opacities scaled so that the 0.3-pixel dilation keeps each Gaussian's "
+               "integral); render the result with --antialiased too")
+    sh_every: int = option(1000, "steps between SH degrees (one band more each time)", low=1)
+    sh_degree: int = option(3, "highest SH degree of the colours (0: view-independent)",
+                            low=0, high=3)
+    batch: int = option(1, "views per step", low=1)
+    pose_opt: bool = option(
+        False, "also optimize each training view's camera pose (gsplat's --pose_opt: a 9-D "
+               "delta per view); held-out views keep their poses")
+    lr_pose: float = option(1e-5, "pose deltas' learning rate", low=0)
+    pose_reg: float = option(1e-6, "pose deltas' L2 weight decay", low=0)
+    color_opt: bool = option(
+        False, "also optimize an affine colour correction of each training view (exposure "
+               "and white balance that change between photos); held-out views render at the "
+               "views' average appearance; colors.json holds the corrections")
+    lr_color: float = option(1e-3, "colour corrections' learning rate", low=0)
+    color_reg: float = option(1e-6, "colour corrections' L2 weight decay", low=0)
+    bilateral_grid: bool = option(
+        False, "also optimize a bilateral grid of affine colour maps per training view "
+               "(gsplat's --use_bilateral_grid: 16x16 cells by 8 brightness levels, for camera "
+               "processing that varies over the image); held-out views render without one; "
+               "bilateral_grids.npz holds the grids")
+    lr_grid: float = option(2e-3, "bilateral grids' learning rate (warmed up over 1000 steps, "
+                                  "decaying to 1%)", low=0)
+    grid_tv: float = option(10.0, "weight of the grids' total variation in the loss", low=0)
+    app_opt: bool = option(
+        False, "also optimize appearance embeddings (gsplat's --app_opt: a feature per "
+               "Gaussian, an embedding per training view and a small MLP giving each "
+               "Gaussian's colour change in each view, for lighting that changes over the "
+               "scene between photos); held-out views and scene.ply are the scene at the "
+               "views' average appearance; appearance.npz holds the rest")
+    lr_app: float = option(1e-3, "appearance head's learning rate (the embeddings' 10x)", low=0)
+    app_reg: float = option(1e-6, "appearance embeddings' and head's L2 weight decay", low=0)
+    lr_features: float = option(2.5e-3, "appearance features' learning rate", low=0)
+
+    def __post_init__(self):
+        check(self)
+
+    @property
+    def raster(self) -> RasterConfig:
+        """The `RasterConfig` of training and evaluation renders."""
+        return RasterConfig(self.convention, antialiased=self.antialiased)
+
+
+@dataclasses.dataclass(frozen=True)
+class FitConfig:
+    """Everything a `fit` run is: the data and the run folder, the run length, the recipe, the
+    strategy, the start, the sizes of the step's buffers, the devices, and when to evaluate
+    and checkpoint. Frozen and hashable; each field's help is its documentation (`python -m
+    lgs_jax fit --help` shows them); bad values raise `ValueError` naming the field."""
+
+    data: str = option(help="dataset folder (or transforms json)")
+    out: str = option(help="run directory (new or empty, unless --resume or --overwrite)")
+    steps: int = option(30_000, "training steps", low=0)
+    recipe: Recipe = Recipe()
+    strategy: Strategy = option(
+        DefaultStrategy(), "densification: default (3DGS clone/split/prune, gsplat's "
+                           "DefaultStrategy) or mcmc (3DGS as MCMC, gsplat's MCMCStrategy, "
+                           "with its recipe: init opacity 0.5, scale 0.1, regularisers 0.01)")
+    max_gaussians: int = option(1_000_000, "cap on the number of Gaussians (the pool's; the "
+                                           "command line's mcmc takes it as cap_max)", low=1)
+    pool_size: int | None = option(
+        None, "initial pool slots (default: the next power of two above the initial count; "
+              "the pool doubles when it must, recompiling once each time)", low=1)
+    init_points: int | None = option(
+        None, f"random initial points for datasets without SfM points (default: one per "
+              f"{PIXELS_PER_POINT} pixels of the largest training image, at most "
+              f"{MAX_INIT_POINTS})", low=1)
+    init_extent: float | None = option(
+        None, "the random points fill a cube of this half-width times the scene scale "
+              "(default: 0.25 for NeRF-synthetic scenes, 3DGS's cube on Lego; 3 otherwise, "
+              "gsplat's)", low=0)
+    downscale: int = option(1, "integer image downscale at load", low=1)
+    crop: tuple[int, int, int, int] | None = option(
+        None, "train and evaluate on this window of every image (quick checks)", low=0,
+        metavar=("X0", "Y0", "W", "H"))
+    uint8_images: bool = option(
+        False, "hold the images as 8-bit values (a quarter of the memory, host and device), "
+               "rounded after compositing, undistortion and --downscale; without those, the "
+               "same results")
+    train_on_all: bool = option(
+        False, "train on every view, the held-out ones too (a final scene; nothing is "
+               "evaluated)")
+    seed: int = option(0, "seed of the start, the view order and the strategies' draws", low=0)
+    backend: str | None = option(None, "differentiable backend (default: pallas on GPUs, tiles "
+                                       "elsewhere)", choices=TRAIN_BACKENDS)
+    devices: int = option(1, "split each step's views across this many devices (data "
+                             "parallel; --batch a multiple of it)", low=1)
+    pair_headroom: float = option(
+        3.0, "pair buffer size as a multiple of a view's pairs, at the start and at each "
+             "growth (a recompile); larger: fewer recompiles, larger buffers", low=1)
+    row_headroom: float | None = option(
+        None, "size the Pallas backward's gradient rows to this multiple of the walked "
+              "pairs, growing them when a view walks more (a recompile each): less memory, "
+              "the same results (default: a row per pair slot)", low=1)
+    stream_images: bool | None = option(
+        None, "keep only each step's views on the device (copied while the step before runs) "
+              "instead of the whole capture; the same results (default: when the images "
+              "would take more than 1/8 of the device's memory)")
+    compile_ahead: Literal["thread", "process", "off"] | None = option(
+        None, "compile the step for a grown pair buffer ahead: in a background thread, in a "
+              "child process through the persistent compilation cache (no contention for "
+              "Python's lock), or off (compiled when a step needs it); the same results "
+              "(default: thread on a GPU, off elsewhere)", exclusive="compile_ahead")
+    eval_every: int = option(500, "steps between held-out evaluations", low=1)
+    checkpoint_every: int = option(
+        1000, "steps between checkpoints (also written at the end and on Ctrl-C)", low=1)
+    resume: bool = option(False, "continue from OUT's checkpoint (with the options it was "
+                                 "started with; --steps may grow)", exclusive="again")
+    overwrite: bool = option(False, "delete OUT's previous run (its checkpoint, metrics and "
+                                    "renders)", exclusive="again")
+
+    def __post_init__(self):
+        check(self)
+        if self.resume and self.overwrite:
+            raise ValueError("resume, overwrite: they exclude each other")
+        if self.recipe.batch % self.devices:
+            raise ValueError(f"devices: {self.devices} devices split recipe.batch = "
+                             f"{self.recipe.batch} views unevenly; make the batch a multiple "
+                             f"of them")
+
+    def start_points(self, pixels: int) -> int:
+        """The random start's point count for training images of at most `pixels` pixels
+        (`init_points`, or its default)."""
+        if self.init_points is not None:
+            return self.init_points
+        return max(1, min(MAX_INIT_POINTS, pixels // PIXELS_PER_POINT))
+
+
+@dataclasses.dataclass(frozen=True)
+class Setup:
+    """What the jitted functions of one run depend on statically (hashable): the recipe, the
+    strategy, the run length (the means' schedule), the scene scale, the backend, and the
+    devices a step's views are split across (data parallel: `step.over_views`)."""
+
+    recipe: Recipe = Recipe()
+    strategy: Strategy = DefaultStrategy()
+    steps: int = 30_000
+    scene_scale: float = 1.0
+    backend: str = "tiles"
+    devices: int = 1
+
+    @classmethod
+    def of(cls, config: FitConfig, scene_scale: float, backend: str) -> "Setup":
+        """The setup of a run of `config` on data of `scene_scale` with `backend`."""
+        return cls(config.recipe, config.strategy, config.steps, scene_scale, backend,
+                   config.devices)

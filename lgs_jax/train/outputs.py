@@ -1,0 +1,93 @@
+"""What a run leaves in OUT at its end (`finish`), each file written whole
+(`lgs_jax.files.written`):
+scene.ply (the active Gaussians, INRIA PLY), cameras.json (INRIA: the training cameras, at their
+optimized poses with pose_opt, then the held-out ones), colors.json (with color_opt: each
+training view's colour correction), bilateral_grids.npz (with bilateral_grid: each training
+view's grid), appearance.npz (with app_opt: the features, embeddings and head,
+`appearance.save`; scene.ply and the held-out renders are the scene at the views' average
+appearance, `appearance.baked`), heldout_<name>.png (render beside ground truth), curves.png,
+result.json; and the held-out evaluations (`evaluate`)."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..io.cameras import save_cameras
+from ..io.ply import save_ply
+from . import appearance, bilateral_grid, camera_opt, color_opt, report
+from .config import Setup
+from .feed import RunData
+from ..files import written
+from .pool import active_gaussians
+from .state import RunState, scene
+from .step import render_views
+
+
+def evaluate(st: RunState, rd: RunData, setup: Setup, out: str | None = None):
+    """Held-out (PSNR, SSIM), (None, None) without held-out views; renders beside the ground
+    truth written to `out` when given."""
+    if not rd.test_cams:
+        return None, None
+    images, st.eval_capacity = render_views(scene(st), rd.test_cams, jnp.asarray(rd.background),
+                                            setup.backend, st.eval_capacity, setup.recipe.raster)
+    if out:
+        report.save_renders(out, images, rd.test_images, rd.test_names)
+    return report.heldout_metrics(images, rd.test_images)
+
+
+def _cameras(st: RunState, rd: RunData) -> list:
+    """The training cameras (at their optimized poses with `Recipe.pose_opt`), then the
+    held-out ones."""
+    cams = rd.train_cams
+    if st.views is not None and "pose" in st.views:
+        cams = camera_opt.adjusted(cams, jax.device_get(st.views["pose"][0]))
+    train = [rd.train_camera(i, cams) for i in range(len(rd.train_names))]
+    return train + list(rd.test_cams)
+
+
+def _views_files(out: str, st: RunState, rd: RunData) -> None:
+    """appearance.npz, colors.json and bilateral_grids.npz of the views' own parameters."""
+    views = st.views or {}
+    if "head" in views:
+        keep = np.asarray(st.pool.active)
+        with written(os.path.join(out, "appearance.npz")) as tmp:
+            appearance.save(tmp, np.asarray(st.pool.params["features"])[keep],
+                            views["embed"][0], jax.device_get(views["head"][0]), rd.train_names)
+    if "color" in views:
+        with written(os.path.join(out, "colors.json")) as tmp:
+            color_opt.save(tmp, views["color"][0], rd.train_names)
+    if "grid" in views:
+        with written(os.path.join(out, "bilateral_grids.npz")) as tmp:
+            bilateral_grid.save(tmp, views["grid"][0], rd.train_names)
+
+
+def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) -> dict:
+    """The final evaluation and outputs (module docstring); returns the result: held-out PSNR
+    and SSIM, Gaussians, pool size, skipped steps, and `run` (the loop's times)."""
+    psnr, ssim = evaluate(st, rd, setup, out)
+    if psnr is None:
+        log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
+    else:
+        with open(os.path.join(out, "metrics.jsonl"), "a") as f:
+            f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
+        log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
+    with written(os.path.join(out, "scene.ply")) as tmp:
+        save_ply(tmp, active_gaussians(scene(st)))
+    with written(os.path.join(out, "cameras.json")) as tmp:
+        save_cameras(tmp, _cameras(st, rd), rd.train_names + rd.test_names)
+    _views_files(out, st, rd)
+    with written(os.path.join(out, "curves.png")) as tmp:
+        report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")), tmp)
+    result = dict(steps=setup.steps, heldout_psnr=psnr, heldout_ssim=ssim,
+                  gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
+                  skipped_steps=st.skipped, **run,
+                  strategy=type(setup.strategy).__name__, backend=setup.backend,
+                  device=jax.devices()[0].device_kind, devices=setup.devices)
+    with written(os.path.join(out, "result.json")) as tmp, open(tmp, "w") as f:
+        json.dump(result, f, indent=1)
+    return result

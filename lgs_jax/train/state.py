@@ -1,0 +1,145 @@
+"""A run's state (`RunState`: what a checkpoint restores): made fresh from the start's Gaussians,
+restored from a checkpoint, saved; the pool as a plain scene."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+
+from ..io.ply import save_ply
+from ..render import count_pairs, next_pow2, pair_capacity, render
+from . import appearance, checkpoint, report, view_params
+from .config import FitConfig, Setup
+from ..files import written
+from .feed import RunData
+from .init import start_gaussians
+from .optim import optimizer
+from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
+from .step import row_stats
+
+
+@dataclasses.dataclass
+class RunState:
+    """Everything a checkpoint restores."""
+
+    pool: Pool
+    opt_state: object
+    strategy_state: object
+    step: int
+    capacity: int  # tile-Gaussian pairs per training view
+    eval_capacity: int
+    skipped: int = 0
+    rows: int | None = None  # the backward's rows per training view (None: one per pair slot)
+    views: object = None  # the training views' own parameters and optimizers (`view_params`)
+
+    @property
+    def saved(self) -> tuple:
+        """What `checkpoint.save` writes, in `checkpoint.PARTS` order."""
+        return self.pool, self.opt_state, self.strategy_state, self.views
+
+
+def templates(setup: Setup, size: int, rd: RunData, seed: int, g=None):
+    """(pool, opt_state, strategy_state, views) at `size` slots: from Gaussians g, or
+    zeros; with app_opt the pool's features and the appearance head drawn from `seed`."""
+    recipe = setup.recipe
+    bases = (recipe.sh_degree + 1) ** 2
+    z = lambda *shape: jnp.zeros((size,) + shape, jnp.float32)
+    if g is None:
+        params = dict(means=z(3), quats=z(4), log_scales=z(3), logit_opacities=z(),
+                      sh_dc=z(1, 3), sh_rest=z(bases - 1, 3))
+        pool = Pool(params, jnp.zeros(size, bool))
+    else:
+        pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)
+    key_features, key_head = jax.random.split(jax.random.fold_in(jax.random.key(seed), 7))
+    if recipe.app_opt:
+        features = z(appearance.FEATURES) if g is None else appearance.init_features(
+            key_features, size)
+        pool = Pool(dict(pool.params, features=features), pool.active)
+    opt = optimizer(recipe, setup.steps, setup.scene_scale)
+    return (pool, opt.init(pool.params), setup.strategy.init(pool, rd.scene_scale),
+            view_params.init(recipe, len(rd.train_names), setup.steps, key_head))
+
+
+shown = jax.jit(render_gaussians)  # the pool as `render` sees it (`pool.render_gaussians`)
+
+
+def pairs(pool: Pool, cam, antialiased: bool = False) -> int:
+    """Tile–Gaussian pairs of the pool's active Gaussians in one view (`lgs_jax.count_pairs`)."""
+    return int(count_pairs(shown(pool.params, pool.active), cam, antialiased=antialiased))
+
+
+def walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
+    """Pairs some pixel reached in one view (the Pallas backends' `pairs_walked`, 0 for
+    backends that store no pair rows: `step.row_stats`): a forward render."""
+    out = render(render_gaussians(pool.params, pool.active), cam, background=background,
+                 backend=setup.backend, capacity=capacity, config=setup.recipe.raster)
+    return int(row_stats(out.stats)[1])
+
+
+def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
+    """The state at step 0: the start's Gaussians (`init.start_gaussians`) in a pool of
+    config.pool_size slots (default the next power of two), the pair capacity (and rows) of
+    the first training view."""
+    cap = config.max_gaussians
+    g = start_gaussians(rd, config, log)
+    size = max(min(config.pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
+    pool, opt_state, sstate, views = templates(setup, size, rd, config.seed, g)
+    first = rd.train_camera(0)
+    capacity = pair_capacity(pairs(pool, first, setup.recipe.antialiased), config.pair_headroom)
+    rows = None
+    if config.row_headroom is not None:
+        rows = pair_capacity(walked(setup, pool, first, jnp.asarray(rd.background), capacity),
+                             config.row_headroom)
+    log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
+        f"{rd.scene_scale:.3f}")
+    return RunState(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, views=views)
+
+
+def resumed(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
+    """The state of the checkpoint in config.out (checked by `rundir.resume_problem` first);
+    metrics.jsonl's rows after its step dropped (a run that stopped after its last checkpoint
+    redoes them, and the resumed log reads as one run)."""
+    out = config.out
+    meta = checkpoint.read_meta(out)
+    pool, opt_state, sstate, views = checkpoint.restore(
+        out, templates(setup, meta["pool_size"], rd, config.seed), meta["step"])
+    _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
+    log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
+    rows = meta.get("rows") if config.row_headroom is not None else None
+    return RunState(pool, opt_state, sstate, meta["step"], meta["capacity"],
+                    meta["eval_capacity"], meta["skipped"], rows, views)
+
+
+def _forget_after(path: str, step: int) -> None:
+    if not os.path.exists(path):
+        return
+    rows = [r for r in report.read_metrics(path)
+            if r.get("step", 0) <= step and r.get("refine_step", -1) < step]
+    with written(path) as tmp, open(tmp, "w") as f:
+        f.writelines(json.dumps(r) + "\n" for r in rows)
+
+
+def save(out: str, config: FitConfig, st: RunState, data: dict) -> None:
+    """The checkpoint of `st` (`data`: `checkpoint.data_of` the run's data) and scene.ply."""
+    meta = dict(step=st.step, capacity=st.capacity, rows=st.rows, eval_capacity=st.eval_capacity,
+                pool_size=st.pool.size, skipped=st.skipped, config=checkpoint.config_of(config),
+                data=data)
+    checkpoint.save(out, st.saved, meta)
+    with written(os.path.join(out, "scene.ply")) as tmp:
+        save_ply(tmp, active_gaussians(scene(st)))
+
+
+_baked = jax.jit(appearance.baked)
+
+
+def scene(st: RunState) -> Pool:
+    """The pool as a plain scene: with appearance embeddings, at the training views' average
+    appearance (`appearance.baked`); else the pool itself."""
+    if st.views is None or "head" not in st.views:
+        return st.pool
+    return Pool(_baked(st.pool.params, st.views["head"][0], st.views["embed"][0]),
+                st.pool.active)
