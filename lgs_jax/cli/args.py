@@ -148,7 +148,7 @@ def load_scene(path: str | None):
     if scene.means.dtype == np.float64 and not jax.config.jax_enable_x64:
         print(f"note: {path} holds float64 values; rendering them as float32 "
               f"(JAX_ENABLE_X64=1 keeps float64)", file=sys.stderr)
-        scene = jax.tree.map(lambda x: np.asarray(x, np.float32), scene)
+        scene = lgs_jax.load_ply(path, dtype=np.float32)  # refuses values beyond float32
     return scene
 
 
