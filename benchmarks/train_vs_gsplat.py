@@ -27,6 +27,9 @@ progress bar does) without evaluations; ours also without compilation (both numb
 compiling ahead in a thread, the default on a GPU, counts only the waits as compilation, so steps
 slowed beside a compile ahead count as steps: --compile-ahead off for the steps alone), gsplat's
 after one warm-up render (its CUDA extension loaded).
+Wall time (`process_s`): each worker process from its start to its last output (ours: the PLY
+and the final evaluation; gsplat: its final evaluation), imports, data loading and compiles
+included: what a user times from the command line.
 Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians), summary.csv
 (final and best PSNR/SSIM, ms/step, peak MB, Gaussians, the folder of the lgs_jax that ran:
@@ -379,18 +382,23 @@ def _run(args, argv, scene: str, trainer: str) -> dict:
             env["JAX_PLATFORMS"] = "cpu"
         cmd = [sys.executable, os.path.abspath(__file__), *argv, "--worker", trainer,
                "--scene", scene]
+        t0 = time.perf_counter()
         if subprocess.run(cmd, env=env).returncode != 0 or not os.path.exists(path):
             return dict(scene=scene, trainer=trainer, error="the run failed (see its output)")
         with open(path) as f:
-            return json.load(f)
+            result = json.load(f)
+        result["process_s"] = time.perf_counter() - t0  # process start to its last output
+        with open(path, "w") as f:
+            json.dump(result, f, indent=1)
+        return result
     with open(path, "w") as f:
         json.dump(result, f, indent=1)
     return result
 
 
 SUMMARY = ("scene", "trainer", "steps", "final_psnr", "final_ssim", "best_psnr", "best_step",
-           "ms_per_step", "ms_per_step_excl_compile", "compile_s", "peak_mb", "gaussians",
-           "device", "package", "error")
+           "process_s", "ms_per_step", "ms_per_step_excl_compile", "compile_s", "peak_mb",
+           "gaussians", "device", "package", "error")
 
 
 def summary_row(r: dict) -> dict:

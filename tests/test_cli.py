@@ -144,7 +144,7 @@ def test_a_ply_given_as_cameras_is_named(tmp_path, capsys):
     ply = tmp_path / "s.ply"
     lgs_jax.save_ply(ply, lgs_jax.default_scene())
     assert main(["render", str(ply), "--cameras", str(ply), "--out", str(tmp_path / "x.png")]) == 1
-    assert f"{ply}: not a cameras file (binary, not JSON text" in _error_line(capsys)
+    assert f"{ply}: is a PLY file, not a cameras file" in _error_line(capsys)
 
 
 def test_the_viewer_refuses_ports_out_of_range():
@@ -201,7 +201,12 @@ def test_render_runs_once_reports_compile_time_and_interpret_mode(tmp_path, caps
     def once(*args, **kwargs):
         calls.append(kwargs["backend"])
         out = real(*args, **kwargs)
-        return dataclasses.replace(out, stats=dataclasses.replace(out.stats, interpreted=True))
+        from lgs_jax.backends.pallas import PallasStats
+
+        interpreted = PallasStats(strip_pairs=0, pairs_walked=0, row_overflow=False,
+                                  kernel="localgs-triton", interpreted=True)
+        return dataclasses.replace(out, stats=dataclasses.replace(out.stats,
+                                                                  backend_stats=interpreted))
 
     real = lgs_jax.render
     monkeypatch.setattr(lgs_jax, "render", once)

@@ -14,7 +14,7 @@ def test_strip_counts_match_the_tiles_backend_stats():
     stats = scenes.render(g, cam, "tiles", scenes.lgs_jax.RasterConfig()).stats
     assert pairs.shape == (2, 3)  # 40x24: 3x2 tiles
     assert pairs.sum() == int(stats.pairs_required)
-    assert strips.sum() == int(stats.strip_pairs)
+    assert strips.sum() == int(stats.backend_stats.strip_pairs)
     assert np.all(strips <= 8 * pairs)
 
 

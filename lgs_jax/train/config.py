@@ -112,8 +112,10 @@ class FitConfig:
     max_gaussians: int = option(1_000_000, "cap on the number of Gaussians (the pool's; the "
                                            "command line's mcmc takes it as cap_max)", low=1)
     pool_size: int | None = option(
-        None, "initial pool slots (default: the next power of two above the initial count; "
-              "the pool doubles when it must, recompiling once each time)", low=1)
+        None, "initial pool slots (default: the most Gaussians the strategy can reach in the "
+              "run, e.g. MCMC's, so that the pool never grows; the next power of two above the "
+              "initial count where it cannot say; the pool doubles when it must, recompiling "
+              "once each time)", low=1)
     init_points: int | None = option(
         None, f"random initial points for datasets without SfM points (default: one per "
               f"{PIXELS_PER_POINT} pixels of the largest training image, at most "

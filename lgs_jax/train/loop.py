@@ -10,7 +10,8 @@ would not be finite is skipped (nothing changes), logged and recorded.
 
 The run folder (`rundir`) is checked and locked before any work. OUT/metrics.jsonl gets a row
 per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts) and
-per evaluation (held-out PSNR/SSIM); a checkpoint (`checkpoint`, `state.save`; bit-identical
+per evaluation (held-out PSNR/SSIM: `heldout.Evaluations`, scored on the device while training
+goes on, recorded when ready); a checkpoint (`checkpoint`, `state.save`; bit-identical
 resume) every config.checkpoint_every steps, at the end, and at Ctrl-C (`interrupt`: the run
 stops at the next step boundary and raises `Interrupted`); the outputs at the end
 (`outputs.finish`).
@@ -29,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..render import default_backend
-from . import outputs, report, rundir, state
+from . import heldout, outputs, report, rundir, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
 from .config import FitConfig, Setup
@@ -60,6 +61,7 @@ class _Run:
     log: object
     say: object = None
     record: object = None
+    evaluations: heldout.Evaluations | None = None
 
     def __post_init__(self):
         self.key = jax.random.key(self.config.seed)
@@ -161,12 +163,19 @@ def _after_step(run: _Run, m: dict, watch: _Watch, data: dict) -> None:
     st, config = run.st, run.config
     watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]),
           force=st.step == config.steps)
-    if st.step % config.eval_every == 0 and st.step < config.steps and run.rd.test_cams:
-        psnr, ssim = outputs.evaluate(st, run.rd, run.setup)
-        run.record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
-        run.say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
+    if run.evaluations is not None:
+        if st.step % config.eval_every == 0 and st.step < config.steps:
+            run.evaluations.submit(st.step, state.scene(st))
+            st.eval_capacity = run.evaluations.capacity
+        _record_evaluations(run, run.evaluations.ready())
     if st.step % config.checkpoint_every == 0 or st.step == config.steps:
         state.save(config.out, config, st, data)
+
+
+def _record_evaluations(run: _Run, scores) -> None:
+    for step, psnr, ssim in scores:
+        run.record(step=step, heldout_psnr=psnr, heldout_ssim=ssim)
+        run.say(f"step {step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
 
 
 def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> float:
@@ -177,6 +186,10 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
     progress = report.Progress(st.step, config.steps)
     run.say = lambda message: progress.write(run.log, message)
     steps, feed, busy, start = stepper(config, run.setup), _feed(run), 0.0, st.step
+    if run.rd.test_cams:
+        run.evaluations = heldout.Evaluations(run.rd.test_cams, run.rd.test_images,
+                                              run.rd.background, run.setup, st.eval_capacity,
+                                              config.pair_headroom)
     _place(run.setup, st)
     watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
     try:
@@ -199,7 +212,11 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
                 progress.step(m["loss"], m["psnr"], m["count"],
                               (st.step - start) / max(busy - clock.seconds, 1e-9))
                 _after_step(run, m, watch, data)
+            if run.evaluations is not None:
+                _record_evaluations(run, run.evaluations.wait())
     finally:
+        if run.evaluations is not None:
+            run.evaluations.close()
         progress.close()
         steps.close()
         feed.close()

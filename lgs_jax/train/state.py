@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 
 from ..io.ply import save_ply
+from ..backends import REGISTRY
 from ..render import count_pairs, next_pow2, pair_capacity, render
 from . import appearance, checkpoint, report, view_params
 from .config import FitConfig, Setup
@@ -82,16 +83,20 @@ def walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
 
 def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     """The state at step 0: the start's Gaussians (`init.start_gaussians`) in a pool of
-    config.pool_size slots (default the next power of two), the pair capacity (and rows) of
-    the first training view."""
+    config.pool_size slots (default: the most Gaussians the strategy can reach in the run,
+    `Strategy.max_count`, so that the pool never grows and its step never recompiles; where it
+    has no bound, the next power of two), the pair capacity (and rows) of the first training
+    view."""
     cap = config.max_gaussians
     g = start_gaussians(rd, config, log)
-    size = max(min(config.pool_size or next_pow2(g.num), cap), g.num)  # g.num <= cap
+    reach = setup.strategy.max_count(g.num, config.steps, cap)
+    size = config.pool_size or (next_pow2(g.num) if reach is None else reach)
+    size = max(min(size, cap), g.num)  # g.num <= cap
     pool, opt_state, sstate, views = templates(setup, size, rd, config.seed, g)
     first = rd.train_camera(0)
     capacity = pair_capacity(pairs(pool, first, setup.recipe.antialiased), config.pair_headroom)
     rows = None
-    if config.row_headroom is not None:
+    if config.row_headroom is not None and REGISTRY[setup.backend].row_capacity:
         rows = pair_capacity(walked(setup, pool, first, jnp.asarray(rd.background), capacity),
                              config.row_headroom)
     log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "

@@ -81,6 +81,13 @@ class Strategy:
         """Whether `refine` runs after 0-based step `step` (on the host: a Python int)."""
         return False
 
+    def max_count(self, initial: int, steps: int, cap: int) -> int | None:
+        """The most Gaussians a run of `steps` steps from `initial` can hold (on the host), or
+        None where the strategy cannot bound it before the run: `fit` sizes the pool to the
+        bound (no growth, so no recompile), else it doubles the pool when a refinement needs
+        room."""
+        return initial
+
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
         """The densification (traced): (state, pool, opt_state, report), the report a dict of
         int32 counts holding at least `needed` (new slots it wanted) and `free` (free slots it
@@ -172,6 +179,10 @@ class DefaultStrategy(Strategy):
     def refine_due(self, step: int) -> bool:
         return bool(self._grows(step) or self._resets(step))
 
+    def max_count(self, initial: int, steps: int, cap: int) -> int | None:
+        """None: clones and splits depend on the gradients (the pool doubles as needed)."""
+        return None
+
     def _grow_and_prune(self, state, pool: Pool, opt_state, step, key):
         """Clone, split, prune (class docstring); returns (pool, opt_state, report)."""
         p = pool.params
@@ -244,6 +255,17 @@ class MCMCStrategy(Strategy):
     def refine_due(self, step: int) -> bool:
         return (self.refine_start_iter < step < self.refine_stop_iter
                 and step % self.refine_every == 0)
+
+    def max_count(self, initial: int, steps: int, cap: int) -> int | None:
+        """`refine`'s additions replayed over the run's refinements: n becomes
+        min(cap_max, cap, n + n // 20) at each (relocation keeps n), an exact upper bound."""
+        n, bound = initial, min(self.cap_max, cap)
+        for step in range(steps):
+            if n >= bound:
+                break
+            if self.refine_due(step):
+                n = max(min(bound, n + n // 20), n)
+        return n
 
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
         k_move, k_add = jax.random.split(key)

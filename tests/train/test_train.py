@@ -844,16 +844,17 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
 
 def test_sized_rows_start_at_the_first_views_walked_pairs(skull, tmp_path):
     """`FitConfig.row_headroom`: a run's rows start at `pair_capacity(walked, headroom)` of the
-    first training view's walked pairs (a forward render), at most its pairs; None: no rows."""
+    first training view's walked pairs (a forward render), at most its pairs, where the backend
+    stores gradient rows (the Pallas backends); None, or a backend without rows: no rows."""
     from lgs_jax.train import state
 
     rd = train_data.prepare(skull, 1, None)
-    for h in (None, 2.0):
+    for h, backend in ((None, "pallas"), (2.0, "tiles"), (2.0, "pallas")):
         config = train.FitConfig(data=skull.path, out=str(tmp_path), steps=10, row_headroom=h,
                                  pool_size=1024)
-        setup = train.Setup.of(config, rd.scene_scale, "tiles")
+        setup = train.Setup.of(config, rd.scene_scale, backend)
         st = state.fresh(config, setup, rd, lambda m: None)
-        if h is None:
+        if h is None or backend == "tiles":
             assert st.rows is None
             continue
         first = jax.tree.map(lambda x: x[0], rd.train_cams)
