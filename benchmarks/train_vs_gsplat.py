@@ -124,7 +124,7 @@ def scene_setup(args, scene: str, out: str = ""):
     config = train.FitConfig(
         data=d.path, out=out, steps=args.steps, strategy=strategy,
         recipe=train.Recipe(ssim_padding=args.ssim_padding, convention=args.convention),
-        max_gaussians=cap, pool_size=cap if args.strategy == "mcmc" else None,
+        max_gaussians=cap,
         init_points=100_000, seed=args.seed, backend=args.backend,
         pair_headroom=args.pair_headroom, row_headroom=args.row_headroom,
         compile_ahead=args.compile_ahead, eval_every=args.eval_every,

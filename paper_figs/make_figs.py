@@ -117,7 +117,8 @@ def ablation(sources=(("CPU, 2 cores", CPU_ABLATION),), name="ablation.png"):
     the max error against float64 over each bar."""
     panels = [(label, data, scene) for label, path in sources for data in [rows(path)]
               for scene in dict.fromkeys(r["scene"] for r in data)]
-    fig, axs = plt.subplots(1, len(panels), figsize=(2.6 * len(panels), 3.6), squeeze=False)
+    fig, axs = plt.subplots(1, len(panels), figsize=(max(2.6 * len(panels), 4.6), 3.6),
+                            squeeze=False)
     for ax, (label, data, scene) in zip(axs[0], panels):
         w = next(r["width"] for r in data if r["scene"] == scene)
         h = next(r["height"] for r in data if r["scene"] == scene)

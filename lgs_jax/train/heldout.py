@@ -1,14 +1,14 @@
-"""Held-out evaluations during training that do not stall it (`Evaluations`), and scikit-image's
-PSNR and SSIM on the device (`view_scores`).
+"""Held-out evaluations during training that cost the run milliseconds (`Evaluations`), and
+scikit-image's PSNR and SSIM on the device (`view_scores`).
 
-At an evaluation step the held-out views are rendered from that step's pool (immutable arrays:
-training goes on while they render) and scored on the device; a background thread waits for
-the scores (a few floats per view) and hands them back, which the loop records when they are
-ready (`Evaluations.ready`). Nothing of a view crosses to the host, and no scoring runs in
-Python. The pair buffer of the held-out renders is sized by counting the views' pairs first
-(one short sync) with the run's pair headroom, so that it grows, a compile each, about as
-rarely as the training step's. The final evaluation (`outputs.finish`) is scikit-image's own
-(`report.heldout_metrics`), on the host.
+At an evaluation step the held-out views are rendered from that step's pool and scored on the
+device; only the scores (a few floats per view) cross to the host: no image is copied and no
+scoring runs in Python, where scikit-image took seconds per evaluation. The loop waits for the
+scores before its next step, so the renders' buffers never sit beside a training step's. The
+pair buffer of the held-out renders is sized by counting the views' pairs first with the run's
+pair headroom, so that it grows, a compile each, about as rarely as the training step's. The
+final evaluation (`outputs.finish`) is scikit-image's own (`report.heldout_metrics`), on the
+host.
 
 `view_scores` computes scikit-image's defaults, `peak_signal_noise_ratio(data_range=1)` and
 `structural_similarity(channel_axis=-1, data_range=1)` (7x7 uniform window, sample covariance
@@ -19,7 +19,6 @@ float32 rounding (tests/train/test_heldout.py compares them).
 
 from __future__ import annotations
 
-import concurrent.futures
 import functools
 
 import jax
@@ -77,42 +76,26 @@ def _pairs(pool: Pool, cam, antialiased: bool):
 
 
 class Evaluations:
-    """Held-out evaluations in flight (module docstring). `submit(step, pool)` dispatches one;
-    `ready()` returns the (step, PSNR, SSIM) of those finished, in step order; `wait()` all of
-    them. `capacity`: the held-out renders' pair buffer, grown here (a checkpoint keeps it)."""
+    """The held-out views of a run, scored on the device (module docstring): `score(pool)` is
+    the (PSNR, SSIM) of the pool over the views, averaged. `capacity`: the held-out renders'
+    pair buffer, grown here (a checkpoint keeps it)."""
 
     def __init__(self, cams, targets, background, setup: Setup, capacity: int,
                  headroom: float):
         self.cams, self.targets = list(cams), targets
         self.background = jnp.asarray(background)
         self.setup, self.capacity, self.headroom = setup, capacity, headroom
-        self.pool = concurrent.futures.ThreadPoolExecutor(1, "heldout")
-        self.pending: list[tuple[int, concurrent.futures.Future]] = []
 
-    def submit(self, step: int, pool: Pool) -> None:
+    def score(self, pool: Pool) -> tuple[float, float]:
         recipe = self.setup.recipe
         need = max(int(_pairs(pool, cam, recipe.antialiased)) for cam in self.cams)
         if need > self.capacity:
             self.capacity = pair_capacity(need, self.headroom)
-        scores = [_scored(pool, cam, jnp.asarray(target), self.background,
-                          backend=self.setup.backend, capacity=self.capacity,
-                          config=recipe.raster)
-                  for cam, target in zip(self.cams, self.targets)]
-        self.pending.append((step, self.pool.submit(jax.device_get, scores)))
-
-    def ready(self, block: bool = False) -> list[tuple[int, float, float]]:
-        done = []
-        while self.pending and (block or self.pending[0][1].done()):
-            step, future = self.pending.pop(0)
-            scores = future.result()
-            if any(bool(o) for _, _, o in scores):  # counted just before: cannot happen
-                raise RuntimeError(f"step {step}: a held-out view overflowed its pair buffer")
-            done.append((step, float(np.mean([p for p, _, _ in scores])),
-                         float(np.mean([s for _, s, _ in scores]))))
-        return done
-
-    def wait(self) -> list[tuple[int, float, float]]:
-        return self.ready(block=True)
-
-    def close(self) -> None:
-        self.pool.shutdown(wait=True)
+        scores = jax.device_get([
+            _scored(pool, cam, jnp.asarray(target), self.background,
+                    backend=self.setup.backend, capacity=self.capacity, config=recipe.raster)
+            for cam, target in zip(self.cams, self.targets)])
+        if any(bool(o) for _, _, o in scores):  # counted just before: cannot happen
+            raise RuntimeError("a held-out view overflowed its pair buffer")
+        return (float(np.mean([p for p, _, _ in scores])),
+                float(np.mean([s for _, s, _ in scores])))

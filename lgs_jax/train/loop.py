@@ -10,11 +10,10 @@ would not be finite is skipped (nothing changes), logged and recorded.
 
 The run folder (`rundir`) is checked and locked before any work. OUT/metrics.jsonl gets a row
 per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts) and
-per evaluation (held-out PSNR/SSIM: `heldout.Evaluations`, scored on the device while training
-goes on, recorded when ready); a checkpoint (`checkpoint`, `state.save`; bit-identical
-resume) every config.checkpoint_every steps, at the end, and at Ctrl-C (`interrupt`: the run
-stops at the next step boundary and raises `Interrupted`); the outputs at the end
-(`outputs.finish`).
+per evaluation (held-out PSNR/SSIM: `heldout.Evaluations`, scored on the device); a checkpoint
+(`checkpoint`, `state.save`; bit-identical resume) every config.checkpoint_every steps, at the
+end, and at Ctrl-C (`interrupt`: the run stops at the next step boundary and raises
+`Interrupted`); the outputs at the end (`outputs.finish`).
 """
 
 from __future__ import annotations
@@ -163,19 +162,14 @@ def _after_step(run: _Run, m: dict, watch: _Watch, data: dict) -> None:
     st, config = run.st, run.config
     watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]),
           force=st.step == config.steps)
-    if run.evaluations is not None:
-        if st.step % config.eval_every == 0 and st.step < config.steps:
-            run.evaluations.submit(st.step, state.scene(st))
-            st.eval_capacity = run.evaluations.capacity
-        _record_evaluations(run, run.evaluations.ready())
+    if run.evaluations is not None and st.step % config.eval_every == 0 \
+            and st.step < config.steps:
+        psnr, ssim = run.evaluations.score(state.scene(st))
+        st.eval_capacity = run.evaluations.capacity
+        run.record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
+        run.say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
     if st.step % config.checkpoint_every == 0 or st.step == config.steps:
         state.save(config.out, config, st, data)
-
-
-def _record_evaluations(run: _Run, scores) -> None:
-    for step, psnr, ssim in scores:
-        run.record(step=step, heldout_psnr=psnr, heldout_ssim=ssim)
-        run.say(f"step {step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
 
 
 def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> float:
@@ -212,11 +206,7 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
                 progress.step(m["loss"], m["psnr"], m["count"],
                               (st.step - start) / max(busy - clock.seconds, 1e-9))
                 _after_step(run, m, watch, data)
-            if run.evaluations is not None:
-                _record_evaluations(run, run.evaluations.wait())
     finally:
-        if run.evaluations is not None:
-            run.evaluations.close()
         progress.close()
         steps.close()
         feed.close()
