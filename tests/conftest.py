@@ -1,15 +1,6 @@
-import glob
 import os
 
-# The default set compiles far more than it computes: on a machine without a GPU, XLA's CPU
-# backend compiles without LLVM's expensive optimizations (about a quarter less time per
-# compile). Tests compare paths compiled alike in one process; none asserts a timing.
-if not glob.glob("/dev/nvidia[0-9]*"):
-    os.environ["XLA_FLAGS"] = " ".join(filter(None, (
-        os.environ.get("XLA_FLAGS"), "--xla_backend_optimization_level=0",
-        "--xla_llvm_disable_expensive_passes=true")))
-
-import jax  # noqa: E402
+import jax
 import pytest
 from hypothesis import HealthCheck, settings
 

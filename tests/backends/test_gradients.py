@@ -89,7 +89,7 @@ def test_camera_gradients_equal_autodiff_through_brute_and_are_finite(seed, yaw)
 @pytest.mark.parametrize("backend,config", [
     pytest.param("reference", C(), id="reference", marks=SLOW),
     pytest.param("tiles", C(blend="fast"), id="tiles_fast"),
-    pytest.param("tiles", C(antialiased=True), id="tiles_antialiased", marks=pytest.mark.slow)])
+    pytest.param("tiles", C(antialiased=True), id="tiles_antialiased")])
 def test_gradients_match_central_differences(backend, config):
     """Well-separated, moderately opaque Gaussians (no depth ties or threshold within reach of
     the step), float64, six entries of every parameter group, and the camera's (antialiased).
