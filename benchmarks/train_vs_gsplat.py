@@ -1,12 +1,10 @@
 """Training, ours against gsplat 1.5.3's trainer, in one call on one GPU.
 
-    python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull]
-        [--strategy mcmc|default] [--steps 7000] [--eval-every 500] [--seed 0] [--out DIR]
-        [--backend NAME] [--convention 3dgs|gsplat] [--pair-headroom 3] [--row-headroom H]
-        [--no-gsplat] [--no-ours] [--inline]
+    python benchmarks/train_vs_gsplat.py [--data-root DIR] [--scenes lego skull] [--steps 7000]
+        [--strategy mcmc|default] [--eval-every 500] [--seed 0] [--out DIR] [--no-gsplat] ...
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
-(so each one's peak memory is its own, and JAX stays off the GPU while gsplat runs), on the same:
+(each its own peak memory; JAX off the GPU while gsplat runs), on the same:
   data     `lgs_jax.load_dataset` (lego: lego_train, 200x200, white background; skull: the COLMAP
            capture, black background), the same split (every 8th image held out; Lego ids
            0, 10, ..., 90), the same views in the same order (`views_for_step`, one per step);
@@ -18,24 +16,20 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
            against ours at start); SH degree +1 every 1000 steps;
   strategy gsplat's `MCMCStrategy(cap_max=cap)` with regularisers 0.01 (opacity, scale) or its
            `DefaultStrategy()`, against ours with the same settings (`lgs_jax.train.strategy`);
-  metrics  held-out PSNR / SSIM with scikit-image (`report.heldout_metrics`) every
-           --eval-every steps and at the end, on renders clipped to [0, 1].
+  metrics  held-out PSNR / SSIM as scikit-image's defaults every --eval-every steps and at the
+           end, renders clipped to [0, 1] (ours during the run: `train.heldout`, the same
+           formulas on the device; the final ones and gsplat's: `report.heldout_metrics`).
 Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by default, with the
 3DGS compositing rule, alpha cap 0.99, or gsplat's with --convention gsplat; gsplat's: 0.999).
-Time per step: the training loop's wall time (one host sync per step in both, as simple_trainer's
-progress bar does) without evaluations; ours also without compilation (both numbers are written;
-compiling ahead in a thread, the default on a GPU, counts only the waits as compilation, so steps
-slowed beside a compile ahead count as steps: --compile-ahead off for the steps alone), gsplat's
-after one warm-up render (its CUDA extension loaded).
-Wall time (`process_s`): each worker process from its start to its last output (ours: the PLY
-and the final evaluation; gsplat: its final evaluation), imports, data loading and compiles
-included: what a user times from the command line.
-Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use (images included in both).
+Time per step: the loop's wall time (one host sync per step in both, as simple_trainer's progress
+bar does) without evaluations; ours also without compilation (compiling ahead in a thread counts
+only its waits: --compile-ahead off for the steps alone); gsplat's after one warm-up render.
+Wall time (`process_s`): each worker from its start to its last output, imports, data and
+compiles included. Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use.
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians), summary.csv
-(final and best PSNR/SSIM, ms/step, peak MB, Gaussians, the folder of the lgs_jax that ran:
-PYTHONPATH=TREE runs an earlier tree's), <scene>_<trainer>.json, curves_<scene>.png, rewritten after
-each run; our run directories (checkpoints: large) in --run-dir, a temporary folder by default.
---no-gsplat runs ours alone (CPU checks); --inline runs the trainers in this process.
+(final and best PSNR/SSIM, times, peak MB, Gaussians, the lgs_jax folder that ran: PYTHONPATH=TREE
+runs an earlier tree's), <scene>_<trainer>.json, curves_<scene>.png; our run directories in
+--run-dir (a temporary folder by default). --no-gsplat: ours alone; --inline: in this process.
 """
 
 from __future__ import annotations
@@ -280,10 +274,8 @@ def _gsplat_eval(params, rd, test_vm, test_k):
 
 
 def _sync():
-    import torch
-
     if DEVICE == "cuda":
-        torch.cuda.synchronize()
+        __import__("torch").cuda.synchronize()
 
 
 def _gsplat_loop(args, rd, model, settings, strategy, log):

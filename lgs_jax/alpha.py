@@ -17,14 +17,10 @@ Hoisted form (Local-GS Eq. 8–10), with raw = V·B the six-term dot product in 
     ln α = min(raw, ln o)  (the clamp at the exact maximum ln o replaces the `power > 0` skip,
     which in the expanded form would fire on rounding at Gaussian centres),
     α = min(cap, e^{ln α}),  hit = ln α >= ln(1/255).
-  e^{ln α} with `exp` (libdevice's `expf` on the GPU, 8 SASS instructions), not as
-  2^{ln α · log2 e}, which the GPU kernels compile to one `ex2.approx` (3 fewer instructions per
-  pair in the forward, 8 in the backward, about 5% of a skull training step): with it skull
-  trained to lower held-out PSNR in all three trajectories tried (−0.95, −1.04 dB at 3k steps,
-  seeds 0 and 1; −1.30 dB at 7k), a spread skull also shows between unrelated bit changes, so
-  not proof of a systematic loss, but the accurate exponential stays until a wider A/B shows
-  none (BENCHMARKS.md §7, Dec 4, second session). With `exp` the XLA paths, interpret mode and
-  the GPU kernels compute the same e^{ln α} function.
+  e^{ln α} with `exp` (libdevice's `expf` on the GPU), not as 2^{ln α · log2 e}, which the GPU
+  kernels would compile to one `ex2.approx`: fewer instructions, but an approximation whose
+  effect on training was not shown to be nil (docs/design-notes.md). With `exp` the XLA paths,
+  interpret mode and the GPU kernels compute the same e^{ln α} function.
   Derivative, where the cap does not bind (e^{ln α} < cap), ∂α/∂ln α = α:
     ∂α/∂raw = α where raw <= ln o (then ∂raw/∂V = B), ∂α/∂ln o = α where the clamp binds.
 """

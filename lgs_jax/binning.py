@@ -258,9 +258,9 @@ class SlotPlan(NamedTuple):
 def expand_slots(plan: SlotPlan):
     """(tile, gauss) of every slot (`SlotPlan`) in XLA: `segment_of_slot` finds each slot's
     depth rank (no scatter-add, so deterministic on GPUs), then a row gather per slot of
-    (start, Gaussian) and one of the Gaussian's rectangle (BENCHMARKS.md §7: one five-column
-    row per slot, the rectangles gathered in depth order first, was slower; so was a Pallas
-    Triton kernel writing each Gaussian's run, as gsplat's `isect_tiles`, "Dec 2, night")."""
+    (start, Gaussian) and one of the Gaussian's rectangle (one five-column row per slot, the
+    rectangles gathered in depth order first, was slower; so was a Pallas Triton kernel writing
+    each Gaussian's run, as gsplat's `isect_tiles`: docs/design-notes.md)."""
     k = segment_of_slot(plan.start, plan.kept, plan.capacity)
     per_k = jnp.stack([plan.start, plan.order], -1)[k]  # one row gather per slot
     g = per_k[:, 1]
@@ -280,8 +280,7 @@ def slot_plan(p: Projected, width: int, height: int, capacity: int):
     tiles_x, tiles_y = tile_grid(width, height)
     tx0, ty0, nx, ny, unbounded = tile_rects(p, width, height)
     # The counts are stored before the depth-order gather: fused into it, XLA recomputed each
-    # Gaussian's rectangle at its depth rank, six scattered reads per Gaussian (H200, 10M
-    # Gaussians: 0.55 ms).
+    # Gaussian's rectangle at its depth rank, six scattered reads per Gaussian.
     counts = lax.optimization_barrier(nx * ny)
     order = depth_order(p)
     counts_sorted = counts[order]
@@ -332,10 +331,9 @@ def sort_pairs(tile, gauss, n_tiles: int):
 
     Where the tiles and the padding value n_tiles fit 16 bits (up to 65535 tiles: 4K has
     32400), the keys are sorted as uint16: the same permutation (a stable sort of the same
-    order), and XLA's GPU radix sort (CUB) on 16-bit keys measured 0.99 ms against 1.21 ms for
-    int32 keys at 25M pairs on an H200 (BENCHMARKS.md §7). Signed int16 keys are not rewritten
-    to CUB and measured 10x slower. The payload must stay the iota (then `gauss[slot]`, a
-    gather): XLA lowers a stable two-operand sort to CUB only when one operand is an iota (its
+    order), and XLA's GPU radix sort (CUB) on 16-bit keys is faster than on int32 keys. Signed
+    int16 keys are not rewritten to CUB and are much slower. The payload must stay the iota
+    (then `gauss[slot]`, a gather): XLA lowers a stable two-operand sort to CUB only when one operand is an iota (its
     StableSortExpander makes that the tie-break, a comparator XLA's SortRewriter recognises);
     sorting the Gaussians along instead would get an iota added, three operands, and a
     comparison sort (xla/service/gpu/transforms/sort_rewriter.cc).

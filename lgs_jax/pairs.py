@@ -45,7 +45,7 @@ class PairGaussians:
 # `gaussian_table`: μx, μy, a, b, c, o, r, g, b, z. The strip masks' padded ellipse (τ, τ_pad,
 # det_lo and whether it is bounded) is computed from a, b, c and o where a mask is made
 # (`strip_mask_columns`), not stored: the table lives through the whole gradient, and its three
-# columns more took 12 bytes per Gaussian (115 MiB at 10M Gaussians).
+# columns more took 12 bytes per Gaussian.
 TABLE_COLUMNS = 10
 
 

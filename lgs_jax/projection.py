@@ -101,23 +101,20 @@ def project(g: Gaussians, cam: Camera, antialiased: bool = False, colors=None) -
     The fields are materialised once (an optimization barrier), so every consumer (the pair
     emission's tile rectangles, the depth order, the kernels' Gaussian table, the counts that
     size the pair buffer) reads the same stored bits. Fused into each consumer instead, XLA
-    recomputed the projection per consumer (at 10M Gaussians and 4K on an H200 the table's
-    fusion alone took 1.84 ms of a 7.2 ms forward, 0.69 ms behind the barrier: BENCHMARKS.md
-    §7 "Dec 2, late evening"), and each recomputation could contract multiplies and adds into
-    FMAs its own way, so two consumers could see different bits of one Gaussian's mean or
-    conic.
+    recomputed the projection per consumer (a large share of a forward at scale), and each
+    recomputation could contract multiplies and adds into FMAs its own way, so two consumers
+    could see different bits of one Gaussian's mean or conic.
 
     The checkpoint takes `g`'s fields whole and slices them into columns inside: JAX keeps a
     checkpoint's inputs for the backward behind an optimization barrier, so with columns as
-    its inputs XLA copied each one out (16 copies of 38 MiB at 10M Gaussians, live at the
-    peak of the gradient's memory, BENCHMARKS.md §7 "Dec 3, second session").
+    its inputs XLA copied each one out (16 column copies, live at the peak of the gradient's
+    memory).
 
     The barrier holds the fields as (N,) columns, stacked into `Projected`'s (N, 2) and (N, 3)
     fields after it: a consumer that reads columns (the Gaussian table's kernel, the emission's
     fusions) then reads the stored columns, and no stacked copy is written unless a consumer
     needs one whole. Behind the barrier the stacks were three XLA concatenates written and read
-    back (about 0.2 ms of a 10M-Gaussian 4K forward on an H200, BENCHMARKS.md §7 "Dec 3, third
-    session"), and in the backward the cotangents arrived stacked too."""
+    back, and in the backward the cotangents arrived stacked too."""
     return _stacked(lax.optimization_barrier(_project(g, cam, bool(antialiased), colors)))
 
 
@@ -143,10 +140,7 @@ def gaussian_columns(means, quats, log_scales, logit_opacities):
     the fields. Differentiated as plain slices instead, each field's cotangent is a sum of
     per-column pads, which XLA fused into the projection's backward: it split that into two
     fusions with 32 (N,) arrays between them. Behind the barrier the backward writes (N,)
-    columns only: at 10M Gaussians on an H200 it took 2.67 against 3.76 ms, at 0.96M with SH
-    degree 3 2.92 against 4.52, with the same bits there. On a CPU XLA compiles the chain
-    differently from before, and the mean, rotation and scale gradients round differently
-    (BENCHMARKS.md §7 "Dec 2, late night"). The SH coefficients stay whole (`sh_sums`).
+    columns only (docs/design-notes.md). The SH coefficients stay whole (`sh_sums`).
     Being a `custom_vjp`, it has no forward-mode derivative (`jax.jvp`), as the rasterizers."""
     return _columns(means, quats, log_scales, logit_opacities)
 
@@ -269,8 +263,7 @@ def float_sort_key(x):
     subnormals to zero (CPUs, GPUs), x == 0 holds for them too, as in its float sort.
 
     XLA sorts either kind with CUB's radix sort on GPUs, but float keys through JAX's total-order
-    comparator (its zero and NaN selects): 0.86 against 0.72 ms for 10M Gaussians on an H200
-    (BENCHMARKS.md §7, "Dec 2").
+    comparator (its zero and NaN selects), which costs more.
     """
     bits = {2: jnp.uint16, 4: jnp.uint32, 8: jnp.uint64}[x.dtype.itemsize]
     u = jax.lax.bitcast_convert_type(jnp.where(x == 0, jnp.zeros_like(x), x), bits)

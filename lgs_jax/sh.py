@@ -54,12 +54,10 @@ def sh_sums(basis, sh, keep):
     (N, K, 3) cotangent was a 48-operand concatenate of them, which XLA's GPU loop emitter
     computes with a branch per element, so every warp ran most of the 48 products one after
     another; with the products stored as 48 columns first, the columns and the stack were live
-    at once (176 MiB each at 0.96M Gaussians). The lego x16 gradient on an H200, one process:
-    4.72 ms and 328 MiB against 5.16 ms (the concatenate) and 4.83 ms, 494 MiB (the stored
-    columns), the same bits (BENCHMARKS.md §7 "Dec 4, fifth session"). At SH degree 0 (K = 1)
-    the three products are stacked as they are: XLA's concatenate emitter, which it uses up to
-    four operands, writes them without branches, and storing the cotangents first added three
-    passes (synthetic 4M: 7.45 against 7.31 ms)."""
+    at once. The broadcast product is faster and smaller than both, with the same bits. At SH
+    degree 0 (K = 1) the three products are stacked as they are: XLA's concatenate emitter,
+    which it uses up to four operands, writes them without branches, and storing the
+    cotangents first added three passes."""
     return [sum(b * _masked(sh, keep, k, c) for k, b in enumerate(basis)) for c in range(3)]
 
 

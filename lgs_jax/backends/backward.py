@@ -47,8 +47,8 @@ def walk_step(t_next, alpha, hit, rgb, z, sums, cotangents, quotients=None):
     rather than multiplied by zeros (which a compiler must keep) and S_Z is carried unchanged.
     Returns (T_k where hit else T_{k+1}: the next carry, w = α·T_k, ∂L/∂α (zero where not hit),
     the sums including this pair). A miss is a pair with α = 0 (T_{k+1}/1 and 0·T_k are exact),
-    one select where three took the cases apart (`hit`, the GPU kernels' pair step 204 -> 198
-    SASS instructions for the H200; the same bits). `quotients(1 − α, (x, y))` gives the two
+    one select where three took the cases apart (`hit`: fewer instructions in the GPU kernels'
+    pair step, the same bits). `quotients(1 − α, (x, y))` gives the two
     divisions by 1 − α (the Mosaic GPU kernel's own, `pallas.quotients.quotients`), `/` if None.
     """
     g_r, g_g, g_b, g_d, g_bg = cotangents

@@ -238,7 +238,7 @@ def forward(p: Projected, bins: TileBins, extra, width: int, height: int,
         pg = pairs.gather(p, bins.gauss)
     if config.warp_cull:
         # Materialise the masks once: fused into their (8, capacity) consumers, XLA would
-        # recompute the tight box for every strip bit (BENCHMARKS.md §2).
+        # recompute the tight box for every strip bit.
         masks = lax.optimization_barrier(pairs.strip_masks(pg, bins, tiles_x, config))
     if config.hoist:
         pair_v = pairs.hoisted_vectors(pg, bins, tiles_x, config)

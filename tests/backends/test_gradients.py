@@ -44,8 +44,8 @@ def _grads(g, cam, backend, config, dtype=np.float64):
     return jax.grad(_loss, argnums=(0, 2))(g, cam, bg, backend, config, _weights(dtype))
 
 
-@pytest.mark.parametrize("config", [C(), C(antialiased=True), pytest.param(C("gsplat"),
-                                                                            marks=SLOW)], ids=str)
+@pytest.mark.parametrize("config", [C(), pytest.param(C(antialiased=True), marks=SLOW),
+                                    pytest.param(C("gsplat"), marks=SLOW)], ids=str)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_reference_gradients_equal_autodiff_through_brute_float64(config, seed):
     """Every adversarial kind (needles, huge, opaque with logit +inf, layers, faint, NaN / inf /
@@ -89,7 +89,7 @@ def test_camera_gradients_equal_autodiff_through_brute_and_are_finite(seed, yaw)
 @pytest.mark.parametrize("backend,config", [
     pytest.param("reference", C(), id="reference", marks=SLOW),
     pytest.param("tiles", C(blend="fast"), id="tiles_fast"),
-    pytest.param("tiles", C(antialiased=True), id="tiles_antialiased")])
+    pytest.param("tiles", C(antialiased=True), id="tiles_antialiased", marks=pytest.mark.slow)])
 def test_gradients_match_central_differences(backend, config):
     """Well-separated, moderately opaque Gaussians (no depth ties or threshold within reach of
     the step), float64, six entries of every parameter group, and the camera's (antialiased).
@@ -275,7 +275,7 @@ def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
 
 
 @pytest.mark.parametrize("backend,config", [
-    ("tiles", C()), ("pallas", C(kernel="mosaic")),
+    pytest.param("tiles", C(), marks=SLOW), ("pallas", C(kernel="mosaic")),
     pytest.param("pallas", C(kernel="triton"), marks=SLOW),
     pytest.param("reference", C(), marks=SLOW)])
 def test_a_loss_without_depth_gives_the_gradients_of_a_zero_depth_weight(backend, config):

@@ -5,6 +5,7 @@ and a perturbed camera found again by gradient descent on its image."""
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import optax
 
 import lgs_jax
@@ -49,6 +50,7 @@ def test_adjusted_moves_the_camera_to_world_pose_and_zero_changes_no_bit():
         np.testing.assert_allclose(got[i], np.linalg.inv(c2w @ move), atol=1e-6)
 
 
+@pytest.mark.slow  # CI time: an optimization of 100s of steps
 def test_a_perturbed_camera_is_found_again():
     """The image of view 2 from a camera moved by a known delta: Adam on the delta's image
     loss brings the pose back (the rendering's camera gradient)."""

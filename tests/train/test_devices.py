@@ -54,6 +54,7 @@ CHILD = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # CI time: tests/parallel runs several simulated devices in the default set
 def test_two_devices_follow_one_and_repeat_themselves(data_dir, tmp_path):
     skull = os.path.join(data_dir, "skull")
     if not os.path.isdir(skull):

@@ -125,6 +125,7 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
     assert abs(float(m["loss"]) - want) < 1e-5 * want, (float(m["loss"]), want)
 
 
+@pytest.mark.slow  # CI time: test_each_view_is_rendered_at_its_size covers the sizes
 def test_fit_trains_on_two_sizes_to_the_same_bits_streamed_or_not(capture, tmp_path):
     """With bilateral grids, which slice each view at its own size."""
     recipe = train.Recipe(batch=2, sh_degree=0, bilateral_grid=True)

@@ -683,6 +683,7 @@ def test_random_starts_scale_with_the_images(tmp_path):
                                       "half-width 0.25 x scene scale"]
 
 
+@pytest.mark.slow  # CI time: a whole fit for one image dtype
 def test_8_bit_images_train_to_the_same_bits(tmp_path):
     """A capture at full size without alpha or distortion: its images held as uint8
     (`load_dataset(dtype=np.uint8)`, `fit --uint8-images`) train to the float32 run's bits,
@@ -740,6 +741,7 @@ def test_fit_needs_held_out_views(tmp_path):
     assert not [n for n in os.listdir(tmp_path / "all") if n.startswith("heldout_")]
 
 
+@pytest.mark.slow  # CI time: the benchmark's own run, a whole fit
 def test_gsplat_comparison_runs_ours_without_gsplat(data_dir, tmp_path, capsys):
     """benchmarks/train_vs_gsplat.py's own parts on the CPU: ours at 0 steps (no compile of a
     training step), its CSVs, and the comparison table from a stand-in gsplat result."""

@@ -194,8 +194,8 @@ def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, shar
 def test_a_row_capacity_at_the_walked_pairs_gives_the_defaults_gradients(kernel, pixels, seed):
     """`render(row_capacity=stats.backend_stats.pairs_walked)`: the Pallas backward with a buffer
     of exactly the walked pairs' rows gives the gradients of the default buffer (the pair
-    capacity's rows), bit for bit, on a scene where most pairs are not walked (asserted); one row fewer is
-    reported (`row_overflow`), never NaN, and leaves the image unchanged."""
+    capacity's rows), bit for bit, on a scene where most pairs are not walked (asserted); one
+    row fewer is reported (`row_overflow`), never NaN, and leaves the image unchanged."""
     g, cam = scenes.saturating(seed, 200, np.float32), scenes.camera(32, 32)
     w = np.random.default_rng(seed).normal(size=(32, 32, 3)).astype(np.float32)
     config = C(kernel=kernel, tuning=lgs_jax.KernelConfig(forward_pixels=pixels,

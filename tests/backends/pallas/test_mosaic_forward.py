@@ -141,6 +141,7 @@ def test_compacted_forward_is_the_full_walk_to_the_bit(seed, dtype):
             == int(out[FULL].stats.backend_stats.pairs_walked))
 
 
+@pytest.mark.slow  # CI time: test_backend's Mosaic GPU against Triton runs these scenes
 @settings(max_examples=3)
 @given(seed=st.integers(0, 2**32 - 1), dtype=st.sampled_from([np.float32, np.float64]))
 def test_compacted_forward_on_partial_tiles_and_short_lists(seed, dtype):
@@ -182,6 +183,7 @@ def test_compacted_forward_gives_the_full_walks_gradients_and_split_entries(back
         np.testing.assert_allclose(got, want, rtol=0, atol=5e-5 * np.abs(want).max())
 
 
+@pytest.mark.slow  # CI time: the default set runs each block size in other tests
 @settings(max_examples=1)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_block_sizes_give_the_same_images(seed):

@@ -120,7 +120,8 @@ def _grads(g, cam, w, config, row_capacity=None, depth=True):
 
 
 @pytest.mark.parametrize("dtype,pixels,rows,size,depth", [
-    (np.float64, 128, True, 16, True), (np.float64, (128, 256), False, 16, False),
+    (np.float64, 128, True, 16, True),
+    pytest.param(np.float64, (128, 256), False, 16, False, marks=pytest.mark.slow),
     pytest.param(np.float64, 256, False, 32, True, marks=pytest.mark.slow),
     pytest.param(np.float32, 128, True, 32, True, marks=[pytest.mark.slow, gpu_only(
         "CI time: the float64 cases check the same kernels in interpret mode")])])
