@@ -333,10 +333,10 @@ def sort_pairs(tile, gauss, n_tiles: int):
     32400), the keys are sorted as uint16: the same permutation (a stable sort of the same
     order), and XLA's GPU radix sort (CUB) on 16-bit keys is faster than on int32 keys. Signed
     int16 keys are not rewritten to CUB and are much slower. The payload must stay the iota
-    (then `gauss[slot]`, a gather): XLA lowers a stable two-operand sort to CUB only when one operand is an iota (its
-    StableSortExpander makes that the tie-break, a comparator XLA's SortRewriter recognises);
-    sorting the Gaussians along instead would get an iota added, three operands, and a
-    comparison sort (xla/service/gpu/transforms/sort_rewriter.cc).
+    (then `gauss[slot]`, a gather): XLA lowers a stable two-operand sort to CUB only when one
+    operand is an iota (its StableSortExpander makes that the tie-break, a comparator XLA's
+    SortRewriter recognises); sorting the Gaussians along instead would get an iota added,
+    three operands, and a comparison sort (xla/service/gpu/transforms/sort_rewriter.cc).
     """
     slot = jnp.arange(tile.shape[0], dtype=jnp.int32)
     key, slot = lax.sort((sort_key(tile, n_tiles), slot), num_keys=1, is_stable=True)
