@@ -45,7 +45,7 @@ LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
 @pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in ("no_cull", "difference",
                                                                         "antialiased")
                                   else n for n in LOCALGS])  # "baseline": both off
-@settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
+@settings(max_examples=6)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 def test_localgs_kernel_equals_reference_float64(name, seed):
     g = scenes.scene(seed)
@@ -62,7 +62,7 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
 
 @pytest.mark.parametrize("name", ["local_gs"] + [pytest.param(n, marks=SLOW) for n in (
     "difference", "local_center", "gsplat")])
-@settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
+@settings(max_examples=6)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 def test_localgs_kernel_equals_reference_float32(name, seed):
     """Same tolerance as the tiles backend (tests/compare.py, F32_ATOL): hoisted and difference
@@ -86,7 +86,7 @@ def test_localgs_kernel_equals_reference_float32(name, seed):
 @pytest.mark.parametrize("convention,dtype", [
     ("3dgs", np.float32), ("gsplat", np.float64),
     pytest.param("3dgs", np.float64, marks=SLOW), pytest.param("gsplat", np.float32, marks=SLOW)])
-@settings(max_examples=10)  # interpret mode on CPU: ~0.7 s per example
+@settings(max_examples=6)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 @example(seed=1711)  # H200: alpha 2.3e-5 from the reference's in 5 pixels
 def test_vanilla_kernel_equals_reference(convention, dtype, seed):
