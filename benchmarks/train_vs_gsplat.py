@@ -52,6 +52,7 @@ DEVICE = "cuda"  # gsplat's; its rasterization has no CPU path
 SCENES = {  # folder in the data root, image downscale, Gaussian cap
     "lego": dict(folder="lego_train", downscale=1, cap=300_000),
     "skull": dict(folder="skull", downscale=1, cap=500_000),
+    "fox": dict(folder="fox", downscale=1, cap=500_000),  # lens distortion: undistorted at load
 }
 
 
@@ -74,6 +75,10 @@ def parse(argv=None) -> argparse.Namespace:
                          "refinement, to tell its effect apart; default: the strategy's)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--images", choices=["auto", "float32"], default="auto",
+                    help="the training images both trainers hold on the device: auto (fit's "
+                         "default: 8-bit where the files are, each view converted to float32 "
+                         "when a step uses it) or float32")
     ap.add_argument("--backend", help="our backend (default: pallas on a GPU, tiles elsewhere)")
     ap.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
                     help="our compositing rule (gsplat's trainer's: always gsplat's)")
@@ -109,7 +114,8 @@ def scene_setup(args, scene: str, out: str = ""):
 
     cfg = SCENES[scene]
     d = lgs_jax.load_dataset(os.path.join(args.data_root, cfg["folder"]),
-                             downscale=args.downscale or cfg["downscale"])
+                             downscale=args.downscale or cfg["downscale"],
+                             dtype="auto" if args.images == "auto" else np.float32)
     cap = args.cap or cfg["cap"]
     strategy = (train.MCMCStrategy(cap_max=cap) if args.strategy == "mcmc"
                 else train.DefaultStrategy())
@@ -299,9 +305,11 @@ def _gsplat_loop(args, rd, model, settings, strategy, log):
         renders, _, info = _gsplat_render(params, vm[i:i + 1], ks[i:i + 1], rd, deg)
         if not mcmc:
             theirs.step_pre_backward(params, opts, state, step, info)
-        img = renders[0]
-        loss = torch.lerp((img - images[i]).abs().mean(),
-                          1 - torch_ssim(img, images[i], settings.ssim_padding),
+        img, target = renders[0], images[i]
+        if target.dtype == torch.uint8:  # x / 255 in float32, as fit's feed converts them
+            target = target.float() / 255
+        loss = torch.lerp((img - target).abs().mean(),
+                          1 - torch_ssim(img, target, settings.ssim_padding),
                           settings.ssim_lambda)
         if mcmc:
             loss = (loss + strategy.opacity_reg * torch.sigmoid(params["opacities"]).mean()

@@ -27,6 +27,13 @@ rounds, one training view):
   train_loop    `train_step` + the host read of its metrics, as `fit` runs it
   refine        MCMC's refinement (every 100 steps in a run), its report read back
   gsplat        gsplat's rasterization + backward of Σ image·w (same Gaussians, same view)
+  gsplat render     gsplat's rasterization alone (no gradient)
+  gsplat ssim+bwd   the loss's image part in torch as benchmarks/train_vs_gsplat's gsplat
+                    trainer computes it (conv2d SSIM + L1) and its backward
+  gsplat adam       torch's fused Adam over the same parameters, one optimizer per group
+Then the step's memory by part (MiB): the pool's parameters, the optimizer state, the strategy
+state, the view's target, and XLA's buffers of the compiled `train_step` (arguments, outputs,
+temporaries: the pair and row buffers, the render's per-pair records, the loss's images).
 """
 
 from __future__ import annotations
@@ -38,6 +45,8 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from lgs_jax.io.datasets import as_float  # noqa: E402
 
 
 def densified_pool(rd, setup, n: int, size: int, seed: int = 0):
@@ -114,7 +123,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     from lgs_jax.train.pool import render_gaussians
 
     cam = jax.tree.map(lambda x: x[0], rd.train_cams)
-    target = jnp.asarray(rd.train_images[0])
+    target = jnp.asarray(as_float(rd.train_images[0]))
     bg = jnp.asarray(rd.background)
     w = jax.random.uniform(jax.random.key(1), (cam.height, cam.width, 3))
     draw = lambda p: render(render_gaussians(p, pool.active), cam, background=bg,
@@ -133,7 +142,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     idx = jnp.array([0])
     key = jax.random.key(0)
     step_fn = functools.partial(st.train_step, setup=setup, capacity=capacity)
-    targets = jnp.asarray(rd.train_images[:1])  # view 0's image, on the device as fit's
+    targets = jnp.asarray(as_float(rd.train_images[:1]))  # view 0's, on the device as fit's
     call = lambda: step_fn(pool, opt_state, sstate, None, rd.train_cams, targets,
                            idx, bg, jnp.int32(6000), key)
     fns = {
@@ -154,7 +163,82 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
         gs = gsplat_grad_step(g, cam, w)
         if gs is not None:
             fns["gsplat"] = gs
+            fns.update(gsplat_stages(g, cam, np.asarray(rd.train_images[0])))
     return fns
+
+
+def gsplat_stages(g, cam, target) -> dict:
+    """{row: blocking callable} of gsplat's forward, the torch loss's backward and torch Adam
+    (module docstring)."""
+    import torch
+    from gsplat import rasterization
+
+    from benchmarks.train_vs_gsplat import torch_ssim
+
+    dev = torch.device("cuda")
+    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
+    params = [t(g.means), t(g.quats), t(g.log_scales), t(g.logit_opacities), t(g.sh[:, :1]),
+              t(g.sh[:, 1:])]
+    viewmat = t(cam.viewmat)[None]
+    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
+    deg = int(round(np.sqrt(g.sh.shape[1]))) - 1
+    ref = t(target.astype(np.float32) / (255 if target.dtype == np.uint8 else 1))
+
+    def render():
+        with torch.no_grad():
+            rasterization(params[0], params[1], torch.exp(params[2]), torch.sigmoid(params[3]),
+                          torch.cat(params[4:], 1), viewmat, K, cam.width, cam.height,
+                          sh_degree=deg, packed=False)
+        torch.cuda.synchronize()
+
+    image = torch.rand_like(ref, requires_grad=True)
+
+    def ssim_bwd():
+        image.grad = None
+        loss = torch.lerp((image - ref).abs().mean(), 1 - torch_ssim(image, ref), 0.2)
+        loss.backward()
+        torch.cuda.synchronize()
+
+    leaves = [torch.nn.Parameter(p.clone()) for p in params]
+    opts = [torch.optim.Adam([p], lr=1e-3, eps=1e-15, fused=True) for p in leaves]
+    for p in leaves:
+        p.grad = torch.ones_like(p)
+
+    def adam():
+        for o in opts:
+            o.step()
+        torch.cuda.synchronize()
+
+    return {"gsplat render": render, "gsplat ssim+bwd": ssim_bwd, "gsplat adam": adam}
+
+
+def memory_parts(setup, pool, opt_state, sstate, rd, capacity: int) -> dict:
+    """{part: MiB} of one training step (module docstring)."""
+    import jax
+    import jax.numpy as jnp
+
+    from lgs_jax.train import step as st
+
+    mib = lambda tree: sum(x.nbytes for x in jax.tree.leaves(tree)) / 2**20
+    targets = jnp.asarray(as_float(rd.train_images[:1]))
+    args = (pool, opt_state, sstate, None, rd.train_cams, targets, jnp.array([0]),
+            jnp.asarray(rd.background), jnp.int32(6000), jax.random.key(0))
+    compiled = st.train_step.lower(*args, setup=setup, capacity=capacity).compile()
+    m = compiled.memory_analysis()
+    parts = {"pool parameters": mib(pool.params), "optimizer state": mib(opt_state),
+             "strategy state": mib(sstate), "one target image": mib(targets),
+             "all training images (as fit holds them)": nbytes_mib(rd.train_images)}
+    if m is not None:
+        parts.update({"XLA arguments": m.argument_size_in_bytes / 2**20,
+                      "XLA outputs": m.output_size_in_bytes / 2**20,
+                      "XLA temporaries": m.temp_size_in_bytes / 2**20})
+    return parts
+
+
+def nbytes_mib(images) -> float:
+    from lgs_jax.train.feed import nbytes
+
+    return nbytes(images) / 2**20
 
 
 def main(argv=None) -> int:
@@ -169,6 +253,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=20)
     ap.add_argument("--backend", default=None)
     ap.add_argument("--no-gsplat", action="store_true")
+    ap.add_argument("--float-images", action="store_true",
+                    help="hold the images as float32 (default: as fit does, 8-bit where the "
+                         "files are)")
     args = ap.parse_args(argv)
     if args.headroom < 1:
         ap.error(f"--headroom: must be at least 1 (fewer slots than pairs drop pairs), got "
@@ -182,7 +269,7 @@ def main(argv=None) -> int:
     from lgs_jax.train.feed import prepare
     from lgs_jax.train.state import pairs as pool_pairs
 
-    rd = prepare(args.data, args.downscale)
+    rd = prepare(args.data, args.downscale, dtype=np.float32 if args.float_images else "auto")
     backend = args.backend or ("pallas" if jax.default_backend() == "gpu" else "tiles")
     setup = Setup(Recipe(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, backend)
     if args.ply:
@@ -199,7 +286,10 @@ def main(argv=None) -> int:
           f"{pairs} pairs, capacity {capacity}, backend {backend}")
     print(tile_load(pool, cam, capacity))
     for name, t in ms.items():
-        print(f"  {name:<12s} {t:8.2f} ms")
+        print(f"  {name:<16s} {t:8.2f} ms")
+    print("memory by part:")
+    for name, size in memory_parts(setup, pool, opt_state, sstate, rd, capacity).items():
+        print(f"  {name:<40s} {size:9.1f} MiB")
     return 0
 
 

@@ -192,7 +192,7 @@ def run(args) -> int:
         from ..io.datasets import load_dataset
 
         data = load_dataset(config.data, downscale=config.downscale,
-                            dtype=np.uint8 if config.uint8_images else np.float32)
+                            dtype=config.image_dtype)
         watch, served = view_cmd.training_viewer(args, config, data)
     try:
         result = train.fit(config, data, watch=watch)

@@ -34,7 +34,7 @@ from ..scene import Camera
 from .colmap import colmap_source, model_folder
 from .transforms import transforms_source
 from .undistort import undistorter
-from .views import DatasetError, Lens, Source, View, read_image
+from .views import DatasetError, Lens, Source, View, bit_depth, read_image
 
 WHITE, BLACK = np.ones(3, np.float32), np.zeros(3, np.float32)
 
@@ -167,6 +167,15 @@ def as_float(images) -> np.ndarray:
     return images.astype(np.float32) / np.float32(255) if images.dtype == np.uint8 else images
 
 
+def _dtype(dtype, views: list[View], listed_in: str):
+    """np.float32 or np.uint8 for `load_dataset`'s `dtype`: "auto" is np.uint8 where every image
+    file is 8-bit (`views.bit_depth`), np.float32 otherwise."""
+    if isinstance(dtype, str) and dtype == "auto":
+        eight = all(bit_depth(v.path, listed_in) == 8 for v in views)
+        return np.dtype(np.uint8) if eight else np.dtype(np.float32)
+    return np.dtype(dtype)
+
+
 def load_dataset(path, *, downscale: int = 1, dtype=np.float32) -> Dataset:
     """Load a COLMAP, instant-ngp/NeRF or NeRF-synthetic dataset (module docstring).
 
@@ -175,7 +184,8 @@ def load_dataset(path, *, downscale: int = 1, dtype=np.float32) -> Dataset:
     `dtype`: np.float32 (default), or np.uint8 to hold the images in a quarter of the memory
     (12 bytes a pixel against 3: 30 GB against 7.5 for 300 views at 4K), each value rounded to
     the nearest of x/255 after compositing, undistortion and downscaling (exact where none of
-    them applies: `as_float` then gives the float32 images' bits).
+    them applies: `as_float` then gives the float32 images' bits); or "auto": np.uint8 where
+    every image file is 8-bit, np.float32 where one has 16 bits.
     Raises `DatasetError` (a `ValueError`) naming the file and the problem for a dataset that
     cannot be loaded, and `ImportError` if a distorted camera needs OpenCV and it is missing
     (install the `data` extra: pip install 'lgs_jax[data]').
@@ -183,12 +193,14 @@ def load_dataset(path, *, downscale: int = 1, dtype=np.float32) -> Dataset:
     if isinstance(downscale, bool) or not isinstance(downscale, (int, np.integer)) \
             or downscale < 1:
         raise ValueError(f"downscale: expected an integer >= 1, got {downscale!r}")
-    try:
-        dtype = np.dtype(dtype)
-    except TypeError:
-        dtype = None
-    if dtype not in (np.float32, np.uint8):
-        raise ValueError(f"dtype: expected np.float32 or np.uint8, got {dtype!r}")
+    if not (isinstance(dtype, str) and dtype == "auto"):
+        try:
+            dtype = np.dtype(dtype)
+        except TypeError:
+            dtype = None
+        if dtype not in (np.float32, np.uint8):
+            raise ValueError(f"dtype: expected np.float32, np.uint8 or \"auto\", got "
+                             f"{dtype!r}")
     path = os.fspath(path)
     source = _source(path)
     views = sorted(source.views, key=lambda v: v.name)
@@ -197,6 +209,7 @@ def load_dataset(path, *, downscale: int = 1, dtype=np.float32) -> Dataset:
     if dupes:
         raise DatasetError(f"{source.file}: images listed more than once: {dupes[:5]}")
     background = WHITE if source.nerf_synthetic else BLACK
+    dtype = _dtype(dtype, views, source.file)
     undistorters = {v.lens: undistorter(v.lens, source.lens_file) for v in views
                     if v.lens.distorted}
     _check_downscale(views, undistorters, int(downscale))

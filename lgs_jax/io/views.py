@@ -122,6 +122,15 @@ def image_size(path: str, listed_in: str) -> tuple[int, int]:
         return im.size
 
 
+def bit_depth(path: str, listed_in: str) -> int:
+    """Bits per channel of an image file, from its header: 16 for 16-bit PNG and 16-bit grey
+    images, 8 otherwise (the depths `read_image` reads)."""
+    with _open(path, listed_in) as im:
+        if im.mode.startswith("I;16") or (im.format == "PNG" and _png_bit_depth(path) == 16):
+            return 16
+        return 8
+
+
 def _png_bit_depth(path: str) -> int | None:
     """The bit depth in a PNG file's IHDR chunk (None if `path` is not a PNG file)."""
     with open(path, "rb") as f:

@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+import numpy as np
+
 from ..config import CONVENTIONS, RasterConfig
 from .losses import PADDINGS
 from .options import check, option
@@ -128,10 +130,11 @@ class FitConfig:
     crop: tuple[int, int, int, int] | None = option(
         None, "train and evaluate on this window of every image (quick checks)", low=0,
         metavar=("X0", "Y0", "W", "H"))
-    uint8_images: bool = option(
-        False, "hold the images as 8-bit values (a quarter of the memory, host and device), "
-               "rounded after compositing, undistortion and --downscale; without those, the "
-               "same results")
+    uint8_images: bool | None = option(
+        None, "hold the images as 8-bit values (a quarter of the memory, host and device), "
+              "rounded after compositing, undistortion and --downscale (as an 8-bit image "
+              "file of that size would be); without those, the same results (default: 8-bit "
+              "where every image file is 8-bit, float32 where one has 16 bits)")
     train_on_all: bool = option(
         False, "train on every view, the held-out ones too (a final scene; nothing is "
                "evaluated)")
@@ -172,6 +175,11 @@ class FitConfig:
             raise ValueError(f"devices: {self.devices} devices split recipe.batch = "
                              f"{self.recipe.batch} views unevenly; make the batch a multiple "
                              f"of them")
+
+    @property
+    def image_dtype(self):
+        """`load_dataset`'s dtype for `uint8_images`: np.uint8, np.float32 or "auto"."""
+        return {None: "auto", True: np.uint8, False: np.float32}[self.uint8_images]
 
     def start_points(self, pixels: int) -> int:
         """The random start's point count for training images of at most `pixels` pixels

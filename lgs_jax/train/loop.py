@@ -294,7 +294,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
     """`fit` in its claimed folder: load, start or resume, loop, finish."""
     t0, out = time.perf_counter(), config.out
     rd = prepare(dataset if dataset is not None else config.data, config.downscale, config.crop,
-                 config.train_on_all, np.uint8 if config.uint8_images else np.float32)
+                 config.train_on_all, config.image_dtype)
     if config.recipe.batch > len(rd.train_names):
         raise ValueError(f"recipe.batch: {config.recipe.batch} views per step, but the data "
                          f"has {len(rd.train_names)} training views")

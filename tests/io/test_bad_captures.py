@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 import lgs_jax
+from lgs_jax.io.datasets import as_float
 from tests.io.captures import tiny_colmap, tiny_transforms, write_frames
 
 NAN, INF = float("nan"), float("inf")
@@ -175,6 +176,22 @@ def test_8_bit_png_keeps_its_exact_bits(tmp_path):
     Image.fromarray(pixels).save(tmp_path / "images" / "a.png")
     d = lgs_jax.load_dataset(tmp_path)
     np.testing.assert_array_equal(d.images[0], pixels.astype(np.float32) / np.float32(255))
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_auto_dtype_holds_8_bit_files_as_uint8_and_16_bit_ones_as_float32(tmp_path, bits):
+    rng = np.random.default_rng(5)
+    tiny_transforms(str(tmp_path))
+    if bits == 8:
+        pixels = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)
+        Image.fromarray(pixels).save(tmp_path / "images" / "a.png")
+    else:
+        pixels = rng.integers(0, 65536, (30, 40, 3), dtype=np.uint16)
+        _png16(tmp_path / "images" / "a.png", pixels)
+    auto = lgs_jax.load_dataset(tmp_path, dtype="auto")
+    assert auto.images.dtype == (np.uint8 if bits == 8 else np.float32)
+    exact = lgs_jax.load_dataset(tmp_path)
+    np.testing.assert_array_equal(as_float(auto.images), exact.images)
 
 
 def test_downscale_larger_than_the_images_is_refused(tmp_path):

@@ -295,7 +295,7 @@ def test_downscale_averages_blocks_and_divides_intrinsics(tmp_path):
     small = lgs_jax.load_dataset(tmp_path, downscale=3, dtype=np.uint8)
     np.testing.assert_array_equal(small.images[0], np.round(want * 255))
     for bad in (np.float64, "int8", 3):
-        with pytest.raises(ValueError, match="dtype: expected np.float32 or np.uint8"):
+        with pytest.raises(ValueError, match='dtype: expected np.float32, np.uint8 or "auto"'):
             lgs_jax.load_dataset(tmp_path, dtype=bad)
 
 
