@@ -38,6 +38,26 @@ def test_ssim_equals_scikit_image():
     assert abs(float(train.ssim(jnp.asarray(a), jnp.asarray(a))) - 1.0) < 1e-12
 
 
+@pytest.mark.parametrize("padding", ["same", "valid"])
+def test_ssim_written_out_gradient_equals_jax_gradient_of_the_reference(padding):
+    """Both images' gradients: to float64 rounding in float64, and in float32 no further from
+    the float64 gradient than JAX's own float32 gradient of the reference is (x 2)."""
+    rng = np.random.default_rng(2)
+    a = rng.uniform(0, 1, (23, 31, 3))
+    b = np.clip(a + rng.normal(0, 0.15, a.shape), 0, 1)
+    grad = lambda f, dt: jax.grad(lambda x, y: f(x, y, padding=padding), (0, 1))(
+        jnp.asarray(a, dt), jnp.asarray(b, dt))
+    exact = grad(train.losses.ssim_reference, jnp.float64)
+    ours = grad(train.ssim, jnp.float64)
+    ours32, ref32 = grad(train.ssim, jnp.float32), grad(train.losses.ssim_reference, jnp.float32)
+    for e, o, o32, r32 in zip(exact, ours, ours32, ref32):
+        scale = float(jnp.max(jnp.abs(e)))
+        assert float(jnp.max(jnp.abs(o - e))) < 1e-12 * scale
+        assert float(jnp.max(jnp.abs(o32 - e))) <= 2 * float(jnp.max(jnp.abs(r32 - e))) + 1e-9
+    with pytest.raises(ValueError, match="padding: expected 'same' or 'valid'"):
+        train.ssim(jnp.asarray(a), jnp.asarray(b), padding="full")
+
+
 def test_loss_ssim_is_zero_padded_over_every_pixel():
     """3DGS's SSIM: conv2d with the 11-tap Gaussian window and zero padding, mean of the map."""
     rng = np.random.default_rng(1)
