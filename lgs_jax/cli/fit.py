@@ -1,9 +1,9 @@
 """`python -m lgs_jax fit`: the command line of `lgs_jax.train.FitConfig`, generated from its
 fields (`options`): an option per field of FitConfig and of its `Recipe`, named after the field;
 `--strategy NAME` (`train.STRATEGIES`; default: the recipe's, `train.recipes`) with an option
-per field of the strategies (default: the chosen strategy's own). The names that are not the fields' are in one place: `ALIASES` (older
-options, still read), `DERIVED` (a field set from another option), `CLI_ONLY` (options that
-are not configuration).
+per field of the strategies (default: the chosen strategy's own). The names that are not the
+fields' are in one place: `ALIASES` (older options, still read), `DERIVED` (a field set from
+another option), `CLI_ONLY` (options that are not configuration).
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ def _strategy_help(o: options.Option) -> str:
 
     has = [f"{name} {getattr(cls(), o.dest)}" for name, cls in STRATEGIES.items()
            if o.dest in {f.name for f in dataclasses.fields(cls)}]
-    return f"{o.field.metadata.get('help', '')} (strategy default: {', '.join(has)})"
+    text = f"{o.field.metadata.get('help', '')} (strategy default: {', '.join(has)})"
+    return text.replace("%", "%%")
 
 
 def parser(sub, common) -> None:

@@ -38,10 +38,12 @@ from .strategy import MCMCStrategy, StepInfo
 
 def budget_curve(step, start: int, budget: int, begin: int, until: int):
     """Taming 3DGS's target count at refinement step `step` (module docstring): S + (B − S)·
-    (2t − t²) rounded down, t = clip((step − begin) / (until − begin), 0, 1); float32
-    arithmetic, the same on the host (numpy scalars) and in a jitted refinement."""
+    t·(2 − t) rounded down, t = clip((step − begin) / (until − begin), 0, 1), in float32
+    (t·(2 − t) never falls as t rises, and is exactly 1 at t = 1): non-decreasing in `step`,
+    `start` at or before `begin`, at most `budget` (callers clip it there, `BudgetStrategy`:
+    float32 may round B − S up above 2^24) and `budget` from `until` on."""
     t = jnp.clip((jnp.asarray(step, jnp.float32) - begin) / max(until - begin, 1), 0.0, 1.0)
-    rise = jnp.asarray(budget - start, jnp.float32) * (2.0 * t - t * t)
+    rise = jnp.asarray(budget - start, jnp.float32) * (t * (2.0 - t))  # 2t − t², monotone
     return jnp.asarray(start, jnp.int32) + jnp.floor(rise).astype(jnp.int32)
 
 

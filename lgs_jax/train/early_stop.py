@@ -54,12 +54,23 @@ class EarlyStop:
         self._decided: dict[int, bool] = {}
 
     @classmethod
-    def of(cls, recipe, first: int, rows: list[dict] = (), source: str = "metrics.jsonl"):
-        """The rule of `recipe`, its losses so far from metrics rows (`report.read_metrics`;
-        those of the training steps)."""
+    def of(cls, recipe, first: int, rows: list[dict] = (), source: str = "metrics.jsonl",
+           done: int = 0):
+        """The rule of `recipe` for a run with `done` steps done, its losses so far from
+        metrics rows (`report.read_metrics`; those of the training steps); `ValueError` naming
+        `source` where a loss a later check needs is missing (a resumed run whose metrics lost
+        rows), before any step."""
         losses = {r["step"]: r["loss"] for r in rows if "loss" in r and "step" in r}
-        return cls(recipe.early_stop, first, recipe.stop_window, recipe.stop_gain, losses,
+        rule = cls(recipe.early_stop, first, recipe.stop_window, recipe.stop_gain, losses,
                    source)
+        if rule.on:
+            need = range(max(first, done - 2 * rule.window) + 1, done + 1)
+            lost = [s for s in need if s not in losses]
+            if lost:
+                raise ValueError(f"{source}: no training loss of step {lost[0]}, which the "
+                                 f"early stop needs (recipe.early_stop); restore the run's "
+                                 f"metrics or start a new run")
+        return rule
 
     def record(self, step: int, loss: float) -> None:
         """The loss of step `step` (1-based: `step` steps done)."""

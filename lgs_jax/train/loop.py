@@ -184,7 +184,7 @@ def _early_stop(run: _Run, feed: LevelFeed) -> EarlyStop:
     path = os.path.join(run.config.out, "metrics.jsonl")
     on = run.config.recipe.early_stop and os.path.exists(path)
     return EarlyStop.of(run.config.recipe, feed.starts[-1],
-                        report.read_metrics(path) if on else [], path)
+                        report.read_metrics(path) if on else [], path, run.st.step)
 
 
 def _stops_early(run: _Run, early: EarlyStop) -> bool:
