@@ -42,7 +42,11 @@ def budget_curve(step, start: int, budget: int, begin: int, until: int):
     (t·(2 − t) never falls as t rises, and is exactly 1 at t = 1): non-decreasing in `step`,
     `start` at or before `begin`, at most `budget` (callers clip it there, `BudgetStrategy`:
     float32 may round B − S up above 2^24) and `budget` from `until` on."""
-    t = jnp.clip((jnp.asarray(step, jnp.float32) - begin) / max(until - begin, 1), 0.0, 1.0)
+    step = jnp.asarray(step, jnp.float32)
+    t = jnp.clip((step - begin) / max(until - begin, 1), 0.0, 1.0)
+    # 1 from `until` on exactly (XLA may divide by the constant as a multiplication by its
+    # reciprocal, which can leave t a rounding below 1 there)
+    t = jnp.where(step >= until, 1.0, t)
     rise = jnp.asarray(budget - start, jnp.float32) * (t * (2.0 - t))  # 2t − t², monotone
     return jnp.asarray(start, jnp.int32) + jnp.floor(rise).astype(jnp.int32)
 
