@@ -300,3 +300,38 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     refines = [r for r in rows if "refine_step" in r]
     assert [r["refine_step"] for r in refines] == [4, 8, 12, 16]
     assert result["gaussians"] == result["pool_size"] == STRATEGY.max_count(64, 24, 10**6)
+
+
+def test_time_to_quality_pairs_the_seeds_and_checks_the_targets(tmp_path, capsys):
+    """benchmarks/time_to_quality.py's files and summary on made-up rows: a rerun replaces its
+    rows; ours − gsplat's PSNR paired by seed against one standard error; the wall-time limit
+    per scene (lego_train 30 s); the dry run prints the commands and runs nothing."""
+    from benchmarks import time_to_quality as ttq
+
+    path = str(tmp_path / "results.csv")
+    rows = [dict(scene=scene, trainer=trainer, seed=seed, psnr=p, ssim=0.9, wall_s=w)
+            for scene, trainer, w, ps in (("skull", "gsplat", 300, (25, 26)),
+                                          ("skull", "lgs_jax_fast", 50, (24.5, 25.7)),
+                                          ("lego_train", "gsplat", 60, (30, 30.2)),
+                                          ("lego_train", "lgs_jax_fast", 31, (31, 31.4)))
+            for seed, p in enumerate(ps)]
+    ttq.merge(path, rows, ttq.FIELDS, ("scene", "trainer", "seed"))
+    ttq.merge(path, [dict(rows[2], psnr=24.0)], ttq.FIELDS, ("scene", "trainer", "seed"))
+    got = ttq.read_csv(path)
+    assert len(got) == 8 and [r["psnr"] for r in got if r["trainer"] == "lgs_jax_fast"
+                              and r["scene"] == "skull"] == ["25.7", "24.0"]
+    skull, lego = ttq.target_rows(got)
+    assert (skull["diff"], skull["error"]) == pytest.approx((-0.65, 0.35))  # -1.0, -0.3
+    assert not skull["quality"] and skull["time"]
+    assert lego["quality"] and not lego["time"] and lego["limit"] == 30
+    assert ttq.main(["--summary", "--out", str(tmp_path), "--figure",
+                     str(tmp_path / "f.png")]) == 0
+    text = capsys.readouterr().out
+    assert "| skull | lgs_jax_fast | 2 | 24.85 ± 0.85 |" in text
+    assert "| lego_train | 2 | +1.10 ± 0.10 | met | 31.0 | 30 | missed |" in text
+    assert (tmp_path / "f.png").stat().st_size > 0
+    assert ttq.main(["--dry-run", "--scenes", "fox", "--seeds", "1", "--out",
+                     str(tmp_path / "dry")]) == 0
+    text = capsys.readouterr().out
+    assert "lgs_jax fit --data" in text and "--recipe fast --seed 0" in text
+    assert not (tmp_path / "dry" / "results.csv").exists()
