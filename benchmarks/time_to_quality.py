@@ -278,8 +278,9 @@ def results_table(rows: list[dict]) -> list[str]:
         for trainer in dict.fromkeys(r["trainer"] for r in rows if r["scene"] == scene):
             mine = [r for r in rows if (r["scene"], r["trainer"]) == (scene, trainer)
                     and not r.get("error")]
-            out.append(f"| {scene} | {trainer} | {len(mine)} | {_cell(_column(mine, 'psnr'), '.2f')}"
-                       f" | {_cell(_column(mine, 'ssim'), '.4f')} | "
+            out.append(f"| {scene} | {trainer} | {len(mine)} | "
+                       f"{_cell(_column(mine, 'psnr'), '.2f')} | "
+                       f"{_cell(_column(mine, 'ssim'), '.4f')} | "
                        f"{_cell(_column(mine, 'wall_s'), '.1f')} | "
                        f"{_cell(_column(mine, 'steps'), '.0f')} | "
                        f"{_cell(_column(mine, 'gaussians'), '.0f')} |")

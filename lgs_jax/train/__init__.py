@@ -1,6 +1,7 @@
 """Training: Gaussians fitted to a capture with a densification strategy, in static shapes.
 
-    python -m lgs_jax fit --data DIR --out RUN [--recipe default|fast] [--strategy default|mcmc|budget] ...
+    python -m lgs_jax fit --data DIR --out RUN [--recipe default|fast]
+        [--strategy default|mcmc|budget] ...
     lgs_jax.train.fit(FitConfig(data=DIR, out=RUN, steps=N, ...))
 
 Modules (each usable alone):
@@ -48,7 +49,8 @@ from .recipes import STRATEGIES
 from .strategy import DefaultStrategy, MCMCStrategy, StepInfo, Strategy
 
 __all__ = ["STRATEGIES", "BudgetStrategy", "CheckpointError", "DefaultStrategy", "FitConfig",
-           "Interrupted", "MCMCStrategy", "Pool", "Recipe", "RunDirError", "Setup", "StepInfo", "Strategy",
+           "Interrupted", "MCMCStrategy", "Pool", "Recipe", "RunDirError", "Setup", "StepInfo",
+           "Strategy",
            "active_gaussians", "check_out", "evaluate", "fit", "from_gaussians", "loss_fn",
            "optimizer", "psnr", "render_gaussians", "run_dir_problem", "sh_mask", "ssim",
            "train_step"]

@@ -5,7 +5,7 @@ With W = `Recipe.stop_window` steps and g = `Recipe.stop_gain`: after step s (s 
 run stops when s is a check (s − F a positive multiple of W with s − F >= 2W, F the first step
 at full resolution, `levels.starts`) and
 
-    mean(loss over steps s − W + 1 .. s) > (1 − g) · mean(loss over steps s − 2W + 1 .. s − W),
+    mean(loss of steps s − W + 1 .. s) > (1 − g) · mean(loss of steps s − 2W + 1 .. s − W),
 
 the losses being the training steps' (`step.train_step`'s loss, as metrics.jsonl records it;
 non-finite ones, of skipped steps, left out of the means). The rule reads only recorded losses,

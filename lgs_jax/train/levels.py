@@ -1,10 +1,9 @@
-"""Coarse to fine (DashGaussian, Chen et al., CVPR 2025: low resolution early, full resolution
-late), in a few static sizes: `Recipe.levels` = L levels, level l (0-based) trains on the images
-downscaled by 2^(L − 1 − l), each level from a fixed step (`starts`), the last at full resolution
-from `Recipe.full_resolution_at` of the run; the coarser levels share the steps before it
-equally. DashGaussian raises the resolution gradually on a schedule set by the images'
-frequency content; here each size compiles its own training step, so a few fixed levels stand
-for it.
+"""Coarse to fine (DashGaussian, Chen et al., CVPR 2025: low resolution early, full
+resolution late), in a few static sizes: `Recipe.levels` = L levels, level l (0-based) trains
+on the images downscaled by 2^(L − 1 − l), each level from a fixed step (`starts`), the last at
+full resolution from `Recipe.full_resolution_at` of the run; the coarser levels share the steps
+before it equally. Each image size compiles its own training step, so a few fixed levels stand
+for DashGaussian's gradual schedule (docs/design-notes.md).
 
 A level's images are made once, when the run starts, from the loaded training images: each k x
 k block averaged (in float64, then float32; 8-bit images rounded to the nearest 8-bit value)
@@ -13,7 +12,9 @@ cameras have every intrinsic divided by k exactly (pixel j covers the full-size 
 k·j + k − 1, whose centre k·(j + 0.5) is the full-size coordinate of j + 0.5) and the same
 poses. Held-out views are always rendered and scored at full resolution. The views of a step
 depend only on (step, seed) (`feed.views_for_step`), so a resumed run sees what an
-uninterrupted one does, at the same level.
+uninterrupted one does, at the same level. The first steps scale with the run's length
+(`FitConfig.steps`), as the means' learning rate does: a run resumed with more steps follows
+the longer run's schedule from there.
 """
 
 from __future__ import annotations
