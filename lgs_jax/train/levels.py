@@ -22,6 +22,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 
+import jax
 import numpy as np
 
 from .feed import RunData, TrainViews
@@ -98,6 +99,12 @@ class Level:
         sizes = tuple((w // k, h // k) for w, h in rd.train_sizes)
         return cls(k, scaled_cameras(rd.train_cams, k), images, sizes)
 
+    def camera(self, i: int = 0):
+        """Training view i's camera at this level's size of its image."""
+        width, height = self.sizes[i]
+        return dataclasses.replace(jax.tree.map(lambda x: x[i], self.cams), width=width,
+                                   height=height)
+
     def groups(self) -> np.ndarray | None:
         """Each view's index among the level's distinct sizes (`RunData.groups`)."""
         distinct = list(dict.fromkeys(self.sizes))
@@ -118,6 +125,7 @@ class LevelFeed:
         self._feeds: dict[int, TrainViews] = {}
 
     def level(self, step: int) -> int:
+        """The level of 0-based `step` (`level_at`)."""
         return level_at(step, self.starts)
 
     def _feed(self, level: int) -> TrainViews:

@@ -3,7 +3,8 @@
 Per step s (0-based): the views of `feed.views_for_step` at the step's image level
 (`levels.LevelFeed`: full resolution unless `Recipe.levels` > 1), one `step.train_step` (through
 `ahead.Stepper`; redone with a larger pair capacity whenever a view overflows: no pair is
-dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`;
+dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`,
+and with several levels starts again at each level's first step, sized to its first view;
 likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Sizes`), then
 `step.refine` where the strategy asks (the pool doubles when it needs room, up to
 `max_gaussians`: a recompile; both are logged). A step whose loss, gradients or parameters
@@ -30,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..render import default_backend
+from ..render import default_backend, pair_capacity
 from . import heldout, outputs, report, rundir, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
@@ -66,15 +67,34 @@ class _Run:
     record: object = None
     evaluations: heldout.Evaluations | None = None
     stopped_early: bool = False
+    level: int | None = None  # the image level of the last step run (`levels`)
 
     def __post_init__(self):
         self.key = jax.random.key(self.config.seed)
         self.background = jnp.asarray(self.rd.background)
 
 
+def _enter_level(run: _Run, feed: LevelFeed) -> None:
+    """With several image levels, at the first step of a level (and of the run): the pair
+    capacity sized to the level's first training view, as `state.fresh` sizes it at full
+    resolution (a coarse level's step needs a fraction of the pairs; the capacity changes no
+    bit, `docs/determinism-and-capacities.md`)."""
+    st, level = run.st, feed.level(run.st.step)
+    if len(feed.levels) == 1 or level == run.level:
+        return
+    run.level = level
+    lv = feed.levels[level]
+    pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
+    st.capacity = pair_capacity(pairs, run.config.pair_headroom)
+    run.say(f"step {st.step + 1}: images at {lv.sizes[0][0]}x{lv.sizes[0][1]} "
+            f"({'full size' if lv.factor == 1 else f'1/{lv.factor}'}), pair capacity "
+            f"{st.capacity}")
+
+
 def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
     st = run.st
+    _enter_level(run, feed)
     images, idx = feed.args(st.step)
     while True:
         args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(st.step), images,

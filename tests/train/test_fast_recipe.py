@@ -260,8 +260,9 @@ class _Stop(Exception):
 
 
 def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path):
-    """Run twice (a, b): the same bits; c dies after step 7 (its checkpoint: step 5, at the
-    coarse level) and is resumed: a's bits; resumed again after its early stop, it stops at
+    """Run twice (a, b): the same bits; each level starts with its own pair capacity (which
+    changes no bit); c dies after step 7 (its checkpoint: step 5, at the coarse level) and is
+    resumed: a's bits; resumed again after its early stop, it stops at
     once. The early stop ends each at step 20, where the rule over metrics.jsonl's training
     losses says so."""
     data = tiny_capture(tmp_path / "d", views=5, size=16)
@@ -270,6 +271,8 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     assert "coarse to fine: 1/2 (8x8) from step 0, full resolution (16x16) from step 12" \
         in lines
     assert result["stopped_early_at"] == result["steps"] == 20
+    entered = [m.split(", pair capacity")[0] for m in lines if ", pair capacity" in m]
+    assert entered == ["step 1: images at 8x8 (1/2)", "step 13: images at 16x16 (full size)"]
     timing = ("seconds", "ms_per_step", "compile_seconds")
     second = train.fit(_fast(data, tmp_path / "b"), log=lambda m: None)
     assert {k: v for k, v in second.items() if k not in timing} == {
