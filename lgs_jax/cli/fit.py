@@ -1,9 +1,9 @@
 """`python -m lgs_jax fit`: the command line of `lgs_jax.train.FitConfig`, generated from its
 fields (`options`): an option per field of FitConfig and of its `Recipe`, named after the field;
-`--strategy NAME` (`train.STRATEGIES`) with an option per field of the strategies (default: the
-chosen strategy's own). The names that are not the fields' are in one place: `ALIASES` (older
-options, still read), `DERIVED` (a field set from another option), `CLI_ONLY` (options that
-are not configuration).
+`--strategy NAME` (`train.STRATEGIES`; default: the recipe's, `train.recipes`) with an option
+per field of the strategies (default: the chosen strategy's own). The names that are not the
+fields' are in one place: `ALIASES` (older options, still read), `DERIVED` (a field set from
+another option), `CLI_ONLY` (options that are not configuration).
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ def _strategy_help(o: options.Option) -> str:
 
     has = [f"{name} {getattr(cls(), o.dest)}" for name, cls in STRATEGIES.items()
            if o.dest in {f.name for f in dataclasses.fields(cls)}]
-    return f"{o.field.metadata.get('help', '')} (strategy default: {', '.join(has)})"
+    text = f"{o.field.metadata.get('help', '')} (strategy default: {', '.join(has)})"
+    return text.replace("%", "%%")
 
 
 def parser(sub, common) -> None:
@@ -66,8 +67,8 @@ def parser(sub, common) -> None:
                     "writes a checkpoint and prints the command that resumes (exit code 130).")
     groups = options.add(f, config_options())
     strategy = next(x for x in dataclasses.fields(FitConfig) if x.name == "strategy")
-    f.add_argument("--strategy", choices=list(STRATEGIES), default="default",
-                   help=strategy.metadata["help"] + " (default: default)")
+    f.add_argument("--strategy", choices=list(STRATEGIES), default=None,
+                   help=strategy.metadata["help"])
     for o in strategy_options():
         kw = options.argument(o.type, o.field, None)
         f.add_argument(o.flag, dest=o.dest, **dict(kw, help=_strategy_help(o)))
@@ -83,23 +84,26 @@ def parser(sub, common) -> None:
     f.set_defaults(func=run)
 
 
-def _strategy(args):
-    """The strategy --strategy names with the strategy options given (`DERIVED` fields from
-    their options); a usage error for an option of another strategy."""
+def _strategy(args, recipe: str):
+    """The strategy --strategy names (default: recipe `recipe`'s) with the strategy options
+    given (`DERIVED` fields from their options), or None (the recipe's, as `FitConfig` fills
+    it in) where neither is given; a usage error for an option of another strategy."""
     from ..train import STRATEGIES
+    from ..train.recipes import RUN_VALUES
 
-    cls = STRATEGIES[args.strategy]
+    given = {o: getattr(args, o.dest) for o in strategy_options()
+             if getattr(args, o.dest) is not None}
+    if args.strategy is None and not given:
+        return None
+    name = args.strategy or RUN_VALUES[recipe]["strategy"]
+    cls = STRATEGIES[name]
     names = {f.name for f in dataclasses.fields(cls)}
-    given = {}
-    for o in strategy_options():
-        value = getattr(args, o.dest)
-        if value is None:
-            continue
+    for o in given:
         if o.dest not in names:
-            raise UsageError(f"{o.flag}: the {args.strategy} strategy has no {o.dest}")
-        given[o.dest] = value
-    given.update({k: getattr(args, v) for k, v in DERIVED.items() if k in names})
-    return cls(**given)
+            raise UsageError(f"{o.flag}: the {name} strategy has no {o.dest}")
+    values = {o.dest: value for o, value in given.items()}
+    values.update({k: getattr(args, v) for k, v in DERIVED.items() if k in names})
+    return cls(**values)
 
 
 def config_of(args):
@@ -111,7 +115,8 @@ def config_of(args):
     for path, value in options.values(args, config_options()).items():
         (recipe if path[0] == "recipe" else top)[path[-1]] = value
     try:
-        return FitConfig(**top, recipe=Recipe(**recipe), strategy=_strategy(args))
+        return FitConfig(**top, recipe=Recipe(**recipe),
+                         strategy=_strategy(args, recipe.get("name", "default")))
     except ValueError as e:
         field, _, message = str(e).partition(": ")
         raise UsageError(f"--{field.split('.')[-1].replace('_', '-')}: {message}") from None
@@ -121,19 +126,23 @@ def argv(config) -> list[str]:
     """The `fit` options that make `config` (`config_of` of them gives it back); ValueError
     for a configuration the command line cannot express (a strategy of another class, a
     `DERIVED` field unlike its option)."""
-    from ..train import STRATEGIES
+    from ..train import STRATEGIES, FitConfig, Recipe
+    from ..train.recipes import RUN_VALUES
 
+    # the values the recipe fills in where the options are not given
+    usual = FitConfig(data="", out="", recipe=Recipe(name=config.recipe.name),
+                      max_gaussians=config.max_gaussians)
     words = []
     for o in config_options():
-        value = config
+        value, default = config, usual
         for name in o.path:
-            value = getattr(value, name)
-        words += options.argv(value, o, o.field.default)
+            value, default = getattr(value, name), getattr(default, name)
+        words += options.argv(value, o, default if o.field.default is None else o.field.default)
     names = [n for n, cls in STRATEGIES.items() if type(config.strategy) is cls]
     if not names:
         raise ValueError(f"strategy: {type(config.strategy).__name__} has no command-line name")
     cls = STRATEGIES[names[0]]
-    if names[0] != "default":
+    if names[0] != RUN_VALUES[config.recipe.name]["strategy"]:
         words += ["--strategy", names[0]]
     for o in strategy_options():
         if o.dest in {f.name for f in dataclasses.fields(cls)}:

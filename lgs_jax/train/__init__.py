@@ -1,6 +1,7 @@
 """Training: Gaussians fitted to a capture with a densification strategy, in static shapes.
 
-    python -m lgs_jax fit --data DIR --out RUN [--strategy default|mcmc] [--steps N] ...
+    python -m lgs_jax fit --data DIR --out RUN [--recipe default|fast]
+        [--strategy default|mcmc|budget] ...
     lgs_jax.train.fit(FitConfig(data=DIR, out=RUN, steps=N, ...))
 
 Modules (each usable alone):
@@ -12,6 +13,10 @@ Modules (each usable alone):
   `optim`      Adam per group with gsplat simple_trainer's rates; moments that follow Gaussians.
   `ops`        clone, split, prune, opacity reset, relocation, sampling, noise (gsplat's ops).
   `strategy`   the `Strategy` interface, `DefaultStrategy` and `MCMCStrategy` (gsplat 1.5.3).
+  `budget`     `BudgetStrategy`: MCMC on Taming 3DGS's budget curve, unseen Gaussians relocated.
+  `recipes`    the recipes by name (default: gsplat's; fast) and the strategies by name.
+  `levels`     coarse to fine: the training images at a few fixed sizes, each from a fixed step.
+  `early_stop` the end of a run when its training loss stops falling.
   `init`       initial Gaussians from SfM points or random ones (gsplat's simple_trainer).
   `step`       `train_step` (the jitted training step) and refinement; renders of the pool.
   `ahead`      `Stepper`: a jitted step compiled ahead for its next buffer size.
@@ -39,10 +44,13 @@ from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians, sh_mask
 from .rundir import RunDirError, run_dir_problem
 from .step import train_step
-from .strategy import STRATEGIES, DefaultStrategy, MCMCStrategy, StepInfo, Strategy
+from .budget import BudgetStrategy
+from .recipes import STRATEGIES
+from .strategy import DefaultStrategy, MCMCStrategy, StepInfo, Strategy
 
-__all__ = ["STRATEGIES", "CheckpointError", "DefaultStrategy", "FitConfig", "Interrupted",
-           "MCMCStrategy", "Pool", "Recipe", "RunDirError", "Setup", "StepInfo", "Strategy",
+__all__ = ["STRATEGIES", "BudgetStrategy", "CheckpointError", "DefaultStrategy", "FitConfig",
+           "Interrupted", "MCMCStrategy", "Pool", "Recipe", "RunDirError", "Setup", "StepInfo",
+           "Strategy",
            "active_gaussians", "check_out", "evaluate", "fit", "from_gaussians", "loss_fn",
            "optimizer", "psnr", "render_gaussians", "run_dir_problem", "sh_mask", "ssim",
            "train_step"]

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..config import CONVENTIONS, RasterConfig
 from .losses import PADDINGS
+from . import recipes
 from .options import check, option
 from .strategy import DefaultStrategy, Strategy
 
@@ -24,16 +25,19 @@ MAX_INIT_POINTS = 100_000  # ... at most this many (gsplat's count for NeRF-synt
 
 @dataclasses.dataclass(frozen=True)
 class Recipe:
-    """What each training step computes: gsplat simple_trainer's recipe (3DGS's rates).
+    """What each training step computes: gsplat simple_trainer's recipe (3DGS's rates), or the
+    fast recipe (`recipes`: images coarse to fine, several views per step, an early stop).
 
     Adam per parameter group (`optim.optimizer`); the views' own parameters (poses, colour
     corrections, bilateral grids, appearance embeddings: `view_params`) at their rates times
-    sqrt(batch). A checkpoint records the recipe: a resumed run must share it.
+    sqrt(batch). Fields left None take recipe `name`'s value when the recipe is made
+    (`recipes.fill`). A checkpoint records the recipe: a resumed run must share it.
     """
 
-    name: Literal["default"] = option(
-        "default", "the recipe whose values the options below change (today only default: "
-                   "gsplat simple_trainer's)", flag="--recipe")
+    name: Literal["default", "fast"] = option(
+        "default", "the recipe whose values the options below change: default (gsplat "
+                   "simple_trainer's) or fast (fewer steps, images coarse to fine, a Gaussian "
+                   "budget, an early stop; see docs/training.md)", flag="--recipe")
     lr_means: float = option(1.6e-4, "means' learning rate, times the scene scale", low=0)
     lr_means_decay: float = option(
         0.01, "the means' rate decays exponentially to this fraction over the run", low=0)
@@ -57,7 +61,25 @@ class Recipe:
     sh_every: int = option(1000, "steps between SH degrees (one band more each time)", low=1)
     sh_degree: int = option(3, "highest SH degree of the colours (0: view-independent)",
                             low=0, high=3)
-    batch: int = option(1, "views per step", low=1)
+    batch: int | None = option(None, f"views per step (default: the recipe's: "
+                                     f"{recipes.said('batch')})", low=1)
+    levels: int | None = option(
+        None, f"coarse to fine (DashGaussian): train on the images downscaled by 2^(L-1), ..., "
+              f"2, then at full resolution, each level from a fixed step (each image size "
+              f"compiles its own step); 1: full resolution throughout (default: "
+              f"the recipe's: {recipes.said('levels')})", low=1, high=4)
+    full_resolution_at: float = option(
+        0.5, "with levels > 1: the fraction of the steps after which training runs at full "
+             "resolution; the coarser levels share the steps before it equally", low=0, high=1)
+    early_stop: bool | None = option(
+        None, f"stop when the training loss stops falling: its mean over the last stop_window "
+              f"steps less than stop_gain below the window's before (training views only; "
+              f"checked every stop_window steps at full resolution) (default: the recipe's: "
+              f"{recipes.said('early_stop')})")
+    stop_window: int = option(400, "the early stop's window, in steps", low=1)
+    stop_gain: float = option(
+        0.002, "the early stop's least relative fall of the mean training loss per window",
+        low=0)
     pose_opt: bool = option(
         False, "also optimize each training view's camera pose (gsplat's --pose_opt: a 9-D "
                "delta per view); held-out views keep their poses")
@@ -89,6 +111,7 @@ class Recipe:
 
     def __post_init__(self):
         check(self)
+        recipes.fill(self, self.name)
 
     @property
     def raster(self) -> RasterConfig:
@@ -101,16 +124,20 @@ class FitConfig:
     """Everything a `fit` run is: the data and the run folder, the run length, the recipe, the
     strategy, the start, the sizes of the step's buffers, the devices, and when to evaluate
     and checkpoint. Frozen and hashable; each field's help is its documentation (`python -m
-    lgs_jax fit --help` shows them); bad values raise `ValueError` naming the field."""
+    lgs_jax fit --help` shows them); bad values raise `ValueError` naming the field. steps and
+    strategy left None take the recipe's (`recipes.fill`) when the configuration is made."""
 
     data: str = option(help="dataset folder (or transforms json)")
     out: str = option(help="run directory (new or empty, unless --resume or --overwrite)")
-    steps: int = option(30_000, "training steps", low=0)
+    steps: int | None = option(None, f"training steps (default: the recipe's: "
+                                     f"{recipes.said('steps')})", low=0)
     recipe: Recipe = Recipe()
-    strategy: Strategy = option(
-        DefaultStrategy(), "densification: default (3DGS clone/split/prune, gsplat's "
-                           "DefaultStrategy) or mcmc (3DGS as MCMC, gsplat's MCMCStrategy, "
-                           "with its recipe: init opacity 0.5, scale 0.1, regularisers 0.01)")
+    strategy: Strategy | None = option(
+        None, "densification: default (3DGS clone/split/prune, gsplat's DefaultStrategy), "
+              "mcmc (3DGS as MCMC, gsplat's MCMCStrategy, with its recipe: init opacity 0.5, "
+              "scale 0.1, regularisers 0.01) or budget (MCMC with Taming 3DGS's budget "
+              "schedule and unseen Gaussians relocated, `budget.BudgetStrategy`) (default: the "
+              f"recipe's: {recipes.said('strategy')})")
     max_gaussians: int = option(1_000_000, "cap on the number of Gaussians (the pool's; the "
                                            "command line's mcmc takes it as cap_max)", low=1)
     pool_size: int | None = option(
@@ -169,6 +196,7 @@ class FitConfig:
 
     def __post_init__(self):
         check(self)
+        recipes.fill(self, self.recipe.name)
         if self.resume and self.overwrite:
             raise ValueError("resume, overwrite: they exclude each other")
         if self.recipe.batch % self.devices:

@@ -1,8 +1,10 @@
 """`fit`: train Gaussians on a capture, with a densification strategy, into a run directory.
 
-Per step s (0-based): the views of `feed.views_for_step`, one `step.train_step` (through
+Per step s (0-based): the views of `feed.views_for_step` at the step's image level
+(`levels.LevelFeed`: full resolution unless `Recipe.levels` > 1), one `step.train_step` (through
 `ahead.Stepper`; redone with a larger pair capacity whenever a view overflows: no pair is
-dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`;
+dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`,
+and with several levels starts again at each level's first step, sized to its first view;
 likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Sizes`), then
 `step.refine` where the strategy asks (the pool doubles when it needs room, up to
 `max_gaussians`: a recompile; both are logged). A step whose loss, gradients or parameters
@@ -13,7 +15,8 @@ per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (
 per evaluation (held-out PSNR/SSIM: `heldout.Evaluations`, scored on the device); a checkpoint
 (`checkpoint`, `state.save`; bit-identical resume) every config.checkpoint_every steps, at the
 end, and at Ctrl-C (`interrupt`: the run stops at the next step boundary and raises
-`Interrupted`); the outputs at the end (`outputs.finish`).
+`Interrupted`); the outputs at the end (`outputs.finish`), which with `Recipe.early_stop` may
+come before config.steps (`early_stop`: when the training loss stops falling).
 """
 
 from __future__ import annotations
@@ -28,13 +31,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..render import default_backend
+from ..render import default_backend, pair_capacity
 from . import heldout, outputs, report, rundir, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
 from .config import FitConfig, Setup
-from .feed import RunData, TrainViews, nbytes, prepare, streams
+from .early_stop import EarlyStop
+from .feed import RunData, nbytes, prepare, streams
 from .interrupt import Interrupted, StopRequest
+from .levels import LevelFeed, check as check_levels
 from .state import RunState
 from .step import refine, replicated, train_step
 
@@ -50,8 +55,8 @@ def stepper(config: FitConfig, setup: Setup) -> Stepper:
 @dataclasses.dataclass
 class _Run:
     """What the loop's pieces share: the configuration, its setup, the data, the state, the
-    run's key and background, the caller's `log`, and the loop's log (`say`, above the
-    progress bar) and metrics (`record`)."""
+    run's key and background, the caller's `log`, the loop's log (`say`, above the progress
+    bar) and metrics (`record`), and whether the early stop ended the run."""
 
     config: FitConfig
     setup: Setup
@@ -61,18 +66,38 @@ class _Run:
     say: object = None
     record: object = None
     evaluations: heldout.Evaluations | None = None
+    stopped_early: bool = False
+    level: int | None = None  # the image level of the last step run (`levels`)
 
     def __post_init__(self):
         self.key = jax.random.key(self.config.seed)
         self.background = jnp.asarray(self.rd.background)
 
 
-def _one_step(run: _Run, feed: TrainViews, steps: Stepper, clock) -> dict:
+def _enter_level(run: _Run, feed: LevelFeed) -> None:
+    """With several image levels, at the first step of a level (and of the run): the pair
+    capacity sized to the level's first training view, as `state.fresh` sizes it at full
+    resolution (a coarse level's step needs a fraction of the pairs; the capacity changes no
+    bit, `docs/determinism-and-capacities.md`)."""
+    st, level = run.st, feed.level(run.st.step)
+    if len(feed.levels) == 1 or level == run.level:
+        return
+    run.level = level
+    lv = feed.levels[level]
+    pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
+    st.capacity = pair_capacity(pairs, run.config.pair_headroom)
+    run.say(f"step {st.step + 1}: images at {lv.sizes[0][0]}x{lv.sizes[0][1]} "
+            f"({'full size' if lv.factor == 1 else f'1/{lv.factor}'}), pair capacity "
+            f"{st.capacity}")
+
+
+def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
     """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
     st = run.st
+    _enter_level(run, feed)
     images, idx = feed.args(st.step)
     while True:
-        args = (st.pool, st.opt_state, st.strategy_state, st.views, run.rd.train_cams, images,
+        args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(st.step), images,
                 idx, run.background, st.step, run.key)
         sig = signature(args)
         size = (st.capacity, st.rows)
@@ -142,12 +167,15 @@ class _Watch:
         self.last = now
 
 
-def _feed(run: _Run) -> TrainViews:
-    """The training views' feed (streamed or whole), its choices logged."""
-    rd, config = run.rd, run.config
+def _feed(run: _Run) -> LevelFeed:
+    """The training views' feed (streamed or whole, at the recipe's levels), its choices
+    logged."""
+    rd, config, recipe = run.rd, run.config, run.config.recipe
     size = nbytes(rd.train_images)
-    feed = TrainViews(rd.train_images, config.recipe.batch, config.seed,
-                      streams(size, config.stream_images), rd.groups())
+    feed = LevelFeed(rd, recipe.batch, config.seed, streams(size, config.stream_images),
+                     recipe.levels, config.steps, recipe.full_resolution_at)
+    if recipe.levels > 1:
+        run.say(feed.describe())
     if feed.stream:
         run.say(f"training images streamed ({size / 2**30:.1f} GiB in all)")
     if len(rd.sizes) > 1:
@@ -157,29 +185,50 @@ def _feed(run: _Run) -> TrainViews:
     return feed
 
 
-def _after_step(run: _Run, m: dict, watch: _Watch, data: dict) -> None:
-    """A step's row, watch, evaluation and checkpoint."""
+def _after_step(run: _Run, m: dict, watch: _Watch, data: dict, last: bool) -> None:
+    """A step's watch, evaluation and checkpoint; `last`: the run's last step."""
     st, config = run.st, run.config
-    watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]),
-          force=st.step == config.steps)
-    if run.evaluations is not None and st.step % config.eval_every == 0 \
-            and st.step < config.steps:
+    watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]), force=last)
+    if run.evaluations is not None and st.step % config.eval_every == 0 and not last:
         psnr, ssim = run.evaluations.score(state.scene(st))
         st.eval_capacity = run.evaluations.capacity
         run.record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
         run.say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
-    if st.step % config.checkpoint_every == 0 or st.step == config.steps:
+    if st.step % config.checkpoint_every == 0 or last:
         state.save(config.out, config, st, data)
 
 
+def _early_stop(run: _Run, feed: LevelFeed) -> EarlyStop:
+    """The run's early stop (`Recipe.early_stop`), with the losses of the steps done so far (a
+    resumed run's, from metrics.jsonl)."""
+    path = os.path.join(run.config.out, "metrics.jsonl")
+    on = run.config.recipe.early_stop and os.path.exists(path)
+    return EarlyStop.of(run.config.recipe, feed.starts[-1],
+                        report.read_metrics(path) if on else [], path, run.st.step)
+
+
+def _stops_early(run: _Run, early: EarlyStop) -> bool:
+    """Whether the early stop ends the run now (after st.step steps), said and noted."""
+    step = run.st.step
+    if not early.due(step):
+        return False
+    before, recent = early.means(step)
+    run.say(f"step {step}: early stop: the training loss's mean over the last {early.window} "
+            f"steps, {recent:.5g}, fell less than {early.gain:g} below the window's before "
+            f"({before:.5g})")
+    run.stopped_early = True
+    return True
+
+
 def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> float:
-    """Steps st.step .. config.steps (module docstring), until `stop` is requested; returns the
-    seconds spent in steps (their compilation, timed by `clock`, included; `watch`'s calls
-    not). `data`: the run's data as checkpoints record it."""
+    """Steps st.step .. config.steps (module docstring), until `stop` is requested or the early
+    stop ends the run; returns the seconds spent in steps (their compilation, timed by `clock`,
+    included; `watch`'s calls not). `data`: the run's data as checkpoints record it."""
     st, config = run.st, run.config
     progress = report.Progress(st.step, config.steps)
     run.say = lambda message: progress.write(run.log, message)
     steps, feed, busy, start = stepper(config, run.setup), _feed(run), 0.0, st.step
+    early = _early_stop(run, feed)
     if run.rd.test_cams:
         run.evaluations = heldout.Evaluations(run.rd.test_cams, run.rd.test_images,
                                               run.rd.background, run.setup, st.eval_capacity,
@@ -190,6 +239,8 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
         with open(os.path.join(config.out, "metrics.jsonl"), "a", buffering=1) as f:
             run.record = lambda **row: f.write(json.dumps(row) + "\n")
             while st.step < config.steps and not stop.requested:
+                if _stops_early(run, early):
+                    break
                 t0 = time.perf_counter()
                 with clock:
                     m = _one_step(run, feed, steps, clock)
@@ -205,7 +256,8 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
                            seconds=busy, **({} if m["ok"] else dict(skipped=True)))
                 progress.step(m["loss"], m["psnr"], m["count"],
                               (st.step - start) / max(busy - clock.seconds, 1e-9))
-                _after_step(run, m, watch, data)
+                early.record(st.step, m["loss"])
+                _after_step(run, m, watch, data, st.step == config.steps or early.due(st.step))
     finally:
         progress.close()
         steps.close()
@@ -277,8 +329,9 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     at the next step boundary, writes a checkpoint and raises `interrupt.Interrupted`. The
     result: held-out PSNR and SSIM, Gaussians, pool size, skipped steps, seconds (the whole
     call), ms_per_step (wall time of the steps and refinements, their compilation included,
-    evaluations and checkpoints not; None when no step ran) and compile_seconds (of that, the
-    time spent compiling or waiting for a compile ahead).
+    evaluations and checkpoints not; None when no step ran), compile_seconds (of that, the
+    time spent compiling or waiting for a compile ahead) and stopped_early_at (the step the
+    early stop ended the run at, or None).
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
@@ -298,6 +351,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
     if config.recipe.batch > len(rd.train_names):
         raise ValueError(f"recipe.batch: {config.recipe.batch} views per step, but the data "
                          f"has {len(rd.train_names)} training views")
+    check_levels(rd.train_sizes, config.recipe.levels)
     if config.overwrite:
         for name in rundir.run_files(out):
             os.remove(os.path.join(out, name))
@@ -311,10 +365,11 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
         run = _Run(config, setup, rd, st, log)
         with clock.listening():
             busy = _loop(run, clock, watch, stop, data)
-        if st.step < config.steps:  # stopped by Ctrl-C
+        if st.step < config.steps and not run.stopped_early:  # stopped by Ctrl-C
             state.save(out, config, st, data)
             raise Interrupted(st.step, config.steps, out)
-    ran = max(config.steps - start, 0)
+    ran = max(st.step - start, 0)
     times = dict(seconds=time.perf_counter() - t0, ms_per_step=1e3 * busy / ran if ran else None,
-                 compile_seconds=clock.seconds)
+                 compile_seconds=clock.seconds,
+                 stopped_early_at=st.step if run.stopped_early else None)
     return outputs.finish(out, setup, st, rd, times, log)

@@ -67,8 +67,9 @@ def _views_files(out: str, st: RunState, rd: RunData) -> None:
 
 
 def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) -> dict:
-    """The final evaluation and outputs (module docstring); returns the result: held-out PSNR
-    and SSIM, Gaussians, pool size, skipped steps, and `run` (the loop's times)."""
+    """The final evaluation and outputs (module docstring); returns the result: the steps done
+    (fewer than the run's where the early stop ended it), held-out PSNR and SSIM, Gaussians,
+    pool size, skipped steps, and `run` (the loop's times)."""
     psnr, ssim = evaluate(st, rd, setup, out)
     if psnr is None:
         log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
@@ -83,7 +84,7 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) ->
     _views_files(out, st, rd)
     with written(os.path.join(out, "curves.png")) as tmp:
         report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")), tmp)
-    result = dict(steps=setup.steps, heldout_psnr=psnr, heldout_ssim=ssim,
+    result = dict(steps=st.step, heldout_psnr=psnr, heldout_ssim=ssim,
                   gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
                   skipped_steps=st.skipped, **run,
                   strategy=type(setup.strategy).__name__, backend=setup.backend,

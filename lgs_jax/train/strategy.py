@@ -279,5 +279,3 @@ class MCMCStrategy(Strategy):
         return state, pool, opt_state, dict(relocated=_count(moved), added=_count(added),
                                             needed=want, free=free)
 
-
-STRATEGIES = {"default": DefaultStrategy, "mcmc": MCMCStrategy}  # the command line's names

@@ -1,0 +1,66 @@
+"""The training recipes by name (`Recipe.name`): the values that `Recipe` and `FitConfig` fields
+left None take, and the strategies the command line names (`STRATEGIES`).
+
+  default  gsplat simple_trainer's recipe: 30,000 steps of one view, full resolution
+           throughout, `DefaultStrategy` (3DGS's clone, split and prune), no early stop.
+  fast     a recipe for time to quality, from published techniques, each a field to ablate:
+           4,000 steps of 2 views (`Recipe.batch`); images coarse to fine (`Recipe.levels`,
+           DashGaussian: 1/4, 1/2, then full resolution from half the run,
+           `Recipe.full_resolution_at`); `budget.BudgetStrategy` (MCMC with its count on Taming
+           3DGS's budget curve, reached at step 2,000, and Gaussians no view sees relocated,
+           after Speedy-Splat); SH bands every 1,000 steps as gsplat's (degree 3 at step 3,000:
+           raised late in this run); an early stop when the training loss stops falling
+           (`Recipe.early_stop`, `early_stop`). Its step counts are a hypothesis, to be measured
+           against gsplat's 7,000-step result (benchmarks/time_to_quality.py).
+
+A field given explicitly keeps its value under either recipe. The values are filled in when
+the `Recipe` or `FitConfig` is made, so `dataclasses.replace(config, recipe=Recipe(name="fast"))`
+keeps the run's already filled steps and strategy: make a new `FitConfig` instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .budget import BudgetStrategy
+from .strategy import DefaultStrategy, MCMCStrategy, Strategy
+
+NAMES = ("default", "fast")
+RECIPE_VALUES = {  # Recipe fields
+    "default": dict(batch=1, levels=1, early_stop=False),
+    "fast": dict(batch=2, levels=3, early_stop=True),
+}
+RUN_VALUES = {  # FitConfig fields (and the strategy, by its command-line name)
+    "default": dict(steps=30_000, strategy="default"),
+    "fast": dict(steps=4_000, strategy="budget"),
+}
+STRATEGIES = {"default": DefaultStrategy, "mcmc": MCMCStrategy, "budget": BudgetStrategy}
+"""The strategies by their command-line names (`--strategy`)."""
+
+
+def said(field: str) -> str:
+    """The recipes' values of `field` in words, for help texts: "default 1, fast 2"."""
+    table = RECIPE_VALUES if field in RECIPE_VALUES["default"] else RUN_VALUES
+    return ", ".join(f"{name} {table[name][field]}" for name in NAMES)
+
+
+def strategy_of(name: str, max_gaussians: int) -> Strategy:
+    """Recipe `name`'s strategy with its defaults (cap_max, where it has one, max_gaussians:
+    as the command line sets it)."""
+    cls = STRATEGIES[RUN_VALUES[name]["strategy"]]
+    if "cap_max" in {f.name for f in dataclasses.fields(cls)}:
+        return cls(cap_max=max_gaussians)
+    return cls()
+
+
+def fill(obj, name: str) -> None:
+    """Set the fields of `obj` (a frozen `Recipe` or `FitConfig`, in its __post_init__) that
+    are None and that recipe `name` gives a value to."""
+    if dataclasses.is_dataclass(obj) and hasattr(obj, "recipe"):
+        values = dict(RUN_VALUES[name], strategy=None)
+        values["strategy"] = strategy_of(name, obj.max_gaussians)
+    else:
+        values = RECIPE_VALUES[name]
+    for field, value in values.items():
+        if getattr(obj, field) is None:
+            object.__setattr__(obj, field, value)
