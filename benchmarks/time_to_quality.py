@@ -397,17 +397,28 @@ def _scene_runs(args, scene: str, gsplat: bool) -> tuple[list[dict], list[dict]]
             shutil.rmtree(cache, ignore_errors=True)
         first, _ = run_ours(args, scene, args.first_seed, cache, "lgs_jax_cold")
         if args.cold:
-            rows.append(first)
+            rows.append(_kept(args, first, []))
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         if gsplat:
             row, curve = run_gsplat(args, scene, seed)
-            rows.append(row)
+            rows.append(_kept(args, row, curve))
             curves += curve
         if "ours" in args.trainers:
             row, curve = run_ours(args, scene, seed, cache)
-            rows.append(row)
+            rows.append(_kept(args, row, curve))
             curves += curve
     return rows, curves
+
+
+def _kept(args, row: dict, curve: list[dict]) -> dict:
+    """`row` (and its curve) merged into the CSVs as soon as its run ends (a call cut short
+    keeps the runs it finished) and printed; returns `row`."""
+    if not args.dry_run:
+        merge(os.path.join(args.out, "results.csv"), [row], FIELDS, ("scene", "trainer", "seed"))
+        merge(os.path.join(args.out, "curves.csv"), curve, CURVE_FIELDS,
+              ("scene", "trainer", "seed"))
+        short_table([row])
+    return row
 
 
 def _ablate(args, scene: str) -> list[dict]:
