@@ -79,7 +79,7 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, order, step: int, ke
     pool, opt_state, strategy_state = in_slot_order(devices, (pool, opt_state, strategy_state),
                                                     order)
     strategy_state, pool, opt_state, report = step_mod.refine(
-        strategy, strategy_state, pool, opt_state, step, key, padded_rows(cap, devices), devices)
+        strategy, strategy_state, pool, opt_state, step, key, cap, devices)
     (pool, opt_state, strategy_state), order = balanced(devices, (pool, opt_state,
                                                                   strategy_state))
     report["per_device"] = per_device(devices, pool)

@@ -253,20 +253,21 @@ def _refine(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: 
 
 def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int,
            multiple: int = 1):
-    """`strategy.refine` at `step` (`key`: the run's), the pool first grown (doubled, at most
-    to `cap` slots, rounded up to a multiple of `multiple`) while the refinement needs more new
-    slots than are free, so nothing is cut short below the cap. A refinement that would make an active parameter non-finite is not
-    applied (ok False). Returns (state, pool, opt_state, report): the report's counts as ints,
-    plus `grown_to` (the new pool size, or 0)."""
-    grown_to = 0
+    """`strategy.refine` at `step` (`key`: the run's; `cap`: at most so many Gaussians), the
+    pool first grown (doubled, at most to `cap` slots rounded up to a multiple of `multiple`,
+    and to such a multiple) while the refinement needs more new slots than are free, so nothing
+    is cut short below the cap. A refinement that would make an active parameter non-finite is
+    not applied (ok False). Returns (state, pool, opt_state, report): the report's counts as
+    ints, plus `grown_to` (the new pool size, or 0)."""
+    grown_to, slots = 0, -(-cap // multiple) * multiple
     while True:
         state, new_pool, new_opt, report = _refine(strategy_state, pool, opt_state, step, key,
                                                    strategy=strategy, cap=cap)
         report = {k: int(v) for k, v in jax.device_get(report).items()}
         short = report["needed"] - report["free"]
-        if short <= 0 or pool.size >= cap:
+        if short <= 0 or pool.size >= slots:
             return state, new_pool, new_opt, dict(report, grown_to=grown_to)
-        grown_to = min(cap, max(2 * pool.size, next_pow2(pool.size + short)))
+        grown_to = min(slots, max(2 * pool.size, next_pow2(pool.size + short)))
         grown_to = -(-grown_to // multiple) * multiple
         pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)
 

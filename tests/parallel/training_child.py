@@ -4,11 +4,12 @@ set before JAX starts), on a synthetic capture made here (`capture`), each run's
 under OUT for the parent to compare (`python -m tests.parallel.training_child OUT`). OUT/logs.json
 holds what the folders cannot: each run's log lines.
 
-The runs (`RUNS`): the same run on 1, 2 and 4 devices; on 4 devices again from pair and
-exchange buffers sized at the first view's needs exactly (they overflow and grow); on 4 devices
-stopped (Ctrl-C) after step `HALF`, then resumed on 2. Few compiles (each costs seconds on a
-CPU): the runs share one configuration but for their device count and buffers, and the stopped
-run finds its step compiled by the full run on 4 devices."""
+The runs (`RUNS`): the same run on 1, 2 and 4 devices; on 4 devices stopped (Ctrl-C) after
+step `HALF`, then resumed on 2 devices with buffers sized at the first view's needs exactly
+(they overflow and grow). Then each strategy's refinement of one state on 1 and 4 devices
+(`refinements`). Few compiles (each costs seconds on a CPU): the runs share one configuration
+but for their device count and buffers, the stopped run and the default strategy's refinements
+find their programs compiled by the runs before them."""
 
 import json
 import os
@@ -26,20 +27,26 @@ if os.environ.get("LGS_JAX_CACHE"):
     jax.config.update("jax_compilation_cache_dir", os.environ["LGS_JAX_CACHE"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
+import jax.numpy as jnp  # noqa: E402
 import lgs_jax  # noqa: E402
 from lgs_jax import train  # noqa: E402
+from lgs_jax.train import sharded_state, step  # noqa: E402
 from lgs_jax.io.datasets import Dataset  # noqa: E402
 
 W, H = 32, 64  # 2 x 4 tiles: a band of one tile row per device on 4 devices
 VIEWS = 5  # view 0 held out
 POINTS = 301  # blocks of 151 + 150 on 2 devices, 76 + 3 x 75 on 4: uneven shards
-POOL = 302  # 304 slots on 4 devices (padded to equal blocks)
+POOL = 1024  # slots; no growth in the runs
 STEPS, HALF = 8, 4
 # refinements at steps 3 and 6, clones only (no split: grow_scale3d beyond any Gaussian), and
-# prunes: the parameters' differences across device counts stay within `sharded.drift_bound`
-STRATEGY = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=1e-4,
+# prunes, never short of slots (a refinement at the cap ranks its candidates by their
+# gradients): the parameters' differences across device counts stay within
+# `sharded.drift_bound`
+STRATEGY = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2d=3e-4,
                                  prune_opa=0.02, grow_scale3d=100.0)
-RUNS = ("d1", "d2", "d4", "d4_grown", "d4_stopped", "d4_resumed_on_d2")
+REFINED = dict(  # `STRATEGY` (its programs compiled by the runs) and MCMC's
+    default=STRATEGY, mcmc=train.MCMCStrategy(refine_start_iter=0, refine_every=1, cap_max=400))
+RUNS = ("d1", "d2", "d4", "d4_stopped", "d4_resumed_on_d2")
 
 
 def capture(path: str) -> Dataset:
@@ -70,29 +77,64 @@ def capture(path: str) -> Dataset:
 
 def config(out: str, devices: int, **kwargs) -> train.FitConfig:
     """The runs' configuration on `devices` devices (kwargs: other fields)."""
+    kwargs = dict(dict(pair_headroom=4.0), **kwargs)
     return train.FitConfig(data=out, out=out, steps=STEPS, strategy=STRATEGY,
-                           recipe=train.Recipe(batch=2), max_gaussians=1000, pool_size=POOL,
+                           recipe=train.Recipe(batch=1), max_gaussians=POOL, pool_size=POOL,
                            backend="reference", gaussian_devices=devices, eval_every=100,
                            checkpoint_every=100, **kwargs)
+
+
+def refinements() -> dict:
+    """Each strategy's refinement (`REFINED`) of one state of `POOL` slots, a third of its
+    Gaussians above the default strategy's gradient threshold, on one device (`step.refine`)
+    and on 4 (`sharded_state.refine`): whether the 4 devices' result, back in slot order, is
+    the same bits; the Gaussians before and after; the blocks' active counts."""
+    rng = np.random.default_rng(1)
+    n = POINTS
+    g = lgs_jax.Gaussians(
+        rng.normal(size=(n, 3)).astype(np.float32), rng.normal(size=(n, 4)).astype(np.float32),
+        rng.normal(-2, 0.7, (n, 3)).astype(np.float32), rng.normal(-3, 2, n).astype(np.float32),
+        rng.normal(size=(n, 16, 3)).astype(np.float32))
+    pool = train.from_gaussians(g, POOL)
+    opt = train.optimizer(train.Recipe(), STEPS, 1.0).init(pool.params)
+    key, out = jax.random.key(5), {}
+    for name, strategy in REFINED.items():
+        state = strategy.init(pool, 1.0)
+        if "grad2d" in state:
+            state = dict(state, grad2d=jnp.asarray(rng.uniform(0, 4.5 * STRATEGY.grow_grad2d,
+                                                               POOL), jnp.float32),
+                         count=jnp.ones(POOL, jnp.float32))
+        one = step.refine(strategy, state, pool, opt, 3, key, POOL)
+        parts, order = sharded_state.balanced(4, (pool, opt, state))
+        s4, p4, o4, report, order = sharded_state.refine(strategy, parts[2], parts[0], parts[1],
+                                                         order, 3, key, POOL, 4)
+        back = sharded_state.in_slot_order(4, (p4, o4, s4), order)
+        same = [bool(np.array_equal(a, b)) for a, b in zip(
+            jax.tree.leaves((one[1], one[2], one[0])), jax.tree.leaves(back))]
+        out[name] = dict(same=same, per_device=report["per_device"],
+                         before=int(np.sum(pool.active)), after=int(np.sum(one[1].active)))
+    return out
 
 
 def main(out: str):
     data = capture(os.path.join(out, "data"))
     logs = {name: [] for name in RUNS}
     where = lambda name: os.path.join(out, name)
+
+    def fit(name, devices, watch=None, **kwargs):
+        train.fit(config(where(name), devices, **kwargs), data, log=logs[name].append,
+                  watch=watch, watch_every=0)
+
     for name, devices in (("d1", 1), ("d2", 2), ("d4", 4)):
-        train.fit(config(where(name), devices), data, log=logs[name].append)
-    train.fit(config(where("d4_grown"), 4, pair_headroom=1.0), data,
-              log=logs["d4_grown"].append)
+        fit(name, devices)
     stop = lambda step, *_: step == HALF and os.kill(os.getpid(), signal.SIGINT)
     try:
-        train.fit(config(where("d4_stopped"), 4), data, log=logs["d4_stopped"].append,
-                  watch=stop, watch_every=0)
+        fit("d4_stopped", 4, watch=stop)
     except train.Interrupted:
         pass
     shutil.copytree(where("d4_stopped"), where("d4_resumed_on_d2"))
-    train.fit(config(where("d4_resumed_on_d2"), 2, resume=True), data,
-              log=logs["d4_resumed_on_d2"].append)
+    fit("d4_resumed_on_d2", 2, resume=True, pair_headroom=1.0)
+    logs["refinements"] = refinements()
     with open(os.path.join(out, "logs.json"), "w") as f:
         json.dump(logs, f)
 
