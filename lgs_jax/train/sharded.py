@@ -15,8 +15,8 @@ render's tie-break, and scene.ply's order). The run state carries `order`
 The step (`step.train_step` with `Setup.gaussian_devices` = D): the views are rendered by
 `parallel.render_sharded` (`render_views`), each device compositing its band of image rows from
 the projected records the others send it; the images are then gathered whole on every device
-(`with_sharding_constraint`) and the loss is the one-device program of the whole image, so
-every pixel's cotangent is the one-device bits. The gradient flows back through the exchange to
+(`with_sharding_constraint`) and the loss is the one-device function of the whole image
+(compiled in another program: its sums may round differently). The gradient flows back through the exchange to
 the rows that sent the records; Adam and the strategies' per-step updates are elementwise, so
 each device updates its own block in place. Random numbers drawn per slot (MCMC's noise on the
 means) are taken in slot order (`StepInfo.slots`), so every slot draws what it draws on one
@@ -24,10 +24,11 @@ device.
 
 Determinism. The forward is the one-device bits. Each Gaussian's gradient with respect to its
 projected fields is the same K tile rows summed in another order (one per band, then across
-bands), within 2·γ_(K−1)·Σ|r_t| of the one-device sum (lgs_jax.parallel.gaussian_parallel);
-everything after it (Adam, the strategy, refinements, the layout) is elementwise or exact. Runs
-on D devices repeat their bits; tests/parallel/test_gaussian_parallel_training.py states and
-checks how far runs on 1, 2 and 4 devices drift apart.
+bands), within 2·γ_(K−1)·Σ_t |r_t| of the one-device sum (lgs_jax.parallel.gaussian_parallel);
+Adam's scale-free update turns such a difference, where a gradient is within rounding of zero,
+into up to a learning rate, so runs on different device counts whose refinements decide the
+same stay within `drift_bound` of each other (docs/multi-gpu.md), not to the bit. Everything else (the strategies' updates,
+refinements, the layout) is elementwise or exact.
 """
 
 from __future__ import annotations
