@@ -4,7 +4,8 @@ scene of the same run on one device within the stated bound (the forward is the 
 gradients' sums are re-associated and Adam carries the difference at most a learning rate per
 step); its refinements decide the same and keep the blocks balanced by count (a refinement on 4
 devices is the one-device refinement's bits, both strategies); each run writes one checkpoint
-and one scene.ply. The slow set runs the whole run on 2 and on 4 devices too.
+and one scene.ply. The slow set runs the whole run on 2 and on 4 devices too, and MCMC with the
+views' own parameters on 2.
 
 The runs happen in one child process (tests/parallel/training_child.py: JAX simulates 4
 devices only when told before it starts); the test here checks their folders."""
@@ -140,7 +141,13 @@ def test_gaussian_parallel_training(tmp_path):
 def test_gaussian_parallel_training_on_two_and_four_devices(tmp_path):
     logs = _run_child(tmp_path, "slow")
     _same_scene(tmp_path, logs, ["d2", "d4"])
-    _balanced(tmp_path, ["d2", "d4"], 4)
+    _balanced(tmp_path, ["d2", "d4", "mcmc_views_d2"], 6)
+    # MCMC with the views' poses, colours and bilateral grids on 2 devices: n + n // 20 at
+    # each refinement, every step applied
+    rows = [r for r in _rows(tmp_path / "mcmc_views_d2") if "loss" in r]
+    assert [r["gaussians"] for r in rows] == [301] * 3 + [316] * 3 + [331] * 2
+    assert all(np.isfinite(r["loss"]) for r in rows)
+    assert json.load(open(tmp_path / "mcmc_views_d2" / "result.json"))["skipped_steps"] == 0
     # the held-out view rendered sharded (`sharded_state.Evaluations`) and saved
     psnr = [json.load(open(tmp_path / run / "result.json"))["heldout_psnr"]
             for run in ("d1", "d2", "d4")]

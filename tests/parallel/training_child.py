@@ -8,7 +8,8 @@ The runs (`PARTS`): "fast", the run on 1 device, on 4 devices stopped (Ctrl-C) a
 `HALF`, then resumed on 2 devices with buffers sized at the first view's needs exactly (they
 overflow and grow), all on every view (nothing held out), then each strategy's refinement of
 one state on 1 and 4 devices (`refinements`); "slow", the same run on 1, 2 and 4 devices, view
-0 held out and evaluated. Few compiles (each costs seconds
+0 held out and evaluated, and an MCMC run on 2 devices optimizing the views' poses, colours
+and bilateral grids. Few compiles (each costs seconds
 on a CPU): the runs share one configuration but for their device count and buffers."""
 
 import json
@@ -46,7 +47,10 @@ STRATEGY = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2
                                  prune_opa=0.02, grow_scale3d=100.0)
 REFINED = dict(  # `STRATEGY` (its one-device program compiled by a run) and MCMC's
     default=STRATEGY, mcmc=train.MCMCStrategy(refine_start_iter=0, refine_every=1, cap_max=400))
-PARTS = dict(fast=("d1", "d4_stopped", "d4_resumed_on_d2"), slow=("d1", "d2", "d4"))
+PARTS = dict(fast=("d1", "d4_stopped", "d4_resumed_on_d2"),
+             slow=("d1", "d2", "d4", "mcmc_views_d2"))
+# the slow part's last run: MCMC (refinements at steps 3 and 6) with the views' own parameters
+MCMC = train.MCMCStrategy(refine_start_iter=2, refine_every=3, cap_max=400)
 
 
 def capture(path: str) -> Dataset:
@@ -77,9 +81,9 @@ def capture(path: str) -> Dataset:
 
 def config(out: str, devices: int, **kwargs) -> train.FitConfig:
     """The runs' configuration on `devices` devices (kwargs: other fields)."""
-    kwargs = dict(dict(pair_headroom=4.0), **kwargs)
-    return train.FitConfig(data=out, out=out, steps=STEPS, strategy=STRATEGY,
-                           recipe=train.Recipe(batch=1), max_gaussians=POOL, pool_size=POOL,
+    kwargs = dict(dict(pair_headroom=4.0, strategy=STRATEGY, recipe=train.Recipe(batch=1)),
+                  **kwargs)
+    return train.FitConfig(data=out, out=out, steps=STEPS, max_gaussians=POOL, pool_size=POOL,
                            backend="reference", gaussian_devices=devices, eval_every=100,
                            checkpoint_every=100, **kwargs)
 
@@ -130,6 +134,8 @@ def main(out: str, part: str):
     if part == "slow":
         fit("d2", 2)
         fit("d4", 4)
+        fit("mcmc_views_d2", 2, strategy=MCMC, recipe=train.Recipe(
+            batch=1, pose_opt=True, color_opt=True, bilateral_grid=True))
     else:
         stop = lambda step, *_: step == HALF and os.kill(os.getpid(), signal.SIGINT)
         try:
