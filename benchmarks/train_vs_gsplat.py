@@ -5,9 +5,10 @@
 
 Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subprocess of its own
 (each its own peak memory; JAX off the GPU while gsplat runs), on the same:
-  data     `lgs_jax.load_dataset` (lego: lego_train, 200x200, white background; skull: the COLMAP
-           capture, black background), the same split (every 8th image held out; Lego ids
-           0, 10, ..., 90), the same views in the same order (`views_for_step`, one per step);
+  data     `lgs_jax.load_dataset` (lego_train 200x200 on white; skull, COLMAP, and fox, lens
+           undistorted, on black), images 8-bit on the device where the files are (--images),
+           the same split (every 8th image held out; Lego ids 0, 10, ..., 90), the same views
+           in the same order (`views_for_step`, one per step);
   start    `init.start_gaussians` (SfM points, or 100,000 random ones for Lego), the same arrays;
   recipe   Adam (eps 1e-15) with lr means 1.6e-4 x scene scale decaying to 1% (ExponentialLR),
            quats 1e-3, scales 5e-3, opacities 5e-2, SH DC 2.5e-3, SH rest 2.5e-3 / 20; loss
@@ -26,10 +27,9 @@ bar does) without evaluations; ours also without compilation (compiling ahead in
 only its waits: --compile-ahead off for the steps alone); gsplat's after one warm-up render.
 Wall time (`process_s`): each worker from its start to its last output, imports, data and
 compiles included. Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use.
-Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR and SSIM, Gaussians), summary.csv
-(final and best PSNR/SSIM, times, peak MB, Gaussians, the lgs_jax folder that ran: PYTHONPATH=TREE
-runs an earlier tree's), <scene>_<trainer>.json, curves_<scene>.png; our run directories in
---run-dir (a temporary folder by default). --no-gsplat: ours alone; --inline: in this process.
+Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR, SSIM, Gaussians), summary.csv
+(final and best PSNR/SSIM, times, peak MB, Gaussians, the lgs_jax folder that ran), <scene>_
+<trainer>.json, curves_<scene>.png; our runs in --run-dir (default: a temporary folder).
 """
 
 from __future__ import annotations
@@ -68,17 +68,14 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--strategy", choices=["mcmc", "default"], default="mcmc")
     ap.add_argument("--steps", type=int, default=7000)
     ap.add_argument("--eval-every", type=int, default=500)
-    ap.add_argument("--cap", type=int, help="Gaussian cap for every scene (default: per scene, "
-                                            "lego 300000, skull 500000)")
+    ap.add_argument("--cap", type=int, help="Gaussian cap for every scene (default: SCENES)")
     ap.add_argument("--refine-from", type=int,
                     help="both strategies' refine_start_iter (e.g. the step count: no "
                          "refinement, to tell its effect apart; default: the strategy's)")
     ap.add_argument("--downscale", type=int, help="image downscale for every scene (default: 1)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--images", choices=["auto", "float32"], default="auto",
-                    help="the training images both trainers hold on the device: auto (fit's "
-                         "default: 8-bit where the files are, each view converted to float32 "
-                         "when a step uses it) or float32")
+                    help="both trainers' images on the device: auto (fit's default) or float32")
     ap.add_argument("--backend", help="our backend (default: pallas on a GPU, tiles elsewhere)")
     ap.add_argument("--convention", choices=CONVENTIONS, default="3dgs",
                     help="our compositing rule (gsplat's trainer's: always gsplat's)")
@@ -91,15 +88,10 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--compile-ahead", choices=["thread", "process", "off"],
                     help="our trainer's compiles ahead of pair-capacity growths "
                          "(FitConfig.compile_ahead; default: thread on a GPU, off elsewhere)")
-    for flag, mode in (("--no-compile-ahead", "off"), ("--compile-ahead-process", "process")):
-        ap.add_argument(flag, dest="compile_ahead", action="store_const", const=mode,
-                        help=f"the same as --compile-ahead {mode}")
     ap.add_argument("--pair-headroom", type=float, default=FitConfig.pair_headroom,
-                    help="our trainer's pair capacity over the pairs needed (FitConfig."
-                         "pair_headroom; larger: fewer growths and recompiles, larger buffers)")
+                    help="our trainer's FitConfig.pair_headroom")
     ap.add_argument("--row-headroom", type=float, default=None,
-                    help="our trainer's backward rows over the walked pairs (FitConfig."
-                         "row_headroom; default: a row per pair slot)")
+                    help="our trainer's FitConfig.row_headroom (default: a row per pair slot)")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)

@@ -170,6 +170,11 @@ class FitConfig:
                                        "elsewhere)", choices=TRAIN_BACKENDS)
     devices: int = option(1, "split each step's views across this many devices (data "
                              "parallel; --batch a multiple of it)", low=1)
+    gaussian_devices: int = option(
+        1, "split the Gaussians and their optimizer state across this many devices (Gaussian "
+           "parallel, for scenes larger than one device: one model, one checkpoint; "
+           "docs/multi-gpu.md); the same results as one device up to the rounding of the "
+           "gradients' sums", low=1)
     pair_headroom: float = option(
         3.0, "pair buffer size as a multiple of a view's pairs, at the start and at each "
              "growth (a recompile); larger: fewer recompiles, larger buffers", low=1)
@@ -203,6 +208,7 @@ class FitConfig:
             raise ValueError(f"devices: {self.devices} devices split recipe.batch = "
                              f"{self.recipe.batch} views unevenly; make the batch a multiple "
                              f"of them")
+        gaussian_parallel_problem(self)
 
     @property
     def image_dtype(self):
@@ -217,11 +223,31 @@ class FitConfig:
         return max(1, min(MAX_INIT_POINTS, pixels // PIXELS_PER_POINT))
 
 
+def gaussian_parallel_problem(config: FitConfig) -> None:
+    """Raise `ValueError` naming the fields that Gaussian parallel training
+    (`gaussian_devices` > 1, `lgs_jax.train.sharded`) does not combine with."""
+    if config.gaussian_devices == 1:
+        return
+    refused = [("devices", config.devices > 1, "a mesh of views x Gaussians is not built for "
+                                               "training"),
+               ("recipe.app_opt", config.recipe.app_opt, "each view's colours of every "
+                                                         "Gaussian are not built sharded"),
+               ("row_headroom", config.row_headroom is not None, "the sharded render keeps a "
+                                                                 "backward row per pair slot"),
+               ("compile_ahead", config.compile_ahead in ("thread", "process"),
+                "a step is compiled when it needs a grown buffer")]
+    for name, wrong, why in refused:
+        if wrong:
+            raise ValueError(f"{name}: not with gaussian_devices = {config.gaussian_devices} "
+                             f"({why})")
+
+
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """What the jitted functions of one run depend on statically (hashable): the recipe, the
-    strategy, the run length (the means' schedule), the scene scale, the backend, and the
-    devices a step's views are split across (data parallel: `step.over_views`)."""
+    strategy, the run length (the means' schedule), the scene scale, the backend, the
+    devices a step's views are split across (data parallel: `step.over_views`) and those its
+    Gaussians are split across (Gaussian parallel: `sharded`)."""
 
     recipe: Recipe = Recipe()
     strategy: Strategy = DefaultStrategy()
@@ -229,9 +255,10 @@ class Setup:
     scene_scale: float = 1.0
     backend: str = "tiles"
     devices: int = 1
+    gaussian_devices: int = 1
 
     @classmethod
     def of(cls, config: FitConfig, scene_scale: float, backend: str) -> "Setup":
         """The setup of a run of `config` on data of `scene_scale` with `backend`."""
         return cls(config.recipe, config.strategy, config.steps, scene_scale, backend,
-                   config.devices)
+                   config.devices, config.gaussian_devices)

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..render import default_backend, pair_capacity
-from . import heldout, outputs, report, rundir, state
+from . import heldout, outputs, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
 from .config import FitConfig, Setup
@@ -44,9 +44,21 @@ from .state import RunState
 from .step import refine, replicated, train_step
 
 
+# A step's second buffer beside the pairs (`ahead.Sizes`' second size): the RunState field
+# that holds it, the metrics that report its overflow and need, and its name in the log. One
+# device: the backward's rows; Gaussian parallel: the exchange's records (`sharded`).
+SECOND = {False: ("rows", "row_overflow", "walked", "backward rows"),
+          True: ("exchange", "exchange_overflow", "exchange_required", "exchange capacity")}
+
+
 def stepper(config: FitConfig, setup: Setup) -> Stepper:
     """`train_step` of this run (its `setup`) behind an `ahead.Stepper` of the configured
-    mode."""
+    mode; with Gaussian parallel, the exchange capacity grown with the pair headroom and no
+    compile ahead."""
+    if setup.gaussian_devices > 1:
+        static = lambda size: dict(setup=setup, capacity=size[0], exchange=size[1])
+        return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom),
+                       None)
     static = lambda size: dict(setup=setup, capacity=size[0], rows=size[1])
     return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom),
                    mode_of(config.compile_ahead))
@@ -96,26 +108,30 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
     st = run.st
     _enter_level(run, feed)
     images, idx = feed.args(st.step)
+    field, flag, needed, name = SECOND[run.setup.gaussian_devices > 1]
     while True:
         args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(st.step), images,
-                idx, run.background, st.step, run.key)
+                idx, run.background, st.step, run.key) + ((st.order,) if st.order is not None
+                                                          else ())
         sig = signature(args)
-        size = (st.capacity, st.rows)
+        size = (st.capacity, getattr(st, field))
         new = steps.run(args, size, sig)
         feed.prefetch(st.step + 1)  # while the step runs
         steps.prepare(args, size, sig)
         m = {k: v.item() for k, v in jax.device_get(new[4]).items()}
-        if not (m["overflow"] or m["row_overflow"]):
+        if not (m["overflow"] or m[flag]):
             st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
             return m
-        need = (m["pairs"], m["walked"])
-        (st.capacity, st.rows), waited, ahead = steps.grow(size, need, sig)
-        if (st.capacity, st.rows) == size:  # never loop on a size that cannot hold the step
-            raise RuntimeError(f"step {st.step + 1}: (pairs, rows) {size} overflowed, "
+        need = (m["pairs"], m[needed])
+        grown_size, waited, ahead = steps.grow(size, need, sig)
+        if grown_size == size:  # never loop on a size that cannot hold the step
+            raise RuntimeError(f"step {st.step + 1}: (pairs, {name}) {size} overflowed, "
                                f"{need} needed")
+        st.capacity = grown_size[0]
+        setattr(st, field, grown_size[1])
         clock.waited(waited)
         grown = [f"{what} grown to {new_size}" for what, new_size, old_size in
-                 (("pair capacity", st.capacity, size[0]), ("backward rows", st.rows, size[1]))
+                 (("pair capacity", grown_size[0], size[0]), (name, grown_size[1], size[1]))
                  if new_size != old_size]
         run.say(f"step {st.step + 1}: {' and '.join(grown)} "
                 + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)")
@@ -123,8 +139,13 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
 
 
 def _place(setup: Setup, st: RunState) -> None:
-    """A data-parallel run's state whole on each of its devices (`step.replicated`; a no-op
-    where it is already, and for one device)."""
+    """A data-parallel run's state whole on each of its devices (`step.replicated`), a
+    Gaussian-parallel run's in blocks (`sharded`); a no-op where it is already, and for one
+    device."""
+    if setup.gaussian_devices > 1:
+        (st.pool, st.opt_state, st.strategy_state), st.views = sharded_state.place(
+            setup.gaussian_devices, (st.pool, st.opt_state, st.strategy_state), st.views)
+        return
     where = replicated(setup.devices)
     if where is not None:
         st.pool, st.opt_state, st.strategy_state, st.views = jax.device_put(st.saved, where)
@@ -133,11 +154,16 @@ def _place(setup: Setup, st: RunState) -> None:
 def _refine(run: _Run) -> int:
     """The strategy's refinement at step st.step, recorded, the pool's growth logged; returns
     the number of active Gaussians after it."""
-    st = run.st
-    st.strategy_state, st.pool, st.opt_state, rep = refine(
-        run.setup.strategy, st.strategy_state, st.pool, st.opt_state, st.step, run.key,
-        run.config.max_gaussians)
-    _place(run.setup, st)
+    st, setup = run.st, run.setup
+    if setup.gaussian_devices > 1:
+        st.strategy_state, st.pool, st.opt_state, rep, st.order = sharded_state.refine(
+            setup.strategy, st.strategy_state, st.pool, st.opt_state, st.order, st.step,
+            run.key, run.config.max_gaussians, setup.gaussian_devices)
+    else:
+        st.strategy_state, st.pool, st.opt_state, rep = refine(
+            setup.strategy, st.strategy_state, st.pool, st.opt_state, st.step, run.key,
+            run.config.max_gaussians)
+    _place(setup, st)
     if rep["grown_to"]:
         run.say(f"step {st.step}: pool grown to {rep['grown_to']} slots (one recompile)")
     if not rep["ok"]:
@@ -149,11 +175,13 @@ def _refine(run: _Run) -> int:
 
 class _Watch:
     """Calls `fn(step, gaussians, metrics)` with the pool as `render` sees it (inactive slots
-    as culled placeholders, every SH band; on one device) when `every` seconds have passed
-    since the last call, or when forced."""
+    as culled placeholders, every SH band; on one device, or on the host where the pool is
+    split over devices: `gathered`) when `every` seconds have passed since the last call, or
+    when forced."""
 
-    def __init__(self, fn, every: float, devices: int):
+    def __init__(self, fn, every: float, devices: int, gathered: bool = False):
         self.fn, self.every, self.devices, self.last = fn, every, devices, -float("inf")
+        self.gathered = gathered
 
     def __call__(self, st: RunState, metrics: dict, force: bool = False) -> None:
         now = time.perf_counter()
@@ -163,6 +191,8 @@ class _Watch:
         g = state.shown(pool.params, pool.active)
         if self.devices > 1:  # replicated: one device's copy, no transfer
             g = jax.tree.map(lambda x: x.addressable_data(0), g)
+        if self.gathered:  # split over devices: the rows whole on the host
+            g = jax.device_get(g)
         self.fn(st.step, g, metrics)
         self.last = now
 
@@ -230,9 +260,10 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
     steps, feed, busy, start = stepper(config, run.setup), _feed(run), 0.0, st.step
     early = _early_stop(run, feed)
     if run.rd.test_cams:
-        run.evaluations = heldout.Evaluations(run.rd.test_cams, run.rd.test_images,
-                                              run.rd.background, run.setup, st.eval_capacity,
-                                              config.pair_headroom)
+        kind = (sharded_state.Evaluations if run.setup.gaussian_devices > 1
+                else heldout.Evaluations)
+        run.evaluations = kind(run.rd.test_cams, run.rd.test_images, run.rd.background,
+                               run.setup, st.eval_capacity, config.pair_headroom)
     _place(run.setup, st)
     watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
     try:
@@ -265,7 +296,7 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
     return busy
 
 
-def _check_hooks(watch, watch_every, devices: int) -> None:
+def _check_hooks(watch, watch_every, devices: int, gaussian_devices: int = 1) -> None:
     """Raise `ValueError` for a watch that is not callable, a bad watch_every, or more devices
     than `jax.devices()` has."""
     if watch is not None and not callable(watch):
@@ -274,9 +305,10 @@ def _check_hooks(watch, watch_every, devices: int) -> None:
             and not isinstance(watch_every, bool) and watch_every >= 0):
         raise ValueError(f"watch_every: expected seconds >= 0, got {watch_every!r}")
     have = len(jax.devices())
-    if devices > have:
-        raise ValueError(f"devices: expected an int from 1 to {have} (the "
-                         f"{jax.default_backend()} devices here), got {devices!r}")
+    for name, count in (("devices", devices), ("gaussian_devices", gaussian_devices)):
+        if count > have:
+            raise ValueError(f"{name}: expected an int from 1 to {have} (the "
+                             f"{jax.default_backend()} devices here), got {count!r}")
 
 
 def check_out(config: FitConfig, data_path: str) -> None:
@@ -335,12 +367,13 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
-    _check_hooks(watch, watch_every, config.devices)
+    _check_hooks(watch, watch_every, config.devices, config.gaussian_devices)
     mode_of(config.compile_ahead)  # checks "process" has its cache
     data_path = dataset.path if dataset is not None else config.data
     with _claimed(config, data_path):
         return _run(config, dataset, data_path, _Watch(watch, float(watch_every),
-                                                       config.devices), log)
+                                                       config.devices,
+                                                       config.gaussian_devices > 1), log)
 
 
 def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict:

@@ -189,13 +189,17 @@ def sample_add(pool: Pool, opt_state, n, key, min_opacity: float = 0.005):
     return Pool(params, pool.active | added), opt_state, added
 
 
-def inject_noise(pool: Pool, key, scaler):
-    """Perturb the active means (module docstring; gsplat's `inject_noise_to_position`)."""
+def inject_noise(pool: Pool, key, scaler, slots=None):
+    """Perturb the active means (module docstring; gsplat's `inject_noise_to_position`); row i
+    draws slot slots[i]'s ε (`StepInfo.slots`; None: slot i)."""
     p = pool.params
     r, s = _covariance_factor(p)
     o = jax.nn.sigmoid(p["logit_opacities"])
     gate = 1.0 / (1.0 + jnp.exp(-100.0 * ((1.0 - o) - 0.995)))
-    eps = jax.random.normal(key, p["means"].shape, p["means"].dtype) * (gate * scaler)[:, None]
+    eps = jax.random.normal(key, p["means"].shape, p["means"].dtype)
+    if slots is not None:
+        eps = jnp.take(eps, slots, axis=0)
+    eps = eps * (gate * scaler)[:, None]
     # Σ·ε = R·diag(s²)·Rᵀ·ε, as multiply-adds (no TF32 on GPUs)
     local = jnp.sum(r * eps[:, :, None], 1) * s * s  # diag(s²)·Rᵀ·ε
     noise = jnp.sum(r * local[:, None, :], -1)

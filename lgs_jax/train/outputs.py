@@ -10,6 +10,7 @@ result.json; and the held-out evaluations (`evaluate`)."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 
@@ -19,7 +20,7 @@ import numpy as np
 
 from ..io.cameras import save_cameras
 from ..io.ply import save_ply
-from . import appearance, bilateral_grid, camera_opt, color_opt, report
+from . import appearance, bilateral_grid, camera_opt, color_opt, report, sharded_state
 from .config import Setup
 from .feed import RunData
 from ..files import written
@@ -33,8 +34,11 @@ def evaluate(st: RunState, rd: RunData, setup: Setup, out: str | None = None):
     truth written to `out` when given."""
     if not rd.test_cams:
         return None, None
-    images, st.eval_capacity = render_views(scene(st), rd.test_cams, jnp.asarray(rd.background),
-                                            setup.backend, st.eval_capacity, setup.recipe.raster)
+    render = render_views
+    if setup.gaussian_devices > 1:
+        render = functools.partial(sharded_state.render_views, setup.gaussian_devices)
+    images, st.eval_capacity = render(scene(st), rd.test_cams, jnp.asarray(rd.background),
+                                      setup.backend, st.eval_capacity, setup.recipe.raster)
     if out:
         report.save_renders(out, images, rd.test_images, rd.test_names)
     return report.heldout_metrics(images, rd.test_images)
@@ -88,7 +92,8 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) ->
                   gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
                   skipped_steps=st.skipped, **run,
                   strategy=type(setup.strategy).__name__, backend=setup.backend,
-                  device=jax.devices()[0].device_kind, devices=setup.devices)
+                  device=jax.devices()[0].device_kind, devices=setup.devices,
+                  gaussian_devices=setup.gaussian_devices)
     with written(os.path.join(out, "result.json")) as tmp, open(tmp, "w") as f:
         json.dump(result, f, indent=1)
     return result

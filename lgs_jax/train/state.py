@@ -13,10 +13,11 @@ import jax.numpy as jnp
 from ..io.ply import save_ply
 from ..backends import REGISTRY
 from ..render import count_pairs, next_pow2, pair_capacity, render
-from . import appearance, checkpoint, report, view_params
+from . import appearance, checkpoint, report, sharded_state, view_params
 from .config import FitConfig, Setup
 from ..files import written
 from .feed import RunData
+from ..parallel.shards import padded_rows
 from .init import start_gaussians
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
@@ -36,10 +37,15 @@ class RunState:
     skipped: int = 0
     rows: int | None = None  # the backward's rows per training view (None: one per pair slot)
     views: object = None  # the training views' own parameters and optimizers (`view_params`)
+    # Gaussian parallel (`sharded`): the records a device can send another per view, and the
+    # slot each row of the pool holds (None on one device)
+    exchange: int | None = None
+    order: object = None
 
     @property
     def saved(self) -> tuple:
-        """What `checkpoint.save` writes, in `checkpoint.PARTS` order."""
+        """What `checkpoint.save` writes, in `checkpoint.PARTS` order (a sharded run's rows in
+        their stored order: `save` puts them in slot order)."""
         return self.pool, self.opt_state, self.strategy_state, self.views
 
 
@@ -92,16 +98,37 @@ def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     reach = setup.strategy.max_count(g.num, config.steps, cap)
     size = config.pool_size or (next_pow2(g.num) if reach is None else reach)
     size = max(min(size, cap), g.num)  # g.num <= cap
+    size = padded_rows(size, setup.gaussian_devices)
     pool, opt_state, sstate, views = templates(setup, size, rd, config.seed, g)
+    log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
+        f"{rd.scene_scale:.3f}")
+    if setup.gaussian_devices > 1:
+        return _sharded(config, setup, rd, (pool, opt_state, sstate, views), step=0,
+                        eval_capacity=None)
     first = rd.train_camera(0)
     capacity = pair_capacity(pairs(pool, first, setup.recipe.antialiased), config.pair_headroom)
     rows = None
     if config.row_headroom is not None and REGISTRY[setup.backend].row_capacity:
         rows = pair_capacity(walked(setup, pool, first, jnp.asarray(rd.background), capacity),
                              config.row_headroom)
-    log(f"{g.num} Gaussians in a pool of {pool.size} (cap {cap}); scene scale "
-        f"{rd.scene_scale:.3f}")
     return RunState(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, views=views)
+
+
+def _sharded(config: FitConfig, setup: Setup, rd: RunData, parts: tuple, step: int,
+             eval_capacity: int | None, skipped: int = 0) -> RunState:
+    """The state of a run split over setup.gaussian_devices devices (`sharded_state`) from
+    `parts` (pool, opt_state, strategy_state, views) in slot order: the pool padded to equal
+    blocks, balanced and placed; both buffers sized from the first training view."""
+    d = setup.gaussian_devices
+    (pool, opt_state, sstate), order = sharded_state.balanced(
+        d, sharded_state.padded(parts[:3], d))
+    views = sharded_state.place(d, (pool, opt_state, sstate), parts[3])[1]
+    capacity, exchange = sharded_state.first_sizes(d, pool, rd.train_camera(0),
+                                                   setup.recipe.antialiased,
+                                                   config.pair_headroom)
+    return RunState(pool, opt_state, sstate, step, capacity,
+                    capacity if eval_capacity is None else eval_capacity, skipped, views=views,
+                    exchange=exchange, order=order)
 
 
 def resumed(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
@@ -114,6 +141,9 @@ def resumed(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
         out, templates(setup, meta["pool_size"], rd, config.seed), meta["step"])
     _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
     log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
+    if setup.gaussian_devices > 1:
+        return _sharded(config, setup, rd, (pool, opt_state, sstate, views), meta["step"],
+                        meta["eval_capacity"], meta["skipped"])
     rows = meta.get("rows") if config.row_headroom is not None else None
     return RunState(pool, opt_state, sstate, meta["step"], meta["capacity"],
                     meta["eval_capacity"], meta["skipped"], rows, views)
@@ -133,7 +163,11 @@ def save(out: str, config: FitConfig, st: RunState, data: dict) -> None:
     meta = dict(step=st.step, capacity=st.capacity, rows=st.rows, eval_capacity=st.eval_capacity,
                 pool_size=st.pool.size, skipped=st.skipped, config=checkpoint.config_of(config),
                 data=data)
-    checkpoint.save(out, st.saved, meta)
+    parts = st.saved
+    if st.order is not None:
+        parts = (*sharded_state.in_slot_order(config.gaussian_devices, parts[:3], st.order),
+                 parts[3])
+    checkpoint.save(out, parts, meta)
     with written(os.path.join(out, "scene.ply")) as tmp:
         save_ply(tmp, active_gaussians(scene(st)))
 

@@ -34,7 +34,7 @@ import optax
 
 from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
-from . import appearance, camera_opt, view_params
+from . import appearance, camera_opt, sharded, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
@@ -76,6 +76,17 @@ def replicated(devices: int):
     return jax.sharding.NamedSharding(mesh(devices), jax.sharding.PartitionSpec())
 
 
+def over_batch(fn):
+    """`fn(*per_view)` over a batch (the leading axis of every argument), one view after
+    another as `over_views` does on one device (a single view: `fn` itself)."""
+    def batched(*per_view):
+        if jax.tree.leaves(per_view)[0].shape[0] == 1:
+            out = fn(*jax.tree.map(lambda x: x[0], per_view))
+            return jax.tree.map(lambda x: jnp.asarray(x)[None], out)
+        return jax.lax.map(lambda views: fn(*views), per_view)
+    return batched
+
+
 def over_views(one, devices: int, vectorize: bool = False):
     """`one(g, cam, target, offsets, look)` over a batch of views (the leading axis of all but
     g, which they share), stacked outputs: one view after another (`lax.map`; a single view is
@@ -89,10 +100,7 @@ def over_views(one, devices: int, vectorize: bool = False):
     def batched(g, *per_view):
         if vectorize:
             return jax.vmap(one, in_axes=(None, 0, 0, 0, 0))(g, *per_view)
-        if jax.tree.leaves(per_view)[0].shape[0] == 1:
-            out = one(g, *jax.tree.map(lambda x: x[0], per_view))
-            return jax.tree.map(lambda x: jnp.asarray(x)[None], out)
-        return jax.lax.map(lambda views: one(g, *views), per_view)
+        return over_batch(functools.partial(one, g))(*per_view)
 
     if devices == 1:
         return batched
@@ -103,15 +111,26 @@ def over_views(one, devices: int, vectorize: bool = False):
                          out_specs=views, check_vma=False)
 
 
+def score(recipe, image, target, look: dict):
+    """(loss, mse) of one view's render `image` (H, W, 3) against `target`, the render first
+    corrected by the view's rows `look` of its appearance parts (`view_params.corrected`)."""
+    image = view_params.corrected(image, look)
+    return (loss_fn(image, target, recipe.ssim_lambda, recipe.ssim_padding),
+            jnp.mean((image - target) ** 2))
+
+
 def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, cams, targets,
-                   background, step, idx, per_view=None):
+                   background, step, idx, per_view=None, exchange: int | None = None):
     """The loss of `train_step` (module docstring) on views `cams` (stacked, at the images'
     size) against `targets` (B, H, W, 3) and its gradients: ((loss, (mse, stats, visible)),
     (param grads, screen grads or None, grads of the views' own parameters or None));
     `per_view`: the views' own parameters {name: (views, SIZE)}
     (`view_params`), whose rows of the views `idx` move their poses (`camera_opt.adjusted`)
     and correct their renders (`view_params.corrected`: colour maps, bilateral grids), or
-    None; their regularizer (the grids' total variation) adds to the loss."""
+    None; their regularizer (the grids' total variation) adds to the loss. With
+    `setup.gaussian_devices` > 1 the pool's rows are split over that many devices and the views
+    are rendered by `sharded.render_views` with `exchange` records per device pair, the loss
+    taken on the whole images."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
     bands = sh_mask(step, num_bases, s.recipe.sh_every)
@@ -133,12 +152,15 @@ def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, ca
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=s.recipe.raster, screen_offsets=off,
                        row_capacity=rows)
-            image = view_params.corrected(o.image, look)
-            return (loss_fn(image, target, s.recipe.ssim_lambda, s.recipe.ssim_padding),
-                    jnp.mean((image - target) ** 2), o.stats, o.visible)
+            return (*score(s.recipe, o.image, target, look), o.stats, o.visible)
 
-        losses, mse, stats, visible = over_views(one, s.devices, s.backend.startswith(
-            "pallas"))(g, views, targets, offsets, look)
+        if s.gaussian_devices > 1:
+            images, stats, visible = sharded.render_views(s, capacity, exchange, g, views,
+                                                          background, offsets)
+            losses, mse = over_batch(functools.partial(score, s.recipe))(images, targets, look)
+        else:
+            losses, mse, stats, visible = over_views(one, s.devices, s.backend.startswith(
+                "pallas"))(g, views, targets, offsets, look)
         total = (jnp.mean(losses) + s.strategy.regularizer(params, pool.active)
                  + view_params.regularizer(s.recipe, per_view))
         return total, (jnp.mean(mse), stats, visible)
@@ -163,10 +185,11 @@ def row_stats(stats):
     return own.row_overflow, own.pairs_walked
 
 
-@functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows"),
+@functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows", "exchange"),
                    compiler_options=COMPILER_OPTIONS)
 def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, idx,
-               background, step, key, *, setup: Setup, capacity: int, rows: int | None = None):
+               background, step, key, slots=None, *, setup: Setup, capacity: int,
+               rows: int | None = None, exchange: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
     (stacked, `data.stack_any`), whose images are `targets` (B, H, W, 3) (`data.TrainViews`:
     the same program whether the capture's images live on the device or are streamed), which
@@ -176,17 +199,20 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, views,
     metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs (largest
     per-view pair count), row_overflow, walked (largest per-view count of walked pairs), count
-    (active Gaussians)."""
+    (active Gaussians). With `setup.gaussian_devices` > 1 (`sharded`): the state's rows split
+    over that many devices, `slots` the slot each row holds, `exchange` the records each device
+    can send another; pairs are per device, and row_overflow and walked give way to
+    exchange_overflow and exchange_required (`sharded.buffer_metrics`)."""
     cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
                                width=targets.shape[2], height=targets.shape[1])
     (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = loss_and_grads(
         setup, capacity, rows, pool, cams, targets, background, step, idx,
-        view_params.params(views))
+        view_params.params(views), exchange)
     opt = optimizer(setup.recipe, setup.steps, setup.scene_scale)
     updates, new_opt = opt.update(grads, opt_state, pool.params)
     new_pool = Pool(optax.apply_updates(pool.params, updates), pool.active)
     lr = means_schedule(setup.recipe, setup.steps, setup.scene_scale)(step + 1)
-    info = StepInfo(grads2d, visible, lr, cams.width, cams.height)
+    info = StepInfo(grads2d, visible, lr, cams.width, cams.height, slots)
     new_state, new_pool, new_opt = setup.strategy.step(strategy_state, new_pool, new_opt, info,
                                                        step, step_keys(key, step)[0])
     ok = (jnp.isfinite(loss) & _finite(grads, pool.active)
@@ -203,10 +229,16 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     if setup.devices > 1:
         pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
             (pool, opt_state, strategy_state, views), replicated(setup.devices))
-    row_overflow, walked = row_stats(stats)
-    metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, overflow=jnp.any(stats.overflow),
-                   pairs=jnp.max(stats.pairs_required), row_overflow=jnp.any(row_overflow),
-                   walked=jnp.max(walked), count=jnp.sum(pool.active, dtype=jnp.int32))
+    if setup.gaussian_devices > 1:
+        (pool, opt_state, strategy_state), views = sharded.constrained(
+            setup.gaussian_devices, (pool, opt_state, strategy_state), pool.size, views)
+        buffers = sharded.buffer_metrics(stats)
+    else:
+        row_overflow, walked = row_stats(stats)
+        buffers = dict(overflow=jnp.any(stats.overflow), pairs=jnp.max(stats.pairs_required),
+                       row_overflow=jnp.any(row_overflow), walked=jnp.max(walked))
+    metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, **buffers,
+                   count=jnp.sum(pool.active, dtype=jnp.int32))
     return pool, opt_state, strategy_state, views, metrics
 
 
@@ -219,21 +251,24 @@ def _refine(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: 
     return state, pool, opt_state, dict(new[3], ok=ok)
 
 
-def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int):
-    """`strategy.refine` at `step` (`key`: the run's), the pool first grown (doubled, at most
-    to `cap` slots) while the refinement needs more new slots than are free, so nothing is cut
-    short below the cap. A refinement that would make an active parameter non-finite is not
-    applied (ok False). Returns (state, pool, opt_state, report): the report's counts as ints,
-    plus `grown_to` (the new pool size, or 0)."""
-    grown_to = 0
+def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int,
+           multiple: int = 1):
+    """`strategy.refine` at `step` (`key`: the run's; `cap`: at most so many Gaussians), the
+    pool first grown (doubled, at most to `cap` slots rounded up to a multiple of `multiple`,
+    and to such a multiple) while the refinement needs more new slots than are free, so nothing
+    is cut short below the cap. A refinement that would make an active parameter non-finite is
+    not applied (ok False). Returns (state, pool, opt_state, report): the report's counts as
+    ints, plus `grown_to` (the new pool size, or 0)."""
+    grown_to, slots = 0, -(-cap // multiple) * multiple
     while True:
         state, new_pool, new_opt, report = _refine(strategy_state, pool, opt_state, step, key,
                                                    strategy=strategy, cap=cap)
         report = {k: int(v) for k, v in jax.device_get(report).items()}
         short = report["needed"] - report["free"]
-        if short <= 0 or pool.size >= cap:
+        if short <= 0 or pool.size >= slots:
             return state, new_pool, new_opt, dict(report, grown_to=grown_to)
-        grown_to = min(cap, max(2 * pool.size, next_pow2(pool.size + short)))
+        grown_to = min(slots, max(2 * pool.size, next_pow2(pool.size + short)))
+        grown_to = -(-grown_to // multiple) * multiple
         pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)
 
 

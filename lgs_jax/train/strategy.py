@@ -39,7 +39,10 @@ class StepInfo:
     screen_grads: (B, N, 2) ∂loss/∂mean2d per view (pixels), or None when the strategy does not
       ask for them (`needs_screen_grads`); visible: (B, N) bool, the Gaussians with tile pairs
       in each view (`RenderOutput.visible`); means_lr: the means' learning rate after this step
-      (gsplat reads the scheduler after `scheduler.step()`); width, height: the image size.
+      (gsplat reads the scheduler after `scheduler.step()`); width, height: the image size;
+      slots: (N,) int32, the slot each row of the pool holds where the rows are stored in
+      another order (Gaussian-parallel training, `sharded`), or None (row i is slot i): draws
+      per Gaussian are made per slot, so that they do not depend on the order.
     """
 
     screen_grads: Any
@@ -47,6 +50,7 @@ class StepInfo:
     means_lr: Any
     width: int = dataclasses.field(metadata=dict(static=True))
     height: int = dataclasses.field(metadata=dict(static=True))
+    slots: Any = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -250,7 +254,8 @@ class MCMCStrategy(Strategy):
         return self.opacity_reg * jnp.sum(o) / n + self.scale_reg * jnp.sum(s) / (3 * n)
 
     def step(self, state, pool: Pool, opt_state, info: StepInfo, step, key):
-        return state, ops.inject_noise(pool, key, info.means_lr * self.noise_lr), opt_state
+        return (state, ops.inject_noise(pool, key, info.means_lr * self.noise_lr, info.slots),
+                opt_state)
 
     def refine_due(self, step: int) -> bool:
         return (self.refine_start_iter < step < self.refine_stop_iter

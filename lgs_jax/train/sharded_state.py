@@ -1,0 +1,183 @@
+"""A Gaussian-parallel run's state (`sharded`: slots stored in rows permuted by `order`, split
+over D devices): placed balanced, refined in slot order, saved as the one-device run saves it,
+its buffers sized, its held-out views rendered sharded.
+
+- `balanced(devices, parts)`: the rows of (pool, opt_state, strategy_state), given in slot
+  order, permuted by `balance.balanced_order(active, D)` and placed in blocks over the mesh;
+  returns them and `order` (row j holds slot order[j]).
+- `in_slot_order(parts, order)`: back to slot order (the one-device layout): what a refinement
+  runs on and a checkpoint holds, so a checkpoint is the one-device run's file and `--resume`
+  takes it on any device count.
+- `refine`: the one-device refinement (`step.refine`) of the state in slot order, the pool
+  grown to multiples of D, then balanced again. Every operation of a refinement is
+  elementwise, a gather, an integer count or a sort, so it gives the bits it gives on one
+  device, split or not.
+- `first_sizes`: the pair and exchange buffers of a new or resumed run, from its first
+  training view (`parallel.count_sharded`) times the pair headroom.
+- `Evaluations`, `render_views`: held-out scores and renders through `parallel.render_sharded`
+  (the bits of `render`), buffers counted first.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import parallel
+from ..config import RasterConfig
+from ..parallel.balance import balanced_order
+from ..parallel.shards import padded_rows
+from ..render import pair_capacity
+from . import heldout, sharded
+from . import step as step_mod
+from .pool import Pool, grow, per_gaussian, render_gaussians
+
+shown = jax.jit(render_gaussians)
+_order = jax.jit(balanced_order, static_argnums=1)
+
+
+@functools.partial(jax.jit, static_argnames=("devices",))
+def _permuted(parts, order, *, devices: int):
+    size = order.shape[0]
+    out = per_gaussian(parts, size, lambda x: jnp.take(x, order, axis=0))
+    return sharded.constrained(devices, out, size)[0]
+
+
+def balanced(devices: int, parts: tuple):
+    """((pool, opt_state, strategy_state) with rows permuted by order and placed, order), from
+    `parts` in slot order (module docstring)."""
+    order = jax.device_put(_order(parts[0].active, devices), sharded.blocks(devices))
+    return _permuted(parts, order, devices=devices), order
+
+
+@jax.jit
+def inverse(order):
+    """The permutation that undoes `order`: slot i is row inverse[i]."""
+    return jnp.zeros_like(order).at[order].set(jnp.arange(order.shape[0], dtype=order.dtype),
+                                               unique_indices=True)
+
+
+def in_slot_order(devices: int, parts: tuple, order) -> tuple:
+    """`parts` (rows permuted by `order`) in slot order, still in blocks over the mesh."""
+    return _permuted(parts, inverse(order), devices=devices)
+
+
+def place(devices: int, parts: tuple, views):
+    """(parts, views) on the mesh as `sharded.shardings` says (no copy where they are)."""
+    rows, whole = sharded.shardings(devices, parts, parts[0].size, views)
+    return jax.device_put(parts, rows), jax.device_put(views, whole)
+
+
+def refine(strategy, strategy_state, pool: Pool, opt_state, order, step: int, key, cap: int,
+           devices: int):
+    """`step.refine` of the state in slot order (module docstring), then balanced again.
+    Returns (strategy_state, pool, opt_state, report, order); the report's `per_device` lists
+    the active Gaussians of each device's block."""
+    pool, opt_state, strategy_state = in_slot_order(devices, (pool, opt_state, strategy_state),
+                                                    order)
+    strategy_state, pool, opt_state, report = step_mod.refine(
+        strategy, strategy_state, pool, opt_state, step, key, cap, devices)
+    (pool, opt_state, strategy_state), order = balanced(devices, (pool, opt_state,
+                                                                  strategy_state))
+    report["per_device"] = per_device(devices, pool)
+    return strategy_state, pool, opt_state, report, order
+
+
+def per_device(devices: int, pool: Pool) -> list[int]:
+    """The active Gaussians of each device's block (host ints)."""
+    return [int(c) for c in jax.device_get(
+        jnp.sum(jnp.reshape(pool.active, (devices, -1)), axis=1, dtype=jnp.int32))]
+
+
+def padded(parts: tuple, devices: int) -> tuple:
+    """(pool, opt_state, strategy_state) in slot order grown (`pool.grow`) to a multiple of
+    `devices` slots (a checkpoint of another run resumed here), or as they are."""
+    size = parts[0].size
+    if size % devices == 0:
+        return parts
+    return grow(*parts, padded_rows(size, devices))
+
+
+def _shards(pool: Pool) -> parallel.GaussianShards:
+    return parallel.GaussianShards(shown(pool.params, pool.active), pool.size)
+
+
+def counts(devices: int, pool: Pool, cams, antialiased: bool) -> tuple[int, int]:
+    """(pairs, records): the most pairs a device's render of any of `cams` needs and the most
+    records a device sends another (`parallel.count_sharded`)."""
+    shards, m = _shards(pool), sharded.mesh(devices)
+    need = [parallel.count_sharded(shards, cam, m, antialiased=antialiased) for cam in cams]
+    return max(p for _, p in need), max(x for x, _ in need)
+
+
+def first_sizes(devices: int, pool: Pool, cam, antialiased: bool,
+                headroom: float) -> tuple[int, int]:
+    """(pair capacity, exchange capacity) of a run's step: its first view's needs times
+    `headroom` (`render.pair_capacity`)."""
+    pairs, records = counts(devices, pool, [cam], antialiased)
+    return pair_capacity(pairs, headroom), pair_capacity(records, headroom)
+
+
+@functools.partial(jax.jit, static_argnames=("devices", "backend", "capacity", "exchange",
+                                             "config", "score"),
+                   compiler_options=step_mod.COMPILER_OPTIONS)
+def _render(pool: Pool, cam, target, background, *, devices: int, backend: str, capacity: int,
+            exchange: int, config: RasterConfig, score: bool):
+    """One held-out view of the pool: (PSNR, SSIM) against `target` with `score`, else the
+    image (H, W, 3) whole on every device; and whether a buffer overflowed."""
+    m = sharded.mesh(devices)
+    out = parallel.render_sharded(_shards(pool), cam, m, capacity=capacity,
+                                  exchange_capacity=exchange, background=background,
+                                  backend=backend, config=config)
+    image = jax.lax.with_sharding_constraint(out.image, sharded.whole(devices))
+    overflow = out.stats.overflow | out.stats.exchange_overflow
+    if score:
+        return (*heldout.view_scores(image, target), overflow)
+    return image, overflow
+
+
+class Evaluations(heldout.Evaluations):
+    """`heldout.Evaluations` of a pool split over `devices` devices: the held-out renders
+    through `parallel.render_sharded`, both buffers counted first and sized with the run's
+    headroom."""
+
+    def __init__(self, cams, targets, background, setup, capacity: int, headroom: float):
+        super().__init__(cams, targets, background, setup, capacity, headroom)
+        self.exchange = 1
+
+    def score(self, pool: Pool) -> tuple[float, float]:
+        s = self.setup
+        pairs, records = counts(s.gaussian_devices, pool, self.cams, s.recipe.antialiased)
+        if pairs > self.capacity:
+            self.capacity = pair_capacity(pairs, self.headroom)
+        if records > self.exchange:
+            self.exchange = pair_capacity(records, self.headroom)
+        scores = jax.device_get([
+            _render(pool, cam, jnp.asarray(target), self.background, devices=s.gaussian_devices,
+                    backend=s.backend, capacity=self.capacity, exchange=self.exchange,
+                    config=s.recipe.raster, score=True)
+            for cam, target in zip(self.cams, self.targets)])
+        if any(bool(o) for _, _, o in scores):  # counted just before: cannot happen
+            raise RuntimeError("a held-out view overflowed its buffers")
+        return (float(np.mean([p for p, _, _ in scores])),
+                float(np.mean([s for _, s, _ in scores])))
+
+
+def render_views(devices: int, pool: Pool, cams, background, backend: str, capacity: int,
+                 config: RasterConfig = RasterConfig()):
+    """`step.render_views` of a pool split over `devices` devices: ([image (H, W, 3) numpy,
+    clipped to [0, 1]] per camera, capacity), the buffers counted first."""
+    pairs, records = counts(devices, pool, cams, config.antialiased)
+    capacity, exchange = max(capacity, pair_capacity(pairs)), pair_capacity(records)
+    images = []
+    for cam in cams:
+        image, overflow = _render(pool, cam, None, background, devices=devices, backend=backend,
+                                  capacity=capacity, exchange=exchange, config=config,
+                                  score=False)
+        if bool(overflow):  # counted just before: cannot happen
+            raise RuntimeError("a view overflowed its buffers")
+        images.append(np.clip(np.asarray(image), 0.0, 1.0))
+    return images, capacity

@@ -1,0 +1,183 @@
+"""Gaussian-parallel training (`fit` with gaussian_devices, lgs_jax.train.sharded): a run
+stopped on one device and resumed on 2 simulated CPU devices, with buffers that overflow and
+grow, gives the scene of the same run on one device within the stated bound (the forward is the same bits; the
+gradients' sums are re-associated and Adam carries the difference at most a learning rate per
+step); its refinements decide the same and keep the blocks balanced by count (a refinement on 4
+devices is the one-device refinement's bits, both strategies); each run writes one checkpoint
+and one scene.ply. The slow set runs the whole run on 2 and on 4 devices (the first step's loss,
+held-out views rendered sharded), and MCMC with the views' own parameters on 2.
+
+The runs happen in one child process (tests/parallel/training_child.py: JAX simulates 4
+devices only when told before it starts); the test here checks their folders."""
+
+import json
+import os
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lgs_jax.io.ply import load_ply
+from lgs_jax.train import DefaultStrategy, FitConfig, Pool, Recipe, fit, ops, sharded
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# the child's (importing it would start its JAX with 4 devices)
+STEPS, HALF, BATCH, PIXELS = 8, 4, 1, 32 * 64 * 3
+
+
+def _run_child(tmp_path, part: str) -> dict:
+    """The child's runs of `part` under tmp_path; returns their logs."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=ROOT)
+    done = subprocess.run([sys.executable, "-m", "tests.parallel.training_child", str(tmp_path),
+                           part], env=env, cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.load(open(tmp_path / "logs.json"))
+
+
+def _rows(run) -> list[dict]:
+    return [json.loads(line) for line in open(run / "metrics.jsonl")]
+
+
+def _fields(path) -> dict:
+    g = load_ply(str(path))
+    return dict(means=g.means, quats=g.quats, log_scales=g.log_scales,
+                logit_opacities=g.logit_opacities, sh_dc=g.sh[:, :1], sh_rest=g.sh[:, 1:])
+
+
+def _beyond(one: dict, got: dict, bound: dict, u: float, pairs: bool = False):
+    """Which Gaussians of `one` differ from those of `got` in some parameter by more than
+    `bound` plus the rounding of the updates: (N,) bool, row against row, or with `pairs`
+    (N, M) bool, every row of `one` against every row of `got`."""
+    far = False
+    for k, x in one.items():
+        x, y = (x[:, None], got[k][None]) if pairs else (x, got[k])
+        err = np.abs(x.astype(np.float64) - y)
+        slack = 2 * STEPS * u * np.maximum(np.abs(x), np.abs(y))
+        far = far | np.any(err > bound[k] + slack, axis=tuple(range(2 if pairs else 1,
+                                                                    err.ndim)))
+    return far
+
+
+def _same_scene(tmp_path, logs, runs):
+    """Every sharded run's scene.ply against the one-device run's: the same Gaussians (the
+    refinements decided the same at every step), each parameter within `sharded.drift_bound`
+    plus the rounding of the updates. Clones fill free slots in the order of their gradients
+    (`ops.allocate`), so two whose gradients are within rounding of each other may trade slots:
+    the Gaussians beyond the bound in place must pair off within it. The first step's loss
+    within the rounding of its sums (the images are the same bits: γ_n·(ℓ + 1), n the values
+    summed, the SSIM map's values at most 1)."""
+    scale = float(logs["d1"][0].split("scene scale ")[1]) + 5e-4  # logged to 3 decimals
+    bound = sharded.drift_bound(Recipe(batch=BATCH), STEPS, scale)
+    u = np.finfo(np.float32).eps / 2
+    one, one_rows = _fields(tmp_path / "d1" / "scene.ply"), _rows(tmp_path / "d1")
+    counts = lambda rows: [(r["step"], r["gaussians"]) for r in rows if "loss" in r]
+    n = BATCH * PIXELS
+    for run in runs:
+        rows = _rows(tmp_path / run)
+        assert counts(rows) == counts(one_rows)[-len(counts(rows)):], run
+        if rows[0]["step"] == 1:
+            a, b = one_rows[0]["loss"], rows[0]["loss"]
+            assert abs(a - b) <= n * u / (1 - n * u) * (a + 1), (run, a, b)
+        got = _fields(tmp_path / run / "scene.ply")
+        assert all(x.shape == got[k].shape for k, x in one.items()), run
+        moved = np.flatnonzero(_beyond(one, got, bound, u))
+        assert len(moved) <= len(one["means"]) // 50, (run, moved)  # traded slots are rare
+        pick = lambda f: {k: x[moved] for k, x in f.items()}
+        close = ~_beyond(pick(one), pick(got), bound, u, pairs=True)
+        assert close.any(axis=0).all() and close.any(axis=1).all(), (run, moved)
+
+
+def _balanced(tmp_path, runs, refinements: int):
+    """After every refinement of the sharded `runs` the devices' blocks hold equal shares of
+    the active Gaussians (within one), the uneven ones too (301 Gaussians at the start). Rows
+    without `per_device` are a one-device run's, before a resume."""
+    seen = 0
+    for run in runs:
+        for r in _rows(tmp_path / run):
+            if "per_device" in r:
+                per = r["per_device"]
+                assert sum(per) == r["gaussians"] and max(per) - min(per) <= 1, (run, r)
+                seen += 1
+    assert seen == refinements
+
+
+def _refined_alike(logs):
+    """A refinement of each strategy on 4 devices, back in slot order, is the one-device
+    refinement's bits, its blocks balanced."""
+    for name, r in logs["refinements"].items():
+        assert all(r["same"]) and len(r["same"]) > 10, (name, r["same"])
+        per = r["per_device"]
+        assert sum(per) == r["after"] != r["before"] and max(per) - min(per) <= 1, (name, r)
+
+
+def _resumed(tmp_path, logs):
+    """The one-device run stopped after step HALF (its checkpoint) resumes on 2 devices with
+    buffers sized at its first view's needs exactly: the exchange overflows, is reported and
+    grown (a recompile; the result is checked in `_same_scene`). One scene.ply per run."""
+    before = [r["gaussians"] for r in _rows(tmp_path / "d1") if r.get("step") == HALF][0]
+    assert f"resumed at step {HALF} ({before} Gaussians)" in logs["d1"], logs["d1"]
+    resumed = logs["d1_resumed_on_d2"]
+    assert resumed[0] == f"resumed at step {HALF} ({before} Gaussians)", resumed
+    assert any("exchange capacity grown to" in line for line in resumed), resumed
+    for run, devices in (("d1", 1), ("d1_resumed_on_d2", 2)):
+        result = json.load(open(tmp_path / run / "result.json"))
+        assert result["gaussian_devices"] == devices
+        assert [f for f in os.listdir(tmp_path / run) if f.endswith(".ply")] == ["scene.ply"]
+        assert load_ply(str(tmp_path / run / "scene.ply")).num == result["gaussians"]
+
+
+def test_gaussian_parallel_training(tmp_path):
+    logs = _run_child(tmp_path, "fast")
+    _same_scene(tmp_path, logs, ["d1_resumed_on_d2"])
+    _balanced(tmp_path, ["d1_resumed_on_d2"], 1)  # the refinement at step 6
+    _refined_alike(logs)
+    _resumed(tmp_path, logs)
+
+
+@pytest.mark.slow
+def test_gaussian_parallel_training_on_two_and_four_devices(tmp_path):
+    logs = _run_child(tmp_path, "slow")
+    _same_scene(tmp_path, logs, ["d2", "d4"])
+    _balanced(tmp_path, ["d2", "d4", "mcmc_views_d2"], 6)
+    # MCMC with the views' poses, colours and bilateral grids on 2 devices: n + n // 20 at
+    # each refinement, every step applied
+    rows = [r for r in _rows(tmp_path / "mcmc_views_d2") if "loss" in r]
+    assert [r["gaussians"] for r in rows] == [301] * 3 + [316] * 3 + [331] * 2
+    assert all(np.isfinite(r["loss"]) for r in rows)
+    assert json.load(open(tmp_path / "mcmc_views_d2" / "result.json"))["skipped_steps"] == 0
+    # the held-out view rendered sharded (`sharded_state.Evaluations`) and saved
+    psnr = [json.load(open(tmp_path / run / "result.json"))["heldout_psnr"]
+            for run in ("d1", "d2", "d4")]
+    assert np.allclose(psnr, psnr[0], rtol=1e-3, atol=0), psnr
+    assert all((tmp_path / run / "heldout_v0.png").exists() for run in ("d2", "d4"))
+
+
+def test_gaussian_parallel_refused_combinations(tmp_path):
+    base = dict(data=str(tmp_path), out=str(tmp_path / "run"), gaussian_devices=2)
+    for extra, field in ((dict(devices=2, recipe=Recipe(batch=2)), "devices"),
+                         (dict(recipe=Recipe(app_opt=True)), "recipe.app_opt"),
+                         (dict(row_headroom=2.0), "row_headroom"),
+                         (dict(compile_ahead="thread"), "compile_ahead")):
+        with pytest.raises(ValueError, match=f"^{field}: not with gaussian_devices = 2"):
+            FitConfig(**base, **extra)
+    with pytest.raises(ValueError, match="^gaussian_devices: expected an int from 1 to 1"):
+        fit(FitConfig(**base, strategy=DefaultStrategy()))  # one CPU device here
+
+
+def test_gaussian_parallel_noise_drawn_per_slot():
+    # MCMC's noise on the means: a pool stored in another row order (row j holds slot
+    # order[j]) draws for each slot what the pool in slot order draws
+    rng = np.random.default_rng(0)
+    n = 12
+    params = dict(means=rng.normal(size=(n, 3)), quats=rng.normal(size=(n, 4)),
+                  log_scales=rng.normal(-1, 0.3, (n, 3)), logit_opacities=rng.normal(-3, 1, n))
+    pool = Pool({k: jnp.asarray(v, jnp.float32) for k, v in params.items()},
+                jnp.asarray(rng.uniform(size=n) < 0.7))
+    order = jnp.asarray(rng.permutation(n), jnp.int32)
+    key = jax.random.key(3)
+    whole = ops.inject_noise(pool, key, 0.1)
+    stored = ops.inject_noise(jax.tree.map(lambda x: x[order], pool), key, 0.1, slots=order)
+    np.testing.assert_array_equal(stored.params["means"], whole.params["means"][order])
