@@ -352,7 +352,8 @@ def test_fit_options_and_fit_config_cannot_drift():
     assert all(getattr(args, o.dest) is None for o in strategy)  # the strategy's own
     for name, cls in train.STRATEGIES.items():
         top = {o.dest: _changed(o, o.field.default) for o in config if o.path[0] != "recipe"}
-        top.update(data="d", out="o", resume=True, overwrite=False, devices=2)
+        top.update(data="d", out="o", resume=True, overwrite=False, devices=2,
+                   gaussian_devices=1)  # Gaussian parallel refuses devices > 1: below
         recipe = train.Recipe(**{o.dest: _changed(o, o.field.default) for o in config
                                  if o.path[0] == "recipe"} | dict(batch=4))
         fields = {f.name: _changed(next(o for o in strategy if o.dest == f.name), f.default)
@@ -363,6 +364,8 @@ def test_fit_options_and_fit_config_cannot_drift():
         words = fit_cmd.argv(changed)
         assert fit_cmd.config_of(cli.parser().parse_args(["fit"] + words)) == changed, name
         assert changed != train.FitConfig(data="d", out="o")
+    sharded = train.FitConfig(data="d", out="o", gaussian_devices=2)
+    assert fit_cmd.config_of(cli.parser().parse_args(["fit"] + fit_cmd.argv(sharded))) == sharded
 
 
 def test_fit_compile_ahead_flags_exclude_each_other(capsys):

@@ -80,6 +80,8 @@ class _Run:
     evaluations: heldout.Evaluations | None = None
     stopped_early: bool = False
     level: int | None = None  # the image level of the last step run (`levels`)
+    eval_seconds: float = 0.0  # held-out evaluations during the run
+    checkpoint_seconds: float = 0.0  # checkpoints during the run
 
     def __post_init__(self):
         self.key = jax.random.key(self.config.seed)
@@ -220,12 +222,16 @@ def _after_step(run: _Run, m: dict, watch: _Watch, data: dict, last: bool) -> No
     st, config = run.st, run.config
     watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]), force=last)
     if run.evaluations is not None and st.step % config.eval_every == 0 and not last:
+        t0 = time.perf_counter()
         psnr, ssim = run.evaluations.score(state.scene(st))
         st.eval_capacity = run.evaluations.capacity
+        run.eval_seconds += time.perf_counter() - t0
         run.record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
         run.say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
     if st.step % config.checkpoint_every == 0 or last:
+        t0 = time.perf_counter()
         state.save(config.out, config, st, data)
+        run.checkpoint_seconds += time.perf_counter() - t0
 
 
 def _early_stop(run: _Run, feed: LevelFeed) -> EarlyStop:
@@ -362,7 +368,10 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     result: held-out PSNR and SSIM, Gaussians, pool size, skipped steps, seconds (the whole
     call), ms_per_step (wall time of the steps and refinements, their compilation included,
     evaluations and checkpoints not; None when no step ran), compile_seconds (of that, the
-    time spent compiling or waiting for a compile ahead) and stopped_early_at (the step the
+    time spent compiling or waiting for a compile ahead), the parts of `seconds`
+    (load_seconds: data and the start or resume; step_seconds: steps and refinements;
+    eval_seconds and checkpoint_seconds during the run; finish_seconds: the final evaluation
+    and the output files; logged in one line at the end) and stopped_early_at (the step the
     early stop ended the run at, or None).
     """
     if not isinstance(config, FitConfig):
@@ -396,6 +405,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
             st = state.fresh(config, setup, rd, log)
         start, clock, data = st.step, report.CompileClock(), data_of(config, data_path)
         run = _Run(config, setup, rd, st, log)
+        loaded = time.perf_counter() - t0
         with clock.listening():
             busy = _loop(run, clock, watch, stop, data)
         if st.step < config.steps and not run.stopped_early:  # stopped by Ctrl-C
@@ -403,6 +413,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
             raise Interrupted(st.step, config.steps, out)
     ran = max(st.step - start, 0)
     times = dict(seconds=time.perf_counter() - t0, ms_per_step=1e3 * busy / ran if ran else None,
-                 compile_seconds=clock.seconds,
+                 compile_seconds=clock.seconds, load_seconds=loaded, step_seconds=busy,
+                 eval_seconds=run.eval_seconds, checkpoint_seconds=run.checkpoint_seconds,
                  stopped_early_at=st.step if run.stopped_early else None)
     return outputs.finish(out, setup, st, rd, times, log)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import time
 
 import jax
 import jax.numpy as jnp
@@ -70,10 +71,24 @@ def _views_files(out: str, st: RunState, rd: RunData) -> None:
             bilateral_grid.save(tmp, views["grid"][0], rd.train_names)
 
 
+def time_parts(run: dict) -> str:
+    """The run's wall time in parts, in words (`fit`'s result: load_seconds, step_seconds and
+    the compile_seconds within them, eval_seconds, checkpoint_seconds, finish_seconds)."""
+    parts = [("loading and starting", "load_seconds"), ("steps", "step_seconds"),
+             ("held-out evaluations", "eval_seconds"), ("checkpoints", "checkpoint_seconds"),
+             ("final evaluation and outputs", "finish_seconds")]
+    said = [f"{name} {run[key]:.1f} s" + (f" (compiling {run['compile_seconds']:.1f} s)"
+                                          if key == "step_seconds" else "")
+            for name, key in parts if run.get(key) is not None]
+    return f"{run['seconds']:.1f} s in all: " + ", ".join(said)
+
+
 def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) -> dict:
     """The final evaluation and outputs (module docstring); returns the result: the steps done
     (fewer than the run's where the early stop ended it), held-out PSNR and SSIM, Gaussians,
-    pool size, skipped steps, and `run` (the loop's times)."""
+    pool size, skipped steps, and `run` (the loop's times), with finish_seconds (this call's)
+    added to its seconds; the time's parts are logged in a line."""
+    t0 = time.perf_counter()
     psnr, ssim = evaluate(st, rd, setup, out)
     if psnr is None:
         log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
@@ -88,6 +103,9 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) ->
     _views_files(out, st, rd)
     with written(os.path.join(out, "curves.png")) as tmp:
         report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")), tmp)
+    run = dict(run, finish_seconds=time.perf_counter() - t0)
+    run["seconds"] += run["finish_seconds"]
+    log(time_parts(run))
     result = dict(steps=st.step, heldout_psnr=psnr, heldout_ssim=ssim,
                   gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
                   skipped_steps=st.skipped, **run,

@@ -239,6 +239,11 @@ def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
     assert os.path.getsize(tmp_path / "curves.png") > 0 and result["skipped_steps"] == 0
     busy = 1e-3 * result["ms_per_step"] * STEPS  # steps and refinements, compiling included
     assert 0 < result["compile_seconds"] < busy <= result["seconds"]
+    parts = [result[k] for k in ("load_seconds", "step_seconds", "eval_seconds",
+                                 "checkpoint_seconds", "finish_seconds")]
+    assert min(parts) >= 0 and result["eval_seconds"] > 0 and result["checkpoint_seconds"] > 0
+    assert abs(result["step_seconds"] - busy) < 1e-6 * busy
+    assert sum(parts) <= result["seconds"]  # the rest: the watch, the bar, the metrics file
 
 
 class _Stop(Exception):
