@@ -14,7 +14,7 @@ the value and gradient of Σ image·w (w fixed, random) over every field, both w
 row buffer and with rows for the walked pairs (`row_capacity`, "@walked"). Printed per row: the
 median ms, XLA's compiled memory (temporaries + outputs) and whether every output equals the
 current tree's to the bit (or, with --against REV, that revision's: the bits of a change that
-is not the newest). (Until Dec 3 this was a carried script, session-dec03e/ab_pkg.py.)
+is not the newest).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ MOSAIC_GPU_DUMP_TO set, writes them out. Here each PTX goes through the CUDA whe
 (sm_90a) and `cuobjdump -sass` (the package's `sass` extra: `build/gpu-offline/bin/pip install
 ".[gpu,sass]"`), then the loops are found by their backward branches. For a
 kernel whose time is its instruction count (the backward kernel at synthetic 4M: 81% of the
-issue slots busy, BENCHMARKS.md §7, Dec 3, seventh session) the count per iteration of the pair
+issue slots busy) the count per iteration of the pair
 loop is what a change buys, before any GPU runs it. Printed per loop: its instructions and, from
 the loop's first forward branch on (the per-pair step past a chunk's staging, in the backward
 kernel), the instructions of that part.

@@ -138,7 +138,7 @@ def test_record_columns_are_computed_from_the_lanes_data(hoist):
     """Every column of `pairs.record_columns` without a mask is computed from the Gaussians'
     own columns, none a constant: the Mosaic GPU kernels store the columns with lane-strided
     inline stores, which a constant's splat fails to build for (LLVM translation), and on the
-    H200 the kernels without warp culling hung their tests (Dec 3, eighth session)."""
+    H200 the kernels without warp culling hung their tests."""
     cols = [jnp.arange(8, dtype=jnp.float32) + i for i in range(pairs.TABLE_COLUMNS)]
     config = lgs_jax.RasterConfig(hoist=hoist, warp_cull=False)
     tx, ty = jnp.int32(3), jnp.int32(2)
