@@ -313,32 +313,48 @@ def grad_rows(scene: str, g, cam, rows, repeat: int, with_gsplat: bool):
     return out
 
 
+def cuda_f32(x):
+    """`x` as a float32 torch tensor on the GPU."""
+    import torch
+
+    return torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to("cuda")
+
+
+def gsplat_draw(cam, sh_degree: int):
+    """draw(means, quats, log_scales, logit_opacities, sh) -> (1, H, W, 3): gsplat's
+    rasterization of view `cam` from our parameter layout (torch tensors on the GPU)."""
+    import torch
+    from gsplat import rasterization
+
+    viewmat = cuda_f32(cam.viewmat)[None]
+    K = cuda_f32([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
+
+    def draw(means, quats, log_scales, logit_opacities, sh):
+        return rasterization(means, quats, torch.exp(log_scales), torch.sigmoid(logit_opacities),
+                             sh, viewmat, K, cam.width, cam.height, near_plane=float(cam.near),
+                             far_plane=float(cam.far), sh_degree=sh_degree, packed=False,
+                             rasterize_mode="classic")[0]
+
+    return draw
+
+
 def gsplat_grad_step(g, cam, weights):
     """gsplat's rasterization + backward() of Σ image·w w.r.t. all parameters, or None."""
     try:
         import torch
-        from gsplat import rasterization
+        draw = gsplat_draw(cam, int(round(np.sqrt(g.sh.shape[1]))) - 1)
     except Exception as e:  # noqa: BLE001
         print(f"gsplat unavailable: {e}", file=sys.stderr)
         return None
-    dev = torch.device("cuda")
-    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
-    params = [t(g.means), t(g.quats), t(g.log_scales), t(g.logit_opacities), t(g.sh)]
+    params = [cuda_f32(x) for x in (g.means, g.quats, g.log_scales, g.logit_opacities, g.sh)]
     for x in params:
         x.requires_grad_(True)
-    viewmat = t(cam.viewmat)[None]
-    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
-    deg = int(round(np.sqrt(g.sh.shape[1]))) - 1
-    tw = t(np.asarray(weights))
+    tw = cuda_f32(weights)
 
     def step():
         for x in params:
             x.grad = None
-        image = rasterization(params[0], params[1], torch.exp(params[2]),
-                              torch.sigmoid(params[3]), params[4], viewmat, K, cam.width,
-                              cam.height, near_plane=float(cam.near), far_plane=float(cam.far),
-                              sh_degree=deg, packed=False, rasterize_mode="classic")[0]
-        (image[0] * tw).sum().backward()
+        (draw(*params)[0] * tw).sum().backward()
         torch.cuda.synchronize()
 
     return step

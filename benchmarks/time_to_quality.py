@@ -387,11 +387,11 @@ def summary(args) -> int:
 
 # ----------------------------------------------------------------------------------- main
 
-def _scene_runs(args, scene: str, gsplat: bool) -> tuple[list[dict], list[dict]]:
-    """The rows and curve points of one scene: the first (untimed, or --cold) run, then each
-    seed's gsplat and ours back to back."""
+def _scene_runs(args, scene: str, gsplat: bool) -> list[dict]:
+    """The rows of one scene (each with its curve kept as its run ends, `_kept`): the first
+    (untimed, or --cold) run, then each seed's gsplat and ours back to back."""
     cache = os.path.join(os.path.abspath(args.out), "jax_cache", scene)
-    rows, curves = [], []
+    rows = []
     if "ours" in args.trainers and (args.cold or not args.no_warmup):
         if args.cold and not args.dry_run:
             shutil.rmtree(cache, ignore_errors=True)
@@ -400,14 +400,10 @@ def _scene_runs(args, scene: str, gsplat: bool) -> tuple[list[dict], list[dict]]
             rows.append(_kept(args, first, []))
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         if gsplat:
-            row, curve = run_gsplat(args, scene, seed)
-            rows.append(_kept(args, row, curve))
-            curves += curve
+            rows.append(_kept(args, *run_gsplat(args, scene, seed)))
         if "ours" in args.trainers:
-            row, curve = run_ours(args, scene, seed, cache)
-            rows.append(_kept(args, row, curve))
-            curves += curve
-    return rows, curves
+            rows.append(_kept(args, *run_ours(args, scene, seed, cache)))
+    return rows
 
 
 def _kept(args, row: dict, curve: list[dict]) -> dict:
@@ -415,8 +411,9 @@ def _kept(args, row: dict, curve: list[dict]) -> dict:
     keeps the runs it finished) and printed; returns `row`."""
     if not args.dry_run:
         merge(os.path.join(args.out, "results.csv"), [row], FIELDS, ("scene", "trainer", "seed"))
-        merge(os.path.join(args.out, "curves.csv"), curve, CURVE_FIELDS,
-              ("scene", "trainer", "seed"))
+        if curve:
+            merge(os.path.join(args.out, "curves.csv"), curve, CURVE_FIELDS,
+                  ("scene", "trainer", "seed"))
         short_table([row])
     return row
 
@@ -465,12 +462,7 @@ def main(argv=None) -> int:
                 merge(os.path.join(args.out, "ablation.csv"), rows, FIELDS,
                       ("scene", "trainer", "seed"))
         else:
-            rows, curves = _scene_runs(args, scene, gsplat)
-            if not args.dry_run:
-                merge(os.path.join(args.out, "results.csv"), rows, FIELDS,
-                      ("scene", "trainer", "seed"))
-                merge(os.path.join(args.out, "curves.csv"), curves, CURVE_FIELDS,
-                      ("scene", "trainer", "seed"))
+            rows = _scene_runs(args, scene, gsplat)  # each row kept as its run ended
         every += rows
     if not args.dry_run:
         short_table(every)

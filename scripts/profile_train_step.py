@@ -171,24 +171,18 @@ def gsplat_stages(g, cam, target) -> dict:
     """{row: blocking callable} of gsplat's forward, the torch loss's backward and torch Adam
     (module docstring)."""
     import torch
-    from gsplat import rasterization
 
+    from benchmarks.scale import cuda_f32, gsplat_draw
     from benchmarks.train_vs_gsplat import torch_ssim
 
-    dev = torch.device("cuda")
-    t = lambda x: torch.from_numpy(np.ascontiguousarray(np.asarray(x, np.float32))).to(dev)
-    params = [t(g.means), t(g.quats), t(g.log_scales), t(g.logit_opacities), t(g.sh[:, :1]),
-              t(g.sh[:, 1:])]
-    viewmat = t(cam.viewmat)[None]
-    K = t([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]])[None]
-    deg = int(round(np.sqrt(g.sh.shape[1]))) - 1
-    ref = t(target.astype(np.float32) / (255 if target.dtype == np.uint8 else 1))
+    draw = gsplat_draw(cam, int(round(np.sqrt(g.sh.shape[1]))) - 1)
+    params = [cuda_f32(x) for x in (g.means, g.quats, g.log_scales, g.logit_opacities,
+                                    g.sh[:, :1], g.sh[:, 1:])]
+    ref = cuda_f32(as_float(target))
 
     def render():
         with torch.no_grad():
-            rasterization(params[0], params[1], torch.exp(params[2]), torch.sigmoid(params[3]),
-                          torch.cat(params[4:], 1), viewmat, K, cam.width, cam.height,
-                          sh_degree=deg, packed=False)
+            draw(*params[:4], torch.cat(params[4:], 1))
         torch.cuda.synchronize()
 
     image = torch.rand_like(ref, requires_grad=True)

@@ -110,13 +110,19 @@ def _held_out(names: list[str], nerf_synthetic: bool, where: str) -> np.ndarray:
     return np.asarray(ids) % 10 == 0
 
 
+def block_mean(image: np.ndarray, k: int) -> np.ndarray:
+    """(H // k, W // k, C) float64 mean of each k x k block of an (H, W, C) image, after
+    dropping the last H % k rows and W % k columns (the downscale of `load_dataset`)."""
+    h, w = image.shape[0] // k, image.shape[1] // k
+    return image[:h * k, :w * k].reshape(h, k, w, k, image.shape[2]).mean((1, 3),
+                                                                           dtype=np.float64)
+
+
 def _downscale(image: np.ndarray, k: int) -> np.ndarray:
-    """Mean of k x k blocks after dropping the last H % k rows and W % k columns."""
+    """`block_mean` in float32 (the image itself for k = 1)."""
     if k == 1:
         return image
-    h, w = image.shape[0] // k, image.shape[1] // k
-    blocks = image[:h * k, :w * k].reshape(h, k, w, k, image.shape[2])
-    return blocks.mean((1, 3), dtype=np.float64).astype(np.float32)
+    return block_mean(image, k).astype(np.float32)
 
 
 def _prepare(view: View, source: Source, background, undistorters, k,

@@ -25,6 +25,7 @@ import dataclasses
 import jax
 import numpy as np
 
+from ..io.datasets import block_mean
 from .feed import RunData, TrainViews
 
 
@@ -51,9 +52,7 @@ def downscaled(image: np.ndarray, k: int) -> np.ndarray:
     """(H, W, C) `image` averaged over k x k blocks (module docstring), in its dtype."""
     if k == 1:
         return image
-    h, w = image.shape[0] // k, image.shape[1] // k
-    mean = image[:h * k, :w * k].reshape(h, k, w, k, image.shape[2]).mean((1, 3),
-                                                                           dtype=np.float64)
+    mean = block_mean(image, k)
     if image.dtype == np.uint8:
         return np.round(mean).astype(np.uint8)
     return mean.astype(np.float32)
