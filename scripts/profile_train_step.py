@@ -33,7 +33,8 @@ rounds, one training view):
   gsplat adam       torch's fused Adam over the same parameters, one optimizer per group
 Then the step's memory by part (MiB): the pool's parameters, the optimizer state, the strategy
 state, the view's target, and XLA's buffers of the compiled `train_step` (arguments, outputs,
-temporaries: the pair and row buffers, the render's per-pair records, the loss's images).
+temporaries: the pair and row buffers, the render's per-pair records, the loss's images; and
+how much of the outputs XLA writes in place of the donated state).
 """
 
 from __future__ import annotations
@@ -143,8 +144,12 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     key = jax.random.key(0)
     step_fn = functools.partial(st.train_step, setup=setup, capacity=capacity)
     targets = jnp.asarray(as_float(rd.train_images[:1]))  # view 0's, on the device as fit's
-    call = lambda: step_fn(pool, opt_state, sstate, None, rd.train_cams, targets,
-                           idx, bg, jnp.int32(6000), key)
+    own = list(jax.tree.map(jnp.copy, (pool, opt_state, sstate)))  # the step donates its state
+
+    def call():
+        out = step_fn(*own, None, rd.train_cams, targets, idx, bg, jnp.int32(6000), key)
+        own[:] = out[:3]
+        return out
     fns = {
         "render": lambda: jax.block_until_ready(fwd(pool.params)),
         "render+bwd": lambda: jax.block_until_ready(bwd(pool.params)),
@@ -225,6 +230,8 @@ def memory_parts(setup, pool, opt_state, sstate, rd, capacity: int) -> dict:
     if m is not None:
         parts.update({"XLA arguments": m.argument_size_in_bytes / 2**20,
                       "XLA outputs": m.output_size_in_bytes / 2**20,
+                      "XLA outputs in their donated arguments' place":
+                          m.alias_size_in_bytes / 2**20,
                       "XLA temporaries": m.temp_size_in_bytes / 2**20})
     return parts
 

@@ -7,8 +7,9 @@ dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_h
 and with several levels starts again at each level's first step, sized to its first view;
 likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Sizes`), then
 `step.refine` where the strategy asks (the pool doubles when it needs room, up to
-`max_gaussians`: a recompile; both are logged). A step whose loss, gradients or parameters
-would not be finite is skipped (nothing changes), logged and recorded.
+`max_gaussians`: a recompile; both are logged). A step whose loss or gradients would not be
+finite is skipped (nothing changes), logged and recorded. The step donates the run's state
+(`RunState`'s pool, optimizer, strategy and views): after a step only its outputs are used.
 
 The run folder (`rundir`) is checked and locked before any work. OUT/metrics.jsonl gets a row
 per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts) and
@@ -41,7 +42,7 @@ from .feed import RunData, nbytes, prepare, streams
 from .interrupt import Interrupted, StopRequest
 from .levels import LevelFeed, check as check_levels
 from .state import RunState
-from .step import refine, replicated, train_step
+from .step import distinct, refine, replicated, train_step
 
 
 # A step's second buffer beside the pairs (`ahead.Sizes`' second size): the RunState field
@@ -111,6 +112,8 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
     _enter_level(run, feed)
     images, idx = feed.args(st.step)
     field, flag, needed, name = SECOND[run.setup.gaussian_devices > 1]
+    st.pool, st.opt_state, st.strategy_state, st.views = distinct(
+        (st.pool, st.opt_state, st.strategy_state, st.views))
     while True:
         args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(st.step), images,
                 idx, run.background, st.step, run.key) + ((st.order,) if st.order is not None
@@ -120,9 +123,10 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
         new = steps.run(args, size, sig)
         feed.prefetch(st.step + 1)  # while the step runs
         steps.prepare(args, size, sig)
+        # the arguments were donated; an overflowed step returned them unchanged
+        st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
         m = {k: v.item() for k, v in jax.device_get(new[4]).items()}
         if not (m["overflow"] or m[flag]):
-            st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
             return m
         need = (m["pairs"], m[needed])
         grown_size, waited, ahead = steps.grow(size, need, sig)
@@ -190,7 +194,8 @@ class _Watch:
         if self.fn is None or not (force or now - self.last >= self.every):
             return
         pool = state.scene(st)
-        g = state.shown(pool.params, pool.active)
+        # copies: the next step donates the pool, whose arrays `shown` may pass through
+        g = jax.tree.map(jnp.copy, state.shown(pool.params, pool.active))
         if self.devices > 1:  # replicated: one device's copy, no transfer
             g = jax.tree.map(lambda x: x.addressable_data(0), g)
         if self.gathered:  # split over devices: the rows whole on the host
@@ -285,8 +290,7 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
                         m["count"] = _refine(run)
                 if not m["ok"]:
                     st.skipped += 1
-                    run.say(f"step {st.step + 1}: skipped (loss, gradients or parameters not "
-                            f"finite)")
+                    run.say(f"step {st.step + 1}: skipped (loss or gradients not finite)")
                 st.step += 1
                 busy += time.perf_counter() - t0
                 run.record(step=st.step, loss=m["loss"], psnr=m["psnr"], gaussians=m["count"],

@@ -8,11 +8,18 @@ means: ∂loss/∂mean2d); one Adam update (and one of the views' own parameters
 deltas with `Recipe.pose_opt`, colour corrections with `Recipe.color_opt`, bilateral grids with
 `Recipe.bilateral_grid`, appearance embeddings and their head with `Recipe.app_opt`, each view's
 Gaussians then seen with their band 0 moved, `appearance.seen`); then the strategy's per-step
-update. A step whose loss, gradients or new parameters (active slots) are not finite changes
-nothing: it returns its inputs with ok False (`fit` reports it). A view whose tile pairs overflow
-the capacity, or whose walked pairs overflow the backward's rows (`render`'s row_capacity), is
-reported (overflow, pairs, row_overflow, walked): `fit` grows what overflowed and runs the same step
-again, so no pair is ever dropped.
+update. A step whose loss or gradients (active slots) are not finite changes nothing: it
+returns its inputs with ok False (`fit` reports it). Finite gradients keep finite parameters
+finite: Adam's step is at most `sharded.adam_step_ratio` times the rate. A view whose tile pairs
+overflow the capacity, or whose walked pairs overflow the backward's rows (`render`'s
+row_capacity), is reported (overflow, pairs, row_overflow, walked) and changes nothing either:
+`fit` grows what overflowed and runs the same step again on the state it returned, so no pair is
+ever dropped.
+
+The state (pool, optimizer, strategy, views) is donated: the step updates it in place, so a
+run holds one copy of it, not two. Whether the step applies is decided before the update from
+the loss and the gradients, so the guard `where(apply, new, old)` fuses into the update
+elementwise; a guard on the new parameters would need the whole new state beside the old.
 
 Every piece is compiled with XLA's autotuning off (`COMPILER_OPTIONS`). On a GPU, XLA picks
 among kernel configurations, reductions' included, by timing them while it compiles
@@ -58,6 +65,19 @@ def _finite(tree, active) -> jax.Array:
 
 def _select(flag, new, old):
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
+
+
+def distinct(tree):
+    """`tree` with every leaf that is an earlier leaf's array object copied: a call cannot
+    donate one buffer twice (a state built outside a step may hold one array in two places)."""
+    seen = set()
+
+    def one(x):
+        if id(x) in seen:
+            return jnp.copy(x)
+        seen.add(id(x))
+        return x
+    return jax.tree.map(one, tree)
 
 
 @functools.cache
@@ -186,6 +206,7 @@ def row_stats(stats):
 
 
 @functools.partial(jax.jit, static_argnames=("setup", "capacity", "rows", "exchange"),
+                   donate_argnames=("pool", "opt_state", "strategy_state", "views"),
                    compiler_options=COMPILER_OPTIONS)
 def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, idx,
                background, step, key, slots=None, *, setup: Setup, capacity: int,
@@ -197,12 +218,14 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     `views`: the training views' own parameters and their optimizer states (`view_params`:
     pose deltas, colour corrections), or None; `key` is the run's; `rows`: the backward's row
     buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, views,
-    metrics): loss, psnr (training views), ok (finite, applied), overflow, pairs (largest
+    metrics): loss, psnr (training views), ok (finite), overflow, pairs (largest
     per-view pair count), row_overflow, walked (largest per-view count of walked pairs), count
     (active Gaussians). With `setup.gaussian_devices` > 1 (`sharded`): the state's rows split
     over that many devices, `slots` the slot each row holds, `exchange` the records each device
     can send another; pairs are per device, and row_overflow and walked give way to
-    exchange_overflow and exchange_required (`sharded.buffer_metrics`)."""
+    exchange_overflow and exchange_required (`sharded.buffer_metrics`). The step applies
+    where ok and nothing overflowed; else it returns its state unchanged. The state arguments
+    are donated: use the returned state, never the arguments, after a call."""
     cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
                                width=targets.shape[2], height=targets.shape[1])
     (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = loss_and_grads(
@@ -215,28 +238,31 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     info = StepInfo(grads2d, visible, lr, cams.width, cams.height, slots)
     new_state, new_pool, new_opt = setup.strategy.step(strategy_state, new_pool, new_opt, info,
                                                        step, step_keys(key, step)[0])
-    ok = (jnp.isfinite(loss) & _finite(grads, pool.active)
-          & _finite(new_pool.params, new_pool.active))
+    ok = jnp.isfinite(loss) & _finite(grads, pool.active)
     if grads2d is not None:
         ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
     new_views = views
     if views is not None:
         new_views = view_params.update(setup.recipe, setup.steps, views, grads_views)
         ok = ok & jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in
-                                     jax.tree.leaves(view_params.params(new_views))]))
+                                     jax.tree.leaves(grads_views)]))
+    if setup.gaussian_devices > 1:
+        buffers = sharded.buffer_metrics(stats)
+        fits = ~(buffers["overflow"] | buffers["exchange_overflow"])
+    else:
+        row_overflow, walked = row_stats(stats)
+        buffers = dict(overflow=jnp.any(stats.overflow), pairs=jnp.max(stats.pairs_required),
+                       row_overflow=jnp.any(row_overflow), walked=jnp.max(walked))
+        fits = ~(buffers["overflow"] | buffers["row_overflow"])
     pool, opt_state, strategy_state, views = _select(
-        ok, (new_pool, new_opt, new_state, new_views), (pool, opt_state, strategy_state, views))
+        ok & fits, (new_pool, new_opt, new_state, new_views),
+        (pool, opt_state, strategy_state, views))
     if setup.devices > 1:
         pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
             (pool, opt_state, strategy_state, views), replicated(setup.devices))
     if setup.gaussian_devices > 1:
         (pool, opt_state, strategy_state), views = sharded.constrained(
             setup.gaussian_devices, (pool, opt_state, strategy_state), pool.size, views)
-        buffers = sharded.buffer_metrics(stats)
-    else:
-        row_overflow, walked = row_stats(stats)
-        buffers = dict(overflow=jnp.any(stats.overflow), pairs=jnp.max(stats.pairs_required),
-                       row_overflow=jnp.any(row_overflow), walked=jnp.max(walked))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, **buffers,
                    count=jnp.sum(pool.active, dtype=jnp.int32))
     return pool, opt_state, strategy_state, views, metrics

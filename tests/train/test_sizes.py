@@ -116,7 +116,8 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
     opt_state = optim.optimizer(setup.recipe, 10, rd.scene_scale).init(pool.params)
     views = [5, 1]  # 24x32 (the first size is 24x32, view 2 is 32x24)
     targets = jnp.stack([jnp.asarray(rd.train_images[v]) for v in views])
-    m = train_step(pool, opt_state, setup.strategy.init(pool, 1.0), None, rd.train_cams,
+    state = jax.tree.map(jnp.copy, (pool, opt_state, setup.strategy.init(pool, 1.0)))  # donated
+    m = train_step(*state, None, rd.train_cams,
                    targets, jnp.asarray(views), jnp.asarray(BACKGROUND), 0, jax.random.key(0),
                    setup=setup, capacity=4096)[4]
     g = train_pool.render_gaussians(pool.params, pool.active)
