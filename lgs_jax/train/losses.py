@@ -17,10 +17,10 @@ SSIM by default (3DGS's; gsplat's simple_trainer uses "valid": Recipe.ssim_paddi
 
 On a GPU `ssim` runs two fused Pallas Triton kernels (`ssim_kernel`: the five blurred maps,
 the SSIM map and its per-pixel partial derivatives in one, their blur into the gradients in
-the other, as fused-ssim does). Elsewhere it is XLA's, with its gradient written out (a custom
-VJP, the same equations as the kernels'): with A = 2 μ_a μ_b +
-C1, B = 2 σ_ab + C2, C = μ_a² + μ_b² + C1, D = σ_a² + σ_b² + C2 and g the mean's weight of each
-pixel (1/N inside the counted pixels, 0 outside),
+the other, as fused-ssim does). Elsewhere it is XLA's (`xla_ssim`), with its gradient written
+out (a custom VJP, the kernels' equations): with A = 2 μ_a μ_b + C1, B = 2 σ_ab + C2,
+C = μ_a² + μ_b² + C1, D = σ_a² + σ_b² + C2 and g the mean's weight of each pixel (1/N inside
+the counted pixels, 0 outside),
 
     ∂SSIM/∂a = w * [g·s·(2μ_b/A − 2μ_b/B − 2μ_a/C + 2μ_a/D)] + 2a·(w * [−g·s/D]) + b·(w * [2g·s/B])
 
