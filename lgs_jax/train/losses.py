@@ -15,9 +15,12 @@ averaged over pixels and channels. Two boundary rules:
 `loss_fn`: (1 − λ)·L1 + λ·(1 − SSIM), λ = 0.2 (3DGS, gsplat's simple_trainer), with the "same"
 SSIM by default (3DGS's; gsplat's simple_trainer uses "valid": Recipe.ssim_padding).
 
-`ssim`'s gradient is written out (a custom VJP, as fused-ssim's backward): with A = 2 μ_a μ_b +
-C1, B = 2 σ_ab + C2, C = μ_a² + μ_b² + C1, D = σ_a² + σ_b² + C2 and g the mean's weight of each
-pixel (1/N inside the counted pixels, 0 outside),
+On a GPU `ssim` runs two fused Pallas Triton kernels (`ssim_kernel`: the five blurred maps,
+the SSIM map and its per-pixel partial derivatives in one, their blur into the gradients in
+the other, as fused-ssim does). Elsewhere it is XLA's (`xla_ssim`), with its gradient written
+out (a custom VJP, the kernels' equations): with A = 2 μ_a μ_b + C1, B = 2 σ_ab + C2,
+C = μ_a² + μ_b² + C1, D = σ_a² + σ_b² + C2 and g the mean's weight of each pixel (1/N inside
+the counted pixels, 0 outside),
 
     ∂SSIM/∂a = w * [g·s·(2μ_b/A − 2μ_b/B − 2μ_a/C + 2μ_a/D)] + 2a·(w * [−g·s/D]) + b·(w * [2g·s/B])
 
@@ -35,6 +38,8 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from . import ssim_kernel
 
 LAMBDA_DSSIM = 0.2
 PADDINGS = ("same", "valid")  # `ssim` boundary rules (module docstring)
@@ -60,9 +65,12 @@ def _blur(x, w, mode: str):
     return sum(float(w[k]) * x[:, :, k:k + wd] for k in range(len(w)))
 
 
-def _check(padding: str) -> None:
+def _check(padding: str, shape) -> None:
     if padding not in PADDINGS:
         raise ValueError(f"padding: expected 'same' or 'valid', got {padding!r}")
+    if padding == "valid" and min(shape[:2]) <= 2 * RADIUS:
+        raise ValueError(f"padding: 'valid' counts no pixel of a {shape[0]}x{shape[1]} image "
+                         f"(its {RADIUS}-pixel border is left out)")
 
 
 def _terms(a, b, data_range: float):
@@ -84,15 +92,25 @@ def _mean(s, padding: str):
 
 def ssim_reference(a, b, data_range: float = 1.0, padding: str = "valid"):
     """`ssim` differentiated by JAX through the blur (module docstring)."""
-    _check(padding)
+    _check(padding, a.shape)
     a, b = jnp.moveaxis(a, -1, 0), jnp.moveaxis(b, -1, 0)
     return _mean(_terms(a, b, data_range)[0], padding)
 
 
 def ssim(a, b, data_range: float = 1.0, padding: str = "valid"):
     """Mean SSIM of two (H, W, C) images (module docstring: "same" or "valid" padding), with
-    its gradient written out."""
-    _check(padding)
+    its gradient written out: the fused kernels when JAX's default backend is a GPU, else
+    `xla_ssim`."""
+    _check(padding, a.shape)
+    if jax.default_backend() == "gpu":
+        return ssim_kernel.ssim(a, b, tuple(gaussian_window()), float(data_range), padding,
+                                interpret=False)
+    return _ssim(a, b, float(data_range), padding)
+
+
+def xla_ssim(a, b, data_range: float = 1.0, padding: str = "valid"):
+    """`ssim` in XLA on any platform (module docstring), its gradient written out."""
+    _check(padding, a.shape)
     return _ssim(a, b, float(data_range), padding)
 
 
