@@ -20,7 +20,9 @@ rounds, one training view):
   render        forward image only
   render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
   loss+bwd      the training loss (L1 + SSIM + MCMC regulariser) and its gradients
-  ssim+bwd      the loss's image part alone (gradient w.r.t. the image)
+  ssim+bwd      the loss's image part alone (gradient w.r.t. the image of one render: the
+                render not included), as training computes it (the fused kernels on a GPU)
+  ssim+bwd xla  the same through the XLA SSIM (`losses.xla_ssim`)
   adam          the optimizer update of the whole pool
   noise         MCMC's per-step noise on the means
   train_step    `train_step` whole (device time: blocked, no host read)
@@ -136,6 +138,10 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
                                                   target[None], bg, jnp.int32(6000),
                                                   jnp.array([0])))
     ssimg = jax.jit(jax.grad(lambda im: losses.loss_fn(im, target, 0.2, "same")))
+    xla_loss = lambda im: 0.8 * jnp.mean(jnp.abs(im - target)) + 0.2 * (
+        1 - losses.xla_ssim(im, target, padding="same"))
+    xla_ssimg = jax.jit(jax.grad(xla_loss))
+    image = fwd(pool.params)
     opt = optimizer(setup.recipe, setup.steps, setup.scene_scale)
     adam = jax.jit(lambda g_, s_, p_: opt.update(g_, s_, p_))
     noise = jax.jit(lambda p_, k_: ops.inject_noise(p_, k_, 1e-4 * 5e5))
@@ -154,7 +160,8 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
         "render": lambda: jax.block_until_ready(fwd(pool.params)),
         "render+bwd": lambda: jax.block_until_ready(bwd(pool.params)),
         "loss+bwd": lambda: jax.block_until_ready(lossg(pool.params)),
-        "ssim+bwd": lambda: jax.block_until_ready(ssimg(fwd(pool.params))),
+        "ssim+bwd": lambda: jax.block_until_ready(ssimg(image)),
+        "ssim+bwd xla": lambda: jax.block_until_ready(xla_ssimg(image)),
         "adam": lambda: jax.block_until_ready(adam(grads, opt_state, pool.params)),
         "noise": lambda: jax.block_until_ready(noise(pool, key)),
         "train_step": lambda: jax.block_until_ready(call()),
