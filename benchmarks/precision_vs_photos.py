@@ -4,7 +4,7 @@
     python -m benchmarks.precision_vs_photos [--data-root DIR] [--scenes lego_train skull]
         [--forms local global difference] [--seeds 4] [--steps N] [--backend tiles|pallas]
         [--out DIR] [--dry-run]
-    python -m benchmarks.precision_vs_photos --summary [--out DIR]
+    python -m benchmarks.precision_vs_photos --summary [--out DIR] [--inputs CSV ...]
 
 Per scene, seed and form (forms innermost, so that a call cut short keeps whole seeds), in this
 process: `fit --alpha-form FORM --seed S --downscale D --steps N` (`train.fit` from those
@@ -90,6 +90,9 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--run-dir",
                     help="keep the runs' folders here (default: temporary ones, removed)")
     ap.add_argument("--summary", action="store_true", help="print and write the summary only")
+    ap.add_argument("--inputs", nargs="+", metavar="CSV",
+                    help="--summary of these results.csv files together (several calls' "
+                         "rows; default: OUT/results.csv)")
     ap.add_argument("--dry-run", action="store_true", help="print the fit commands only")
     return ap.parse_args(argv)
 
@@ -337,14 +340,16 @@ def summary_lines(rows: list[dict]) -> list[str]:
 
 
 def summary(args) -> int:
-    rows = read_csv(os.path.join(args.out, "results.csv"))
+    paths = args.inputs or [os.path.join(args.out, "results.csv")]
+    rows = [r for p in paths for r in read_csv(p)]
     if not rows:
-        print(f"{args.out}: no results.csv to summarise")
+        print(f"{', '.join(paths)}: no rows to summarise")
         return 1
-    device = next((r["device"] for r in rows if r.get("device")), "?")
+    devices = sorted({r["device"] for r in rows if r.get("device")})
     backends = sorted({r["backend"] for r in rows if r.get("backend")})
     lines = ["## Exponent forms against the photos and float64 (mean ± sd over seeds)", "",
-             f"Device {device}; training backend {', '.join(backends)}; rows: results.csv.",
+             f"Device {', '.join(devices)}; training backend {', '.join(backends)}; rows: "
+             f"{', '.join(paths)}.",
              ""] + summary_lines(rows)
     errors = [r for r in rows if r.get("error")]
     if errors:
@@ -363,9 +368,9 @@ def summary(args) -> int:
 def main(argv=None) -> int:
     args = parse(argv)
     args.data_root = os.path.abspath(args.data_root)
+    os.makedirs(args.out, exist_ok=True)
     if args.summary:
         return summary(args)
-    os.makedirs(args.out, exist_ok=True)
     os.environ.setdefault("TQDM_DISABLE", "1")  # fit's progress bars: the rows say enough
     import jax
 

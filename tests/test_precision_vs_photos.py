@@ -29,6 +29,7 @@ def _row(form, seed, psnr, ev="200x200"):
 
 def test_rows_are_kept_as_runs_end_and_summarised_paired_by_seed(tmp_path, capsys):
     out = str(tmp_path)
+    (tmp_path / "other").mkdir()
     pvp.keep(out, [_row("local", 0, 30.0), _row("global", 0, 29.0)])
     pvp.keep(out, [_row("local", 1, 31.0), _row("global", 1, 30.5)])
     pvp.keep(out, [_row("global", 1, 30.0)])  # a rerun replaces its row
@@ -47,3 +48,10 @@ def test_rows_are_kept_as_runs_end_and_summarised_paired_by_seed(tmp_path, capsy
     # global − local per seed: −1.0, −1.0: mean −1, standard error 0
     assert "| 2 | 29.500 ± 0.707 | 0.9000 ± 0.0000 | -1.000 ± 0.000 |" in lines["global"]
     assert "difference" not in lines and "1 rows failed: lego_train difference seed 0" in text
+    other = tmp_path / "other"  # another call's rows, summarised with these
+    pvp.keep(str(other), [_row("local", 2, 32.0)])
+    assert pvp.summary(pvp.parse(["--out", str(other), "--summary", "--inputs",
+                                  str(tmp_path / "results.csv"),
+                                  str(other / "results.csv")])) == 0
+    assert "| lego_train | 200x200 | local | 3 | 31.000 ± 1.000 |" in (
+        other / "summary.md").read_text()
