@@ -12,10 +12,10 @@ command-line words: the default recipe, no evaluation or checkpoint inside the r
 compiled programs kept for the next seeds), then the run's scene.ply at each of the scene's
 evaluation sizes (`SCENES`), every held-out view rendered twice:
   f32   with the form, on the backend the run trained with (the scene's own renders);
-  f64   in float64 (`jax.enable_x64` around these renders only; `--f64-backend`: `tiles` with
-        hoisting off, or `reference`: both the contract's difference form, the same image to
-        float64 rounding; in float64 every form is), from the same parameters: the image
-        that float32 evaluation approximates.
+  f64   in float64 from the same parameters (`jax.enable_x64` around these renders only):
+        the image that float32 evaluation approximates. `--f64-backend`: `tiles` with
+        hoisting off (default) or `reference`, both the contract's difference form (the same
+        image to float64 rounding, as is every form in float64).
 Scores (means over the views; images clipped to [0, 1]): psnr/ssim f32 against the photos
 (scikit-image's defaults, as fit's evaluation), psnr_f64/ssim_f64 f64 against the photos,
 psnr_vs_f64 f32 against f64, max_abs_vs_f64 (the largest over the views), over_1_255 (share of
