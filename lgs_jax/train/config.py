@@ -19,6 +19,13 @@ from .options import check, option
 from .strategy import DefaultStrategy, Strategy
 
 TRAIN_BACKENDS = ("reference", "tiles", "pallas", "pallas_vanilla")  # differentiable ones
+FORM_BACKENDS = ("tiles", "pallas")  # those that honour Recipe.alpha_form; the others compute
+# the difference form
+ALPHA_FORMS = {  # Recipe.alpha_form -> the RasterConfig switches it sets
+    "local": dict(hoist=True, local_coords=True),
+    "global": dict(hoist=True, local_coords=False),
+    "difference": dict(hoist=False),
+}
 PIXELS_PER_POINT = 4  # random start: a point per this many pixels of a training image ...
 MAX_INIT_POINTS = 100_000  # ... at most this many (gsplat's count for NeRF-synthetic scenes)
 
@@ -58,6 +65,14 @@ class Recipe:
         False, "train and evaluate with antialiased renders (gsplat's --antialiased: "
                "opacities scaled so that the 0.3-pixel dilation keeps each Gaussian's "
                "integral); render the result with --antialiased too")
+    alpha_form: Literal["local", "global", "difference"] = option(
+        "local", "how training and evaluation renders evaluate each pair's exponent ln α "
+                 "(the tiles and pallas backends; reference and pallas_vanilla always use the "
+                 "difference form): local (the paper's hoisted quadratic, Eq. 8-10, in "
+                 "tile-local coordinates, Eq. 1-3), global (the same quadratic in global "
+                 "screen coordinates: the paper's \"w/o Local Coord\", Table V) or difference "
+                 "(the original 3DGS form, -½ dᵀ Σ⁻¹ d of the pixel's offset d from the "
+                 "centre: no hoisting)")
     sh_every: int = option(1000, "steps between SH degrees (one band more each time)", low=1)
     sh_degree: int = option(3, "highest SH degree of the colours (0: view-independent)",
                             low=0, high=3)
@@ -115,8 +130,10 @@ class Recipe:
 
     @property
     def raster(self) -> RasterConfig:
-        """The `RasterConfig` of training and evaluation renders."""
-        return RasterConfig(self.convention, antialiased=self.antialiased)
+        """The `RasterConfig` of training and evaluation renders (`alpha_form`'s switches:
+        `ALPHA_FORMS`)."""
+        return RasterConfig(self.convention, antialiased=self.antialiased,
+                            **ALPHA_FORMS[self.alpha_form])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -247,7 +264,8 @@ class Setup:
     """What the jitted functions of one run depend on statically (hashable): the recipe, the
     strategy, the run length (the means' schedule), the scene scale, the backend, the
     devices a step's views are split across (data parallel: `step.over_views`) and those its
-    Gaussians are split across (Gaussian parallel: `sharded`)."""
+    Gaussians are split across (Gaussian parallel: `sharded`). Raises `ValueError` for a
+    `recipe.alpha_form` that `backend` does not compute."""
 
     recipe: Recipe = Recipe()
     strategy: Strategy = DefaultStrategy()
@@ -256,6 +274,11 @@ class Setup:
     backend: str = "tiles"
     devices: int = 1
     gaussian_devices: int = 1
+
+    def __post_init__(self):
+        if self.recipe.alpha_form == "global" and self.backend not in FORM_BACKENDS:
+            raise ValueError(f"recipe.alpha_form: 'global' needs a backend of {FORM_BACKENDS}; "
+                             f"{self.backend!r} computes the difference form")
 
     @classmethod
     def of(cls, config: FitConfig, scene_scale: float, backend: str) -> "Setup":
