@@ -64,16 +64,16 @@ def _count(mask):
 @dataclasses.dataclass(frozen=True)
 class BudgetStrategy(MCMCStrategy):
     """MCMC with a budget schedule and the relocation of unseen Gaussians (module docstring).
-    Its step defaults suit the fast recipe's 4,000-step run: refinements every 100 steps from
-    step 300, the budget reached at step 2,000 (where the coarse-to-fine schedule reaches full
-    resolution), relocations until step 3,500."""
+    Its step defaults suit the fast recipe's 2,000-step run: refinements every 100 steps from
+    step 300, the budget reached at step 1,000 (where the coarse-to-fine schedule reaches full
+    resolution), relocations until step 1,700."""
 
     refine_start_iter: int = option(300, "refine after this step", low=0)
-    refine_stop_iter: int = option(3_500, "refine before this step", low=0)
+    refine_stop_iter: int = option(1_700, "refine before this step", low=0)
     budget: int = option(
         20, "the Gaussian count the schedule reaches: this times the starting count, at most "
             "cap_max (Taming 3DGS's multiplier budget)", low=1)
-    budget_until: int = option(2_000, "the step at which the count reaches the budget", low=1)
+    budget_until: int = option(1_000, "the step at which the count reaches the budget", low=1)
     growth: Literal["budget", "mcmc"] = option(
         "budget", "how the count rises to the budget: budget (Taming 3DGS's parabola, steepest "
                   "first) or mcmc (5% per refinement, gsplat's MCMC)")

@@ -73,7 +73,9 @@ class Recipe:
                  "screen coordinates: the paper's \"w/o Local Coord\", Table V) or difference "
                  "(the original 3DGS form, -½ dᵀ Σ⁻¹ d of the pixel's offset d from the "
                  "centre: no hoisting)")
-    sh_every: int = option(1000, "steps between SH degrees (one band more each time)", low=1)
+    sh_every: int | None = option(None, f"steps between SH degrees (one band more each time) "
+                                        f"(default: the recipe's: {recipes.said('sh_every')})",
+                                  low=1)
     sh_degree: int = option(3, "highest SH degree of the colours (0: view-independent)",
                             low=0, high=3)
     batch: int | None = option(None, f"views per step (default: the recipe's: "

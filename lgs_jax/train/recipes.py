@@ -4,14 +4,15 @@ left None take, and the strategies the command line names (`STRATEGIES`).
   default  gsplat simple_trainer's recipe: 30,000 steps of one view, full resolution
            throughout, `DefaultStrategy` (3DGS's clone, split and prune), no early stop.
   fast     a recipe for time to quality, from published techniques, each a field to ablate:
-           4,000 steps of 2 views (`Recipe.batch`); images coarse to fine (`Recipe.levels`,
-           DashGaussian: 1/4, 1/2, then full resolution from half the run,
-           `Recipe.full_resolution_at`); `budget.BudgetStrategy` (MCMC with its count on Taming
-           3DGS's budget curve, reached at step 2,000, and Gaussians no view sees relocated,
-           after Speedy-Splat); SH bands every 1,000 steps as gsplat's (degree 3 at step 3,000:
-           raised late in this run); an early stop when the training loss stops falling
-           (`Recipe.early_stop`, `early_stop`). Its step counts are a hypothesis, to be measured
-           against gsplat's 7,000-step result (benchmarks/time_to_quality.py).
+           2,000 steps of 2 views (`Recipe.batch`: 4,000 view passes, against the 7,000 of
+           gsplat's 7k result); images coarse to fine (`Recipe.levels`, DashGaussian: 1/4,
+           1/2, then full resolution from half the run, `Recipe.full_resolution_at`);
+           `budget.BudgetStrategy` (MCMC with its count on Taming 3DGS's budget curve, reached
+           at step 1,000 where the images reach full resolution, and Gaussians no view sees
+           relocated, after Speedy-Splat); SH bands every 500 steps (`Recipe.sh_every`: degree
+           3 at step 1,500); an early stop when the training loss stops falling
+           (`Recipe.early_stop`, `early_stop`). Measured against gsplat's 7,000-step result by
+           benchmarks/time_to_quality.py.
 
 A field given explicitly keeps its value under either recipe. The values are filled in when
 the `Recipe` or `FitConfig` is made, so `dataclasses.replace(config, recipe=Recipe(name="fast"))`
@@ -27,12 +28,12 @@ from .strategy import DefaultStrategy, MCMCStrategy, Strategy
 
 NAMES = ("default", "fast")
 RECIPE_VALUES = {  # Recipe fields
-    "default": dict(batch=1, levels=1, early_stop=False),
-    "fast": dict(batch=2, levels=3, early_stop=True),
+    "default": dict(batch=1, levels=1, early_stop=False, sh_every=1000),
+    "fast": dict(batch=2, levels=3, early_stop=True, sh_every=500),
 }
 RUN_VALUES = {  # FitConfig fields (and the strategy, by its command-line name)
     "default": dict(steps=30_000, strategy="default"),
-    "fast": dict(steps=4_000, strategy="budget"),
+    "fast": dict(steps=2_000, strategy="budget"),
 }
 STRATEGIES = {"default": DefaultStrategy, "mcmc": MCMCStrategy, "budget": BudgetStrategy}
 """The strategies by their command-line names (`--strategy`)."""

@@ -188,7 +188,7 @@ def test_the_default_recipe_is_unchanged_and_the_fast_one_fills_its_fields():
     assert (c.steps, c.strategy, c.recipe.name) == (30_000, train.DefaultStrategy(), "default")
     assert (c.recipe.batch, c.recipe.levels, c.recipe.early_stop) == (1, 1, False)
     f = train.FitConfig(data="d", out="o", recipe=train.Recipe(name="fast"), max_gaussians=5000)
-    assert (f.steps, f.strategy) == (4000, train.BudgetStrategy(cap_max=5000))
+    assert (f.steps, f.strategy) == (2000, train.BudgetStrategy(cap_max=5000))
     assert (f.recipe.batch, f.recipe.levels, f.recipe.early_stop) == (2, 3, True)
     mine = train.FitConfig(data="d", out="o", steps=7, strategy=train.MCMCStrategy(),
                            recipe=train.Recipe(name="fast", batch=1, levels=1,
@@ -221,7 +221,7 @@ def test_fit_cli_takes_the_recipe_and_its_ablations(tmp_path, fit_calls, capsys)
     for words in ablations:
         assert cli.main(base + ["--recipe", "fast", *words]) == 0
         config = fit_calls[-1]
-        assert config.steps == 4000 and config.recipe.name == "fast"
+        assert config.steps == 2000 and config.recipe.name == "fast"
         assert fit_cmd.config_of(cli.parser().parse_args(["fit"] + fit_cmd.argv(config))) \
             == config, words
     assert fit_calls[1].recipe.levels == 1 and fit_calls[2].recipe.batch == 1
@@ -234,7 +234,7 @@ def test_fit_cli_takes_the_recipe_and_its_ablations(tmp_path, fit_calls, capsys)
         cli.main(["fit", "--help"])
     assert done.value.code == 0
     text = " ".join(capsys.readouterr().out.split())
-    for words in ("--recipe {default,fast}", "default 30000, fast 4000", "fast budget",
+    for words in ("--recipe {default,fast}", "default 30000, fast 2000", "fast budget",
                   "default 1, fast 3", "docs/training.md", "5% per refinement"):
         assert words in text, words
 
