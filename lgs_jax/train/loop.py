@@ -93,14 +93,17 @@ def _enter_level(run: _Run, feed: LevelFeed) -> None:
     """With several image levels, at the first step of a level (and of the run): the pair
     capacity sized to the level's first training view, as `state.fresh` sizes it at full
     resolution (a coarse level's step needs a fraction of the pairs; the capacity changes no
-    bit, `docs/determinism-and-capacities.md`)."""
+    bit, `docs/determinism-and-capacities.md`), times the pool's slots over its active
+    Gaussians: room for the pairs of a pool filled during the level (the fast recipe's budget
+    rises through the coarse levels), so a level compiles once rather than at every growth."""
     st, level = run.st, feed.level(run.st.step)
     if len(feed.levels) == 1 or level == run.level:
         return
     run.level = level
     lv = feed.levels[level]
     pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
-    st.capacity = pair_capacity(pairs, run.config.pair_headroom)
+    filled = st.pool.size / max(int(jnp.sum(st.pool.active)), 1)
+    st.capacity = pair_capacity(int(pairs * filled), run.config.pair_headroom)
     run.say(f"step {st.step + 1}: images at {lv.sizes[0][0]}x{lv.sizes[0][1]} "
             f"({'full size' if lv.factor == 1 else f'1/{lv.factor}'}), pair capacity "
             f"{st.capacity}")
