@@ -232,7 +232,10 @@ def test_render_stops_are_per_block():
 
 
 @pytest.mark.parametrize("dtype,config", [
-    (np.float32, C(kernel="mosaic")), (np.float32, C(kernel="mosaic", blend="fast")),
+    (np.float32, C(kernel="mosaic")),
+    # slow: test_backend.py's test_kernels_lower_for_the_gpu[localgs-fast] lowers the fast
+    # blending kernels, forward and backward, in float32
+    pytest.param(np.float32, C(kernel="mosaic", blend="fast"), marks=pytest.mark.slow),
     pytest.param(np.float64, C(kernel="mosaic"), marks=pytest.mark.slow)])
 def test_in_kernel_staging_lowers_for_the_gpu(dtype, config, monkeypatch):
     """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
