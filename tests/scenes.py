@@ -183,6 +183,17 @@ def projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, ed
                      invalid=jnp.asarray(~valid))
 
 
+@functools.partial(jax.jit, static_argnames="capacity")
+def projected_bins(g, cam, capacity=CAPACITY):
+    """(`project(g, cam)`, its `bin_gaussians` at `capacity`), jitted with the scene and camera
+    as arguments: one compile per shape, where eager calls compile each operation."""
+    from lgs_jax import binning
+    from lgs_jax.projection import project
+
+    p = project(g, cam)
+    return p, binning.bin_gaussians(p, cam.width, cam.height, capacity)
+
+
 @functools.partial(jax.jit, static_argnames="config")
 def _kernel_forward(g, cam, config):
     """The Local-GS kernel's forward on a test scene, with what its backward needs."""

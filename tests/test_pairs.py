@@ -160,17 +160,14 @@ def test_strip_pair_count_is_what_the_tiles_backend_reports():
     import jax
 
     import lgs_jax
-    from lgs_jax import binning
     from lgs_jax.layout import tile_grid
-    from lgs_jax.projection import project
     from tests import scenes
 
     g = scenes.cast(scenes.scene(3), np.float32)
     cam = scenes.camera()
+    p, bins = scenes.projected_bins(g, cam)
     for config in (lgs_jax.RasterConfig(), lgs_jax.RasterConfig(warp_cull=False)):
         out = scenes.render(g, cam, "tiles", config)
-        p = project(g, cam)
-        bins = binning.bin_gaussians(p, cam.width, cam.height, scenes.CAPACITY)
         count = jax.jit(pairs.strip_pair_count, static_argnums=(2, 3))(
             p, bins, tile_grid(cam.width, cam.height)[0], config)
         assert int(count) == int(out.stats.backend_stats.strip_pairs)

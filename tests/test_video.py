@@ -133,13 +133,13 @@ def test_bad_frames_are_refused(tmp_path, frames, match):
 
 def test_video_command_writes_an_orbit_of_the_default_scene(tmp_path, capsys):
     out = tmp_path / "orbit.mp4"
-    assert main(["video", "--frames", "3", "--width", "96", "--out", str(out)]) == 0
-    assert "3 frames 96x54" in capsys.readouterr().out
+    assert main(["video", "--frames", "3", "--width", "64", "--out", str(out)]) == 0
+    assert "3 frames 64x36" in capsys.readouterr().out
     frames = _decode(out)
-    assert len(frames) == 3 and frames[0].shape == (54, 96, 3)
+    assert len(frames) == 3 and frames[0].shape == (36, 64, 3)
     assert frames[0].max() > 50  # the label is in view, not an empty frame
     depth = tmp_path / "depth.mp4"  # the depth's turbo colours: blue and red, not grey
-    assert main(["video", "--frames", "2", "--width", "96", "--output", "depth", "--out",
+    assert main(["video", "--frames", "2", "--width", "64", "--output", "depth", "--out",
                  str(depth)]) == 0
     first = _decode(depth)[0].astype(int)
     assert np.abs(first[..., 2] - first[..., 0]).max() > 100
@@ -182,7 +182,7 @@ def test_orbit_of_a_real_capture_circles_its_points(data_dir):
 
 
 def test_frames_show_the_image_the_alpha_or_the_expected_depth():
-    out = lgs_jax.render(lgs_jax.default_scene(), lgs_jax.default_camera(0, 128, 72))
+    out = lgs_jax.render(lgs_jax.default_scene(), lgs_jax.default_camera(0, 64, 36))
     image, alpha, depth = (video.frame_pixels(out, o) for o in ("image", "alpha", "depth"))
     np.testing.assert_array_equal(image, video.to_uint8(out.image))
     a = np.asarray(out.alpha)

@@ -40,8 +40,11 @@ def _loss(g, cam, bg, backend, config, weights):
 
 
 def _grads(g, cam, backend, config, dtype=np.float64):
+    """Gradients of `_loss` w.r.t. (Gaussians, camera, background): every test of a backend
+    and configuration takes all three from one program (the camera's cost little), so the
+    tests share their compiled programs."""
     bg = jnp.asarray(scenes.BACKGROUND, dtype)
-    return jax.grad(_loss, argnums=(0, 2))(g, cam, bg, backend, config, _weights(dtype))
+    return jax.grad(_loss, argnums=(0, 1, 2))(g, cam, bg, backend, config, _weights(dtype))
 
 
 @pytest.mark.parametrize("config", [C(), pytest.param(C(antialiased=True), marks=SLOW),
@@ -54,7 +57,7 @@ def test_reference_gradients_equal_autodiff_through_brute_float64(config, seed):
     singular in rounding too: their opacity is 0)."""
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    (gr, bgr), (gb, bgb) = (_grads(g, cam, b, config) for b in ("reference", "brute"))
+    (gr, _, bgr), (gb, _, bgb) = (_grads(g, cam, b, config) for b in ("reference", "brute"))
     invalid = np.asarray(project(g, cam).invalid)
     for name in FIELDS:
         want, got = np.asarray(getattr(gb, name)), np.asarray(getattr(gr, name))
@@ -75,11 +78,9 @@ def test_camera_gradients_equal_autodiff_through_brute_and_are_finite(seed, yaw)
     row's placeholder mean lies: the square root's infinite derivative there once made it NaN."""
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64, yaw=yaw)
-    bg = jnp.asarray(scenes.BACKGROUND, np.float64)
-    grad = lambda b: jax.grad(_loss, argnums=1)(g, cam, bg, b, C(), _weights(np.float64))
-    want = grad("brute")
+    want = _grads(g, cam, "brute", C())[1]
     for backend in ("brute", "reference", "tiles"):
-        got = want if backend == "brute" else grad(backend)
+        got = want if backend == "brute" else _grads(g, cam, backend, C())[1]
         for name in ("viewmat", "fx", "fy", "cx", "cy"):
             x = np.asarray(getattr(got, name))
             assert np.all(np.isfinite(x)), (backend, name)
@@ -146,8 +147,8 @@ def test_float32_gradients_are_close_to_float64():
     g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
     cam64, cam32 = scenes.camera(dtype=np.float64), scenes.camera()
     g32 = scenes.cast(g64, np.float32)
-    (a, _), (b, _) = _grads(g64, cam64, "reference", C()), _grads(g32, cam32, "reference", C(),
-                                                                  np.float32)
+    a = _grads(g64, cam64, "reference", C())[0]
+    b = _grads(g32, cam32, "reference", C(), np.float32)[0]
     for name in FIELDS:
         x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
         rel = np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30)
@@ -222,7 +223,7 @@ def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
     config = TILES[name]
-    (gt, bgt), (gr, bgr) = (_grads(g, cam, b, c) for b, c in
+    (gt, _, bgt), (gr, _, bgr) = (_grads(g, cam, b, c) for b, c in
                             (("tiles", config), ("reference", C(config.convention))))
     for field in FIELDS:
         want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gt, field))
@@ -234,8 +235,8 @@ def test_tiles_gradients_equal_reference_gradients_float64(name, seed):
 @pytest.mark.parametrize("backend", ["tiles", pytest.param("pallas", marks=SLOW)])
 def test_fast_backends_float32_gradients_are_close_to_float64(backend):
     g64 = scenes.scene(5, kinds=("normal", "opaque", "layers", "tiny", "needle"))
-    (a, _) = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())
-    (b, _) = _grads(scenes.cast(g64, np.float32), scenes.camera(), backend, C(), np.float32)
+    a = _grads(g64, scenes.camera(dtype=np.float64), "reference", C())[0]
+    b = _grads(scenes.cast(g64, np.float32), scenes.camera(), backend, C(), np.float32)[0]
     for name in FIELDS:
         x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name), np.float64)
         assert np.linalg.norm(x - y) / max(np.linalg.norm(x), 1e-30) < 1e-3, name
@@ -264,7 +265,7 @@ def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
     backend, config = PALLAS[name]
-    (gp, bgp), (gr, bgr) = (_grads(g, cam, b, c) for b, c in
+    (gp, _, bgp), (gr, _, bgr) = (_grads(g, cam, b, c) for b, c in
                             ((backend, config), ("reference", C(config.convention))))
     invalid = np.asarray(project(g, cam).invalid)
     for field in FIELDS:

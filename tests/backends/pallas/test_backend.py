@@ -207,11 +207,12 @@ BACKWARD = {**{n: LOCALGS[n] for n in ("local_gs", "no_cull", "difference", "loc
 
 def _backward_cases():
     """Default: float64, the Triton kernel with hoisting on and off, both conventions and both
-    blending modes, and the Mosaic GPU kernel (half-tile blocks); slow: every other switch,
+    blending modes (the gsplat convention and fast blending in one case), and the Mosaic GPU
+    kernel (half-tile blocks); slow: every other switch and each of those two alone,
     whole-tile Mosaic GPU blocks (both blending modes in float64, both α forms in float32; the
     conventions only change constants the Triton cases cover), and float32 for both α forms
     of both kernels (the other switches run the same float32 code paths)."""
-    default = ("local_gs", "difference", "gsplat", "fast")
+    default = ("local_gs", "difference", "fast_gsplat")
     triton = [(n, "triton", None) for n in default]
     triton_slow = [(n, "triton", None) for n in BACKWARD if n not in default]
     mosaic = [("local_gs", "mosaic", 128)]

@@ -45,14 +45,20 @@ def _render(g, cam, config, capacity=CAPACITY):
                           backend="pallas", config=config, capacity=capacity)
 
 
+@jax.jit
+def _bins_and_masks(g, cam):
+    """The bins of `g` at CAPACITY and their pairs' strip masks (default configuration)."""
+    p, bins = scenes.projected_bins(g, cam, CAPACITY)
+    return bins, pairs.strip_masks(pairs.gather(p, bins.gauss), bins, 1, C())
+
+
 def _dense_tile(seed, dtype=np.float32):
     g = scenes.cast(scenes.scene(seed, kinds=DENSE, n=N_DENSE), dtype)
     cam = scenes.camera(dtype=dtype, **TILE_CAMERA)
-    p = project(g, cam)
-    bins = binning.bin_gaussians(p, cam.width, cam.height, CAPACITY)
+    bins, masks = _bins_and_masks(g, cam)
     n = int(bins.tile_end[0])
     assert not bins.overflow and n > 2 * mosaic_forward.LANES
-    masks = np.asarray(pairs.strip_masks(pairs.gather(p, bins.gauss), bins, 1, C()))[:n]
+    masks = np.asarray(masks)[:n]
     for half in (0x0F, 0xF0):  # each half-tile block has pairs to drop and pairs to keep
         assert 0 < np.count_nonzero(masks & half) < n
     return g, cam
@@ -226,7 +232,10 @@ def test_render_stops_are_per_block():
 
 
 @pytest.mark.parametrize("dtype,config", [
-    (np.float32, C(kernel="mosaic")), (np.float32, C(kernel="mosaic", blend="fast")),
+    (np.float32, C(kernel="mosaic")),
+    # slow: test_backend.py's test_kernels_lower_for_the_gpu[localgs-fast] lowers the fast
+    # blending kernels, forward and backward, in float32
+    pytest.param(np.float32, C(kernel="mosaic", blend="fast"), marks=pytest.mark.slow),
     pytest.param(np.float64, C(kernel="mosaic"), marks=pytest.mark.slow)])
 def test_in_kernel_staging_lowers_for_the_gpu(dtype, config, monkeypatch):
     """The staging kernels, forward and backward, lower through Mosaic GPU (inline gather,
@@ -259,13 +268,18 @@ def test_render_builds_the_table_before_binning_as_the_backend_would():
 
     g = scenes.scene(3, kinds=DENSE, n=48)
     cam = scenes.camera(dtype=np.float32, **TILE_CAMERA)
-    p = project(scenes.cast(g, np.float32), cam)
     config = C(kernel="mosaic")
-    table = backend.prepare(p, config, 1, CAPACITY)
+
+    @jax.jit
+    def run(g, cam):  # the scene and camera as arguments: one compile
+        p, bins = scenes.projected_bins(g, cam, CAPACITY)
+        table = backend.prepare(p, config, 1, CAPACITY)
+        outs = [pallas.rasterize(p, bins, cam.width, cam.height, config, BackendInputs(t))
+                for t in (None, table)]
+        return p, table, [(o.color, o.trans, o.depth, o.stop) for o in outs]
+
+    p, table, outs = run(scenes.cast(g, np.float32), cam)
     assert table is not None and table.shape == (g.num, pairs.TABLE_COLUMNS)
     assert backend.prepare(p, C(kernel="triton"), 1, CAPACITY) is None
-    bins = binning.bin_gaussians(p, cam.width, cam.height, CAPACITY)
-    outs = [pallas.rasterize(p, bins, cam.width, cam.height, config, BackendInputs(t))
-            for t in (None, table)]
-    for a, b in zip(*(jax.tree.leaves((o.color, o.trans, o.depth, o.stop)) for o in outs)):
+    for a, b in zip(*(jax.tree.leaves(o) for o in outs)):
         assert np.array_equal(np.asarray(a), np.asarray(b))

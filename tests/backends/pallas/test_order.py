@@ -11,8 +11,12 @@ from hypothesis import given, settings, strategies as st
 from lgs_jax.backends.pallas import order as block_order
 
 EDGES = [2 ** k + d for k in range(1, 30) for d in (-1, 0, 1)]  # powers of two and neighbours
-LENGTHS = st.lists(st.one_of(st.integers(0, 3), st.integers(0, 5000), st.sampled_from(EDGES),
-                             st.just(2 ** 31 - 2)), min_size=1, max_size=300)
+LENGTH = st.one_of(st.integers(0, 3), st.integers(0, 5000), st.sampled_from(EDGES),
+                   st.just(2 ** 31 - 2))
+# a few list sizes, so that the examples run through a few compiled programs (a new size is a
+# new compile of every function under test)
+LENGTHS = st.sampled_from([1, 2, 7, 64, 300]).flatmap(
+    lambda n: st.lists(LENGTH, min_size=n, max_size=n))
 
 
 @settings(max_examples=50)
