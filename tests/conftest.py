@@ -5,11 +5,13 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)  # float64 ground truth; float32 tests pass float32
-# Persistent compilation cache: pytest-xdist workers (and reruns) share compiled kernels.
+# Persistent compilation cache: pytest-xdist workers (and reruns) share compiled kernels, the
+# small programs of eager operations too (reading one back costs less than compiling it again
+# in the other worker).
 _CACHE = os.environ.get("LGS_JAX_CACHE",
                         os.path.join(os.path.dirname(__file__), "..", ".jax_cache"))
 jax.config.update("jax_compilation_cache_dir", os.path.abspath(_CACHE))
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
 
 settings.register_profile("ci", max_examples=25, deadline=None, derandomize=True,
                           suppress_health_check=[HealthCheck.too_slow])

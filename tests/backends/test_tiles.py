@@ -28,7 +28,8 @@ PRECISION = {  # Table V: local vs global coordinates; corner vs centre origin
     "local_corner": C(), "local_center": C(origin="center"), "global": C(local_coords=False),
 }
 EXACT = {**{k: v for k, v in ABLATION.items() if v.blend == "exact"}, **PRECISION,
-         "difference_culled": C(hoist=False), "antialiased": C(antialiased=True)}
+         "difference_culled": C(hoist=False), "antialiased": C(antialiased=True),
+         "antialiased_center": C(antialiased=True, origin="center")}
 
 
 def all_exact_configs():
@@ -44,8 +45,11 @@ def all_exact_configs():
 
 # ------------------------------------------------------------------ against `reference`
 
+# default: baseline (hoisting and culling off), +warp_culling (both on), global, and the centre
+# origin with antialiasing in one case; each other switch alone in the slow set
 @pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in (
-    "+hoisting", "local_corner", "difference_culled") else n for n in EXACT])  # baseline: both off
+    "+hoisting", "local_corner", "difference_culled", "local_center", "antialiased") else n
+                                  for n in EXACT])
 @given(seed=st.integers(0, 2**32 - 1))
 def test_tiles_exact_equals_reference_float64(name, seed):
     g = scenes.scene(seed)

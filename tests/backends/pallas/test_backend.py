@@ -42,15 +42,20 @@ LOCALGS = {  # the switches the Local-GS kernel honours (exact blending)
 }
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in ("no_cull", "difference",
-                                                                        "antialiased")
-                                  else n for n in LOCALGS])  # "baseline": both off
+# default: "baseline" has both culling and hoisting off; the centre origin and the gsplat
+# convention (constants of the kernel) in one case
+GSPLAT_CENTER = C("gsplat", origin="center")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=SLOW) if n in (
+    "no_cull", "difference", "antialiased", "local_center", "gsplat") else n
+                                  for n in [*LOCALGS, "gsplat_center"]])
 @settings(max_examples=6)  # interpret mode on CPU: ~0.7 s per example
 @given(seed=st.integers(0, 2**32 - 1))
 def test_localgs_kernel_equals_reference_float64(name, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
-    config = LOCALGS[name]
+    config = GSPLAT_CENTER if name == "gsplat_center" else LOCALGS[name]
     ref = scenes.render(g, cam, "reference", C(config.convention,
                                                 antialiased=config.antialiased))
     out = scenes.render(g, cam, "pallas", config)
