@@ -31,3 +31,10 @@ def data_dir():
     if not os.path.isdir(path):
         pytest.skip(f"real scenes not found at {path}")
     return path
+
+
+def pytest_collection_modifyitems(items):
+    """tests/parallel first, the rest in their order: its child processes run the default set's
+    longest tests (up to a minute each), which last in a pytest-xdist worker's share (the
+    workers split the items in order) would end the run with the other worker idle."""
+    items.sort(key=lambda item: not item.nodeid.startswith("tests/parallel/"))

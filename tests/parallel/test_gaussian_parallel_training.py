@@ -4,7 +4,9 @@ grow, gives the scene of the same run on one device within the stated bound (the
 gradients' sums are re-associated and Adam carries the difference at most a learning rate per
 step); its refinements decide the same and keep the blocks balanced by count (a refinement on 4
 devices is the one-device refinement's bits, both strategies); each run writes one checkpoint
-and one scene.ply. The slow set runs the whole run on 2 and on 4 devices (the first step's loss,
+and one scene.ply; trained on every view, with an evaluation due after every step, the runs
+evaluate nothing (the default set's check of a fit without held-out views: test_train.py's
+own such fit is in the slow set). The slow set runs the whole run on 2 and on 4 devices (the first step's loss,
 held-out views rendered sharded), and MCMC with the views' own parameters on 2.
 
 The runs happen in one child process (tests/parallel/training_child.py: JAX simulates 4
@@ -129,12 +131,26 @@ def _resumed(tmp_path, logs):
         assert load_ply(str(tmp_path / run / "scene.ply")).num == result["gaussians"]
 
 
+def _evaluated_nothing(tmp_path, logs, runs):
+    """Runs on every view (`FitConfig.train_on_all`, nothing held out), an evaluation due after
+    every step: none is made, nor an image of one, and the result's scores are None, as the
+    log says."""
+    for run in runs:
+        result = json.load(open(tmp_path / run / "result.json"))
+        assert result["heldout_psnr"] is None and result["heldout_ssim"] is None, run
+        assert f"step {STEPS}: no held-out views to evaluate (trained on every view)" in \
+            logs[run], logs[run]
+        assert not [r for r in _rows(tmp_path / run) if "heldout_psnr" in r], run
+        assert not [f for f in os.listdir(tmp_path / run) if f.startswith("heldout_")], run
+
+
 def test_gaussian_parallel_training(tmp_path):
     logs = _run_child(tmp_path, "fast")
     _same_scene(tmp_path, logs, ["d1_resumed_on_d2"])
     _balanced(tmp_path, ["d1_resumed_on_d2"], 1)  # the refinement at step 6
     _refined_alike(logs)
     _resumed(tmp_path, logs)
+    _evaluated_nothing(tmp_path, logs, ["d1", "d1_resumed_on_d2"])
 
 
 @pytest.mark.slow

@@ -742,7 +742,8 @@ def test_8_bit_images_train_to_the_same_bits(tmp_path):
         assert results[name]["heldout_psnr"] == results["f32"]["heldout_psnr"]
 
 
-def test_fit_needs_held_out_views(tmp_path):
+def _two_views(tmp_path):
+    """A capture of two 8x8 views (too few to hold one out); returns its folder."""
     import matplotlib.image
 
     data = tmp_path / "data"
@@ -753,9 +754,22 @@ def test_fit_needs_held_out_views(tmp_path):
         frames.append(dict(file_path=f"./train/r_{i}", transform_matrix=np.eye(4).tolist()))
     (data / "transforms_train.json").write_text(json.dumps(dict(camera_angle_x=0.7,
                                                                 frames=frames)))
+    return data
+
+
+def test_fit_needs_held_out_views(tmp_path):
+    data = _two_views(tmp_path)
     with pytest.raises(ValueError, match="needs training views and held-out views"):
         train.fit(train.FitConfig(data=str(data), out=str(tmp_path / "out"), steps=1))
-    # ... unless it trains on every view: then nothing is evaluated
+
+
+# CI time (a step's compile): the default set checks a fit on every view in
+# tests/parallel/test_gaussian_parallel_training.py, whose runs train on every view
+@pytest.mark.slow
+def test_a_fit_on_every_view_evaluates_nothing(tmp_path):
+    """A capture too small to hold a view out trains on every view (`train_on_all`): nothing
+    is evaluated, though an evaluation is due after every step."""
+    data = _two_views(tmp_path)
     lines = []
     result = train.fit(train.FitConfig(data=str(data), out=str(tmp_path / "all"), steps=2,
                                        backend="reference", train_on_all=True, eval_every=1,

@@ -26,8 +26,7 @@ W = H = 32
 def _random_walks(g, seed: int, share: float):
     """(bins of g on a W x H image, tile starts, random walk ends `last` in [start, start +
     share·length], the rng that drew them)."""
-    cam = scenes.camera(W, H)
-    bins = jax.jit(lambda g: binning.bin_gaussians(project(g, cam), W, H, 1024))(g)
+    _, bins = scenes.projected_bins(g, scenes.camera(W, H), 1024)
     rng = np.random.default_rng(seed)
     start, end = np.asarray(bins.tile_start), np.asarray(bins.tile_end)
     last = start + np.floor((end - start) * share * rng.uniform(size=start.shape)).astype(np.int32)
