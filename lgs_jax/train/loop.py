@@ -115,8 +115,6 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
     _enter_level(run, feed)
     images, idx = feed.args(st.step)
     field, flag, needed, name = SECOND[run.setup.gaussian_devices > 1]
-    st.pool, st.opt_state, st.strategy_state, st.views = distinct(
-        (st.pool, st.opt_state, st.strategy_state, st.views))
     while True:
         args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(st.step), images,
                 idx, run.background, st.step, run.key) + ((st.order,) if st.order is not None
@@ -150,14 +148,15 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
 def _place(setup: Setup, st: RunState) -> None:
     """A data-parallel run's state whole on each of its devices (`step.replicated`), a
     Gaussian-parallel run's in blocks (`sharded`); a no-op where it is already, and for one
-    device."""
+    device. Then no array in two places of it (`step.distinct`: the step donates the state;
+    a state built outside the step, at the start or by a refinement, may share one)."""
     if setup.gaussian_devices > 1:
         (st.pool, st.opt_state, st.strategy_state), st.views = sharded_state.place(
             setup.gaussian_devices, (st.pool, st.opt_state, st.strategy_state), st.views)
-        return
-    where = replicated(setup.devices)
-    if where is not None:
+    elif (where := replicated(setup.devices)) is not None:
         st.pool, st.opt_state, st.strategy_state, st.views = jax.device_put(st.saved, where)
+    st.pool, st.opt_state, st.strategy_state, st.views = distinct(
+        (st.pool, st.opt_state, st.strategy_state, st.views))
 
 
 def _refine(run: _Run) -> int:
