@@ -43,7 +43,6 @@ A CPU smoke run: --scenes lego_train --forms local global --seeds 1 --steps 50.
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import functools
 import os
@@ -55,6 +54,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if __package__ in (None, ""):  # run as a file: make `benchmarks` importable
     sys.path.insert(0, ROOT)
+
+from benchmarks.rows import merge, number as _number, read_csv  # noqa: E402
 
 FORMS = ("local", "global", "difference")
 SCENES = {  # folder, training downscale, default steps, evaluation sizes: (label, the
@@ -248,24 +249,9 @@ def run_one(args, scene: str, form: str, seed: int, device: str) -> list[dict]:
 
 # ----------------------------------------------------------------------------------- files
 
-def read_csv(path: str) -> list[dict]:
-    if not os.path.exists(path):
-        return []
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
 def keep(out: str, rows: list[dict]) -> None:
     """Merge `rows` into OUT/results.csv (replacing rows of the same KEY) and print them."""
-    path = os.path.join(out, "results.csv")
-    mine = {tuple(str(r.get(k)) for k in KEY) for r in rows}
-    kept = [r for r in read_csv(path) if tuple(r.get(k) for k in KEY) not in mine]
-    tmp = path + ".tmp"
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=FIELDS, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(kept + rows)
-    os.replace(tmp, path)
+    merge(os.path.join(out, "results.csv"), rows, FIELDS, KEY)
     for r in rows:
         print(f"{r['scene']:10} {r['form']:10} seed {r['seed']:>2} {r['eval']:10} "
               f"PSNR {_shown(r, 'psnr', '6.3f')} SSIM {_shown(r, 'ssim', '6.4f')} "
@@ -275,13 +261,6 @@ def keep(out: str, rows: list[dict]) -> None:
 
 def _shown(row: dict, key: str, spec: str) -> str:
     return "-" if _number(row.get(key)) is None else format(float(row[key]), spec)
-
-
-def _number(v):
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return None
 
 
 # --------------------------------------------------------------------------------- summary

@@ -32,7 +32,6 @@ skipped with a note; a CPU smoke run: --scenes lego_train --seeds 1 --steps 20 -
 from __future__ import annotations
 
 import argparse
-import csv
 import importlib.util
 import json
 import os
@@ -47,6 +46,7 @@ if __package__ in (None, ""):  # run as a file: make `benchmarks` importable
     sys.path.insert(0, ROOT)
 
 from benchmarks import train_vs_gsplat as tvg  # noqa: E402
+from benchmarks.rows import merge, number as _number, read_csv  # noqa: E402
 from benchmarks.seed_summary import mean_and_error  # noqa: E402
 
 SCENES = {  # folder under the data root, gsplat's Gaussian cap (its MCMC strategy)
@@ -231,31 +231,6 @@ def run_gsplat(args, scene: str, seed: int) -> tuple[dict, list[dict]]:
 
 
 # ---------------------------------------------------------------------------------- files
-
-def merge(path: str, rows: list[dict], fields: tuple, key: tuple) -> None:
-    """Write `rows` into the CSV at `path`, replacing the rows there of the same `key`."""
-    old = read_csv(path)
-    mine = {tuple(str(r.get(k)) for k in key) for r in rows}
-    kept = [r for r in old if tuple(str(r.get(k)) for k in key) not in mine]
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(kept + rows)
-
-
-def read_csv(path: str) -> list[dict]:
-    if not os.path.exists(path):
-        return []
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-def _number(v):
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return None
-
 
 # -------------------------------------------------------------------------------- summary
 
