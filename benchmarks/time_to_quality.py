@@ -20,7 +20,8 @@ Per scene, seed after seed, back to back on one machine, each run a subprocess o
 Rows (results.csv, one per trainer x scene x seed; a rerun replaces its rows, so several
 invocations, e.g. one per scene, fill one file): held-out PSNR and SSIM (scikit-image's, the
 renders clipped to [0, 1]), wall seconds, steps done (the early stop's), Gaussians, compile
-seconds, device. curves.csv: held-out PSNR and SSIM against wall seconds where the runs evaluated
+seconds, our runs' parts (`fit`'s load, step and finish seconds), device; our runs' logs in
+OUT/logs. curves.csv: held-out PSNR and SSIM against wall seconds where the runs evaluated
 inside (--eval-every; a point's time: the run's wall time less the training seconds after it).
 --ablate: the fast recipe with each technique switched off in turn (`ABLATIONS`), seed 0, into
 ablation.csv. --summary: the markdown tables (mean ± standard error over seeds; the target:
@@ -67,7 +68,7 @@ ABLATIONS = {  # variant -> the fit options that switch one technique off
 DEFAULT_ABLATIONS = ["fast", "levels_1", "batch_1", "strategy_mcmc", "no_early_stop"]
 BIG = 10**9  # --eval-every / --checkpoint-every: never inside the run
 FIELDS = ("scene", "trainer", "seed", "psnr", "ssim", "wall_s", "steps", "stopped_early_at",
-          "gaussians", "compile_s", "device", "error")
+          "gaussians", "compile_s", "load_s", "step_s", "finish_s", "device", "error")
 CURVE_FIELDS = ("scene", "trainer", "seed", "step", "wall_s", "psnr", "ssim")
 
 
@@ -153,7 +154,9 @@ def run_ours(args, scene: str, seed: int, cache: str, trainer: str = "lgs_jax_fa
     cmd = fit_command(args, scene, seed, out, extra)
     print("$ " + " ".join(cmd), flush=True)
     t0 = time.time()
-    done = subprocess.run(cmd, env=_env(cache), stdout=subprocess.DEVNULL)
+    os.makedirs(os.path.join(args.out, "logs"), exist_ok=True)
+    with open(os.path.join(args.out, "logs", f"{scene}_{trainer}_{seed}.log"), "w") as log:
+        done = subprocess.run(cmd, env=_env(cache), stdout=log, stderr=subprocess.STDOUT)
     ply = os.path.join(out, "scene.ply")
     if done.returncode != 0 or not os.path.exists(os.path.join(out, "result.json")):
         return dict(row, error=f"fit exited with {done.returncode}"), []
@@ -162,7 +165,8 @@ def run_ours(args, scene: str, seed: int, cache: str, trainer: str = "lgs_jax_fa
         r = json.load(f)
     row.update(psnr=r["heldout_psnr"], ssim=r["heldout_ssim"], wall_s=wall, steps=r["steps"],
                stopped_early_at=r["stopped_early_at"], gaussians=r["gaussians"],
-               compile_s=r["compile_seconds"], device=r["device"])
+               compile_s=r["compile_seconds"], load_s=r["load_seconds"],
+               step_s=r["step_seconds"], finish_s=r["finish_seconds"], device=r["device"])
     curve = _our_curve(os.path.join(out, "metrics.jsonl"), row)
     if not args.run_dir:
         shutil.rmtree(base, ignore_errors=True)

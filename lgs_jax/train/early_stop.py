@@ -76,10 +76,14 @@ class EarlyStop:
         """The loss of step `step` (1-based: `step` steps done)."""
         self.losses[step] = float(loss)
 
+    def checks(self, step: int) -> bool:
+        """Whether the rule decides after `step` steps (`due` may be true only then)."""
+        return self.on and is_check(step, self.first, self.window)
+
     def due(self, step: int) -> bool:
         """Whether the run ends after `step` steps; `ValueError` naming `source` where a loss
         the rule needs was never recorded (a resumed run whose metrics lost rows)."""
-        if not (self.on and is_check(step, self.first, self.window)):
+        if not self.checks(step):
             return False
         if step not in self._decided:
             try:

@@ -10,6 +10,11 @@ likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Size
 `max_gaussians`: a recompile; both are logged). A step whose loss or gradients would not be
 finite is skipped (nothing changes), logged and recorded. The step donates the run's state
 (`RunState`'s pool, optimizer, strategy and views): after a step only its outputs are used.
+Where nothing between two steps reads or replaces the state (no refinement, evaluation,
+checkpoint, watch, early-stop check, level change or stop), step s + 1 is dispatched before
+step s's metrics are read, so the device never waits for the host's read (`_ahead`); step
+s + 1 gets step s's `fits` as its `go`, so where s overflowed, s + 1 changes nothing and both
+run again in order: the same bits as one step after another.
 
 The run folder (`rundir`) is checked and locked before any work. OUT/metrics.jsonl gets a row
 per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts) and
@@ -79,6 +84,7 @@ class _Run:
     say: object = None
     record: object = None
     evaluations: heldout.Evaluations | None = None
+    pending: dict | None = None  # the metrics (on the device) of the next step, dispatched ahead
     stopped_early: bool = False
     level: int | None = None  # the image level of the last step run (`levels`)
     eval_seconds: float = 0.0  # held-out evaluations during the run
@@ -87,6 +93,9 @@ class _Run:
     def __post_init__(self):
         self.key = jax.random.key(self.config.seed)
         self.background = jnp.asarray(self.rd.background)
+        self.go = jnp.ones((), bool)  # `train_step`'s go where the previous step was read
+        if (where := replicated(self.setup.devices)) is not None:
+            self.go = jax.device_put(self.go, where)
 
 
 def _enter_level(run: _Run, feed: LevelFeed) -> None:
@@ -109,26 +118,43 @@ def _enter_level(run: _Run, feed: LevelFeed) -> None:
             f"{st.capacity}")
 
 
-def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock) -> dict:
-    """Run step st.step (capacity grown until nothing overflows); returns its metrics."""
+def _dispatch(run: _Run, feed: LevelFeed, steps: Stepper, step: int, size: tuple, go):
+    """Start 0-based step `step` at `size` on the run's state, which becomes the step's
+    outputs (the arguments were donated; a step that does not apply returns them unchanged);
+    returns (its metrics on the device, the signature of its arguments)."""
     st = run.st
-    _enter_level(run, feed)
-    images, idx = feed.args(st.step)
+    images, idx = feed.args(step)
+    args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(step), images, idx,
+            run.background, step, run.key, st.order, go)
+    sig = signature(args)
+    new = steps.run(args, size, sig)
+    feed.prefetch(step + 1)  # while the step runs
+    steps.prepare(args, size, sig)
+    st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
+    return new[4], sig
+
+
+def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, ahead: bool) -> dict:
+    """Run step st.step (capacity grown until nothing overflows), unless it was dispatched
+    ahead (run.pending); with `ahead`, dispatch step st.step + 1 before reading step st.step's
+    metrics (module docstring). Returns step st.step's metrics."""
+    st = run.st
     field, flag, needed, name = SECOND[run.setup.gaussian_devices > 1]
+    pending, run.pending = run.pending, None
+    if pending is None:
+        _enter_level(run, feed)
     while True:
-        args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(st.step), images,
-                idx, run.background, st.step, run.key) + ((st.order,) if st.order is not None
-                                                          else ())
-        sig = signature(args)
         size = (st.capacity, getattr(st, field))
-        new = steps.run(args, size, sig)
-        feed.prefetch(st.step + 1)  # while the step runs
-        steps.prepare(args, size, sig)
-        # the arguments were donated; an overflowed step returned them unchanged
-        st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
-        m = {k: v.item() for k, v in jax.device_get(new[4]).items()}
+        if pending is not None:
+            (metrics, sig), pending = pending, None
+        else:
+            metrics, sig = _dispatch(run, feed, steps, st.step, size, run.go)
+        if ahead:
+            run.pending = _dispatch(run, feed, steps, st.step + 1, size, metrics["fits"])
+        m = {k: v.item() for k, v in jax.device_get(metrics).items()}
         if not (m["overflow"] or m[flag]):
             return m
+        run.pending = None  # it changed nothing: the state is this step's inputs again
         need = (m["pairs"], m[needed])
         grown_size, waited, ahead = steps.grow(size, need, sig)
         if grown_size == size:  # never loop on a size that cannot hold the step
@@ -191,6 +217,10 @@ class _Watch:
         self.fn, self.every, self.devices, self.last = fn, every, devices, -float("inf")
         self.gathered = gathered
 
+    def due(self) -> bool:
+        """Whether a call now, unforced, would call `fn`."""
+        return self.fn is not None and time.perf_counter() - self.last >= self.every
+
     def __call__(self, st: RunState, metrics: dict, force: bool = False) -> None:
         now = time.perf_counter()
         if self.fn is None or not (force or now - self.last >= self.every):
@@ -227,7 +257,8 @@ def _feed(run: _Run) -> LevelFeed:
 def _after_step(run: _Run, m: dict, watch: _Watch, data: dict, last: bool) -> None:
     """A step's watch, evaluation and checkpoint; `last`: the run's last step."""
     st, config = run.st, run.config
-    watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]), force=last)
+    if run.pending is None:  # else the state is the next step's (`_ahead`: not due then)
+        watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]), force=last)
     if run.evaluations is not None and st.step % config.eval_every == 0 and not last:
         t0 = time.perf_counter()
         psnr, ssim = run.evaluations.score(state.scene(st))
@@ -263,6 +294,20 @@ def _stops_early(run: _Run, early: EarlyStop) -> bool:
     return True
 
 
+def _ahead(run: _Run, feed: LevelFeed, early: EarlyStop, watch: _Watch, stop: StopRequest,
+           step: int) -> bool:
+    """Whether step `step` + 1 may be dispatched before step `step`'s metrics are read:
+    it is a step of the run and nothing between the two reads or replaces the state (a
+    refinement, an evaluation, a checkpoint, the watch, the early stop's check, a new image
+    level, a requested stop)."""
+    config, after = run.config, step + 1
+    return (after < config.steps and not run.setup.strategy.refine_due(step)
+            and after % config.checkpoint_every != 0
+            and (run.evaluations is None or after % config.eval_every != 0)
+            and not early.checks(after) and feed.level(after) == feed.level(step)
+            and not watch.due() and not stop.requested)
+
+
 def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> float:
     """Steps st.step .. config.steps (module docstring), until `stop` is requested or the early
     stop ends the run; returns the seconds spent in steps (their compilation, timed by `clock`,
@@ -282,12 +327,14 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
     try:
         with open(os.path.join(config.out, "metrics.jsonl"), "a", buffering=1) as f:
             run.record = lambda **row: f.write(json.dumps(row) + "\n")
-            while st.step < config.steps and not stop.requested:
+            # a stop requested while a step was dispatched ahead ends after that step
+            while st.step < config.steps and (not stop.requested or run.pending is not None):
                 if _stops_early(run, early):
                     break
                 t0 = time.perf_counter()
                 with clock:
-                    m = _one_step(run, feed, steps, clock)
+                    m = _one_step(run, feed, steps, clock,
+                                  _ahead(run, feed, early, watch, stop, st.step))
                     if run.setup.strategy.refine_due(st.step):
                         m["count"] = _refine(run)
                 if not m["ok"]:

@@ -209,7 +209,7 @@ def row_stats(stats):
                    donate_argnames=("pool", "opt_state", "strategy_state", "views"),
                    compiler_options=COMPILER_OPTIONS)
 def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, idx,
-               background, step, key, slots=None, *, setup: Setup, capacity: int,
+               background, step, key, slots=None, go=True, *, setup: Setup, capacity: int,
                rows: int | None = None, exchange: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
     (stacked, `data.stack_any`), whose images are `targets` (B, H, W, 3) (`data.TrainViews`:
@@ -219,13 +219,15 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     pose deltas, colour corrections), or None; `key` is the run's; `rows`: the backward's row
     buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, views,
     metrics): loss, psnr (training views), ok (finite), overflow, pairs (largest
-    per-view pair count), row_overflow, walked (largest per-view count of walked pairs), count
-    (active Gaussians). With `setup.gaussian_devices` > 1 (`sharded`): the state's rows split
+    per-view pair count), row_overflow, walked (largest per-view count of walked pairs), fits
+    (no buffer overflowed), count (active Gaussians). With `setup.gaussian_devices` > 1 (`sharded`): the state's rows split
     over that many devices, `slots` the slot each row holds, `exchange` the records each device
     can send another; pairs are per device, and row_overflow and walked give way to
     exchange_overflow and exchange_required (`sharded.buffer_metrics`). The step applies
-    where ok and nothing overflowed; else it returns its state unchanged. The state arguments
-    are donated: use the returned state, never the arguments, after a call."""
+    where ok, nothing overflowed and `go` (a bool scalar: `fit` passes the previous step's
+    fits, so that a step dispatched before the previous one's metrics were read changes
+    nothing where that one must be redone); else it returns its state unchanged. The state
+    arguments are donated: use the returned state, never the arguments, after a call."""
     cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
                                width=targets.shape[2], height=targets.shape[1])
     (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = loss_and_grads(
@@ -255,7 +257,7 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
                        row_overflow=jnp.any(row_overflow), walked=jnp.max(walked))
         fits = ~(buffers["overflow"] | buffers["row_overflow"])
     pool, opt_state, strategy_state, views = _select(
-        ok & fits, (new_pool, new_opt, new_state, new_views),
+        ok & fits & go, (new_pool, new_opt, new_state, new_views),
         (pool, opt_state, strategy_state, views))
     if setup.devices > 1:
         pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
@@ -263,7 +265,7 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     if setup.gaussian_devices > 1:
         (pool, opt_state, strategy_state), views = sharded.constrained(
             setup.gaussian_devices, (pool, opt_state, strategy_state), pool.size, views)
-    metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, **buffers,
+    metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, **buffers, fits=fits,
                    count=jnp.sum(pool.active, dtype=jnp.int32))
     return pool, opt_state, strategy_state, views, metrics
 

@@ -124,6 +124,15 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
     want = np.mean([float(losses.loss_fn(_image(g, rd.train_camera(v)),
                                          jnp.asarray(rd.train_images[v]))) for v in views])
     assert abs(float(m["loss"]) - want) < 1e-5 * want, (float(m["loss"]), want)
+    # go False (`fit`: the step before overflowed): the state comes back unchanged
+    state = (pool, opt_state, setup.strategy.init(pool, 1.0))
+    before = jax.tree.map(np.asarray, state)
+    kept = train_step(*jax.tree.map(jnp.copy, state), None, rd.train_cams, targets,
+                      jnp.asarray(views), jnp.asarray(BACKGROUND), 0, jax.random.key(0), None,
+                      jnp.asarray(False), setup=setup, capacity=4096)
+    assert bool(kept[4]["fits"]) and bool(kept[4]["ok"])
+    for a, b in zip(jax.tree.leaves(kept[:3]), jax.tree.leaves(before), strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.slow  # CI time: test_each_view_is_rendered_at_its_size covers the sizes

@@ -5,6 +5,7 @@ the `fit` CLI (outputs, run-directory rules, lego_train) and the progress bar.""
 
 import csv
 import dataclasses
+import functools
 import io
 import json
 import os
@@ -23,7 +24,8 @@ from skimage.metrics import structural_similarity
 import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
-from lgs_jax.train import ahead, feed as train_data, init, report
+from lgs_jax.train import ahead, init, loop, report
+from lgs_jax.train import feed as train_data
 
 from .captures import tiny_capture
 
@@ -181,7 +183,7 @@ def _config(data, out, **kwargs) -> train.FitConfig:
     return train.FitConfig(data=data.path, out=str(out), steps=STEPS, recipe=recipe,
                            strategy=STRATEGY, max_gaussians=1024, pool_size=1024,
                            backend="reference", eval_every=kwargs.pop("eval_every", 100),
-                           checkpoint_every=3, pair_headroom=1.5,
+                           checkpoint_every=kwargs.pop("checkpoint_every", 3), pair_headroom=1.5,
                            stream_images=kwargs.pop("stream", None), **kwargs)
 
 
@@ -341,6 +343,33 @@ def test_compiling_ahead_changes_no_bit(skull, tmp_path):
     for name in a.files:
         np.testing.assert_array_equal(a[name], c[name], err_msg=name)
         np.testing.assert_array_equal(b[name], c[name], err_msg=name)
+
+
+def test_steps_dispatched_ahead_change_no_bit(skull, tmp_path, monkeypatch):
+    """`fit` dispatches a step before reading the previous one's metrics where nothing between
+    them reads the state (`loop._ahead`), passing it the previous one's fits as its go; where
+    the previous one overflowed (0-based step 9 here: the pairs outgrow the capacity), the one
+    dispatched ahead is told not to apply (`train_step`'s go: test_sizes) and both run again.
+    A checkpoint after every step leaves no step to dispatch ahead: the same bits."""
+    order, dispatch = {}, loop._dispatch
+
+    def tracked(run, feed, steps, step, size, go, seen):
+        seen.append((step, bool(go)))
+        return dispatch(run, feed, steps, step, size, go)
+
+    for every in (3, 1):
+        monkeypatch.setattr(loop, "_dispatch", functools.partial(tracked, seen=[]))
+        order[every] = loop._dispatch.keywords["seen"]
+        _fit(skull, tmp_path / str(every), checkpoint_every=every)
+    redo = [(9, True), (10, False), (9, True), (10, True), (11, True)]
+    assert [s for s in order[3] if not s[1]] == [(10, False)], order[3]
+    i = order[3].index((10, False))
+    assert order[3][i - 1:i + 4] == redo and len(order[3]) == STEPS + 2, order[3]
+    assert order[1] == [(s, True) for s in sorted(list(range(STEPS)) + [9])], order[1]
+    a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "31")
+    assert sorted(a.files) == sorted(b.files)
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
 class _Lowered:
