@@ -2,9 +2,12 @@
 over D devices): placed balanced, refined in slot order, saved as the one-device run saves it,
 its buffers sized, its held-out views rendered sharded.
 
-- `balanced(devices, parts)`: the rows of (pool, opt_state, strategy_state), given in slot
-  order, permuted by `balance.balanced_order(active, D)` and placed in blocks over the mesh;
-  returns them and `order` (row j holds slot order[j]).
+- `balanced(devices, parts, cams)`: the rows of (pool, opt_state, strategy_state), given in
+  slot order, permuted by `balance.balanced_order(active, D, work)` and placed in blocks over
+  the mesh; returns them and `order` (row j holds slot order[j]). `work` (per slot, `work`):
+  Σ over a few training views (`balance_views`) of 1 + the Gaussian's tile pairs in the view,
+  the projection and binning a device does for it, so the blocks share the pairs, not just
+  the count (without views: by count).
 - `in_slot_order(parts, order)`: back to slot order (the one-device layout): what a refinement
   runs on and a checkpoint holds, so a checkpoint is the one-device run's file and `--resume`
   takes it on any device count.
@@ -29,7 +32,9 @@ import numpy as np
 from .. import parallel
 from ..config import RasterConfig
 from ..parallel.balance import balanced_order
+from ..binning import tile_rects
 from ..parallel.shards import padded_rows
+from ..projection import project
 from ..render import pair_capacity
 from . import heldout, sharded
 from . import step as step_mod
@@ -46,10 +51,39 @@ def _permuted(parts, order, *, devices: int):
     return sharded.constrained(devices, out, size)[0]
 
 
-def balanced(devices: int, parts: tuple):
+BALANCE_VIEWS = 8  # the most training views `balance_views` picks
+
+
+def balance_views(views: int) -> list[int]:
+    """Which of `views` training views the blocks are balanced over (`work`): at most
+    `BALANCE_VIEWS`, evenly spaced, the first and last included."""
+    return [int(i) for i in np.unique(np.linspace(0, views - 1, min(views, BALANCE_VIEWS)
+                                                  ).round().astype(int))]
+
+
+@functools.partial(jax.jit, static_argnames=("antialiased",))
+def _view_work(params, active, cam, *, antialiased: bool):
+    p = project(render_gaussians(params, active), cam, antialiased)
+    _, _, nx, ny, _ = tile_rects(p, cam.width, cam.height)
+    return 1.0 + (nx * ny).astype(jnp.float32)
+
+
+def work(pool: Pool, cams: list, antialiased: bool) -> jax.Array:
+    """(size,) float32 per slot: Σ over `cams` of 1 + the Gaussian's tile pairs in that view
+    (its projection and its binned pairs; an inactive slot has no pair). The weight
+    `balanced_order` shares out."""
+    total = jnp.zeros(pool.active.shape, jnp.float32)
+    for cam in cams:
+        total = total + _view_work(pool.params, pool.active, cam, antialiased=antialiased)
+    return total
+
+
+def balanced(devices: int, parts: tuple, cams: list = (), antialiased: bool = False):
     """((pool, opt_state, strategy_state) with rows permuted by order and placed, order), from
-    `parts` in slot order (module docstring)."""
-    order = jax.device_put(_order(parts[0].active, devices), sharded.blocks(devices))
+    `parts` in slot order (module docstring): the blocks balanced by `work` over `cams`, or
+    by count without them."""
+    weights = work(parts[0], cams, antialiased) if cams else None
+    order = jax.device_put(_order(parts[0].active, devices, weights), sharded.blocks(devices))
     return _permuted(parts, order, devices=devices), order
 
 
@@ -72,17 +106,25 @@ def place(devices: int, parts: tuple, views):
 
 
 def refine(strategy, strategy_state, pool: Pool, opt_state, order, step: int, key, cap: int,
-           devices: int):
-    """`step.refine` of the state in slot order (module docstring), then balanced again.
-    Returns (strategy_state, pool, opt_state, report, order); the report's `per_device` lists
-    the active Gaussians of each device's block."""
+           devices: int, cams: list = (), antialiased: bool = False):
+    """`step.refine` of the state in slot order (module docstring), then balanced again by
+    `work` over `cams` (by count without them). Returns (strategy_state, pool, opt_state,
+    report, order); the report's `per_device` lists the active Gaussians of each device's
+    block, with cams `per_device_work` each block's work and `heaviest` the largest one
+    Gaussian's (a block's work is within it of an equal share unless the block is full)."""
     pool, opt_state, strategy_state = in_slot_order(devices, (pool, opt_state, strategy_state),
                                                     order)
     strategy_state, pool, opt_state, report = step_mod.refine(
         strategy, strategy_state, pool, opt_state, step, key, cap, devices)
     (pool, opt_state, strategy_state), order = balanced(devices, (pool, opt_state,
-                                                                  strategy_state))
+                                                                  strategy_state),
+                                                        cams, antialiased)
     report["per_device"] = per_device(devices, pool)
+    if cams:
+        w = jnp.where(pool.active, work(pool, cams, antialiased), 0.0)
+        report["per_device_work"] = [float(x) for x in jax.device_get(
+            jnp.sum(jnp.reshape(w, (devices, -1)), axis=1))]
+        report["heaviest"] = float(jnp.max(w))
     return strategy_state, pool, opt_state, report, order
 
 

@@ -114,14 +114,21 @@ def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     return RunState(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, views=views)
 
 
+def balance_views(rd: RunData) -> list:
+    """The training cameras a Gaussian-parallel run balances its blocks over
+    (`sharded_state.balance_views`)."""
+    return [rd.train_camera(i) for i in sharded_state.balance_views(len(rd.train_names))]
+
+
 def _sharded(config: FitConfig, setup: Setup, rd: RunData, parts: tuple, step: int,
              eval_capacity: int | None, skipped: int = 0) -> RunState:
     """The state of a run split over setup.gaussian_devices devices (`sharded_state`) from
     `parts` (pool, opt_state, strategy_state, views) in slot order: the pool padded to equal
-    blocks, balanced and placed; both buffers sized from the first training view."""
+    blocks, balanced (`sharded_state.work` over `balance_views`) and placed; both buffers
+    sized from the first training view."""
     d = setup.gaussian_devices
     (pool, opt_state, sstate), order = sharded_state.balanced(
-        d, sharded_state.padded(parts[:3], d))
+        d, sharded_state.padded(parts[:3], d), balance_views(rd), setup.recipe.antialiased)
     views = sharded_state.place(d, (pool, opt_state, sstate), parts[3])[1]
     capacity, exchange = sharded_state.first_sizes(d, pool, rd.train_camera(0),
                                                    setup.recipe.antialiased,

@@ -65,3 +65,30 @@ def test_gaussian_parallel_rebalance_respects_block_sizes():
 def test_gaussian_parallel_rebalance_refuses_uneven_blocks():
     with pytest.raises(ValueError, match="47 slots do not split into 4 equal blocks"):
         block_starts(np.ones(47, bool), 4)
+
+
+def test_gaussian_parallel_work_is_each_gaussians_pairs_and_projection():
+    """`sharded_state.work`, the weight training balances by: per slot and view, 1 (its
+    projection) + its tile pairs; an inactive slot has none. Its views: at most 8, evenly
+    spaced."""
+    from lgs_jax import Camera, Gaussians, count_pairs
+    from lgs_jax.train import from_gaussians, sharded_state
+
+    rng = np.random.default_rng(3)
+    n = 40
+    g = Gaussians(rng.normal(size=(n, 3)).astype(np.float32),
+                  rng.normal(size=(n, 4)).astype(np.float32),
+                  rng.normal(-2, 0.7, (n, 3)).astype(np.float32),
+                  rng.normal(0, 2, n).astype(np.float32),
+                  rng.normal(size=(n, 1, 3)).astype(np.float32))
+    pool = from_gaussians(g, SIZE)
+    cam = Camera(viewmat=np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]],
+                                  np.float32), fx=np.float32(40), fy=np.float32(40),
+                 cx=np.float32(32), cy=np.float32(16), width=64, height=32)
+    w = np.asarray(sharded_state.work(pool, [cam, cam], antialiased=False))
+    active = np.asarray(pool.active)
+    pairs = int(count_pairs(g, cam))
+    assert pairs > n and np.all(w[~active] == 2) and w[active].sum() == 2 * (n + pairs)
+    assert sharded_state.balance_views(3) == [0, 1, 2]
+    picks = sharded_state.balance_views(100)
+    assert len(picks) == 8 and picks[0] == 0 and picks[-1] == 99

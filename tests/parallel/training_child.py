@@ -49,6 +49,11 @@ REFINED = dict(  # `STRATEGY` (its one-device program compiled by the runs) and 
     default=STRATEGY, mcmc=train.MCMCStrategy(refine_start_iter=0, refine_every=1, cap_max=400))
 PARTS = dict(fast=("d1", "d1_resumed_on_d2"),
              slow=("d1", "d2", "d4", "mcmc_views_d2"))
+# the view the refinements balance their blocks' work over: 4 units in front of the points
+VIEW = lgs_jax.Camera(viewmat=np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]],
+                                       np.float32), fx=np.float32(40), fy=np.float32(40),
+                      cx=np.float32(32), cy=np.float32(16), width=64, height=32)
+
 # the slow part's last run: MCMC (refinements at steps 3 and 6) with the views' own parameters
 MCMC = train.MCMCStrategy(refine_start_iter=2, refine_every=3, cap_max=400)
 
@@ -109,13 +114,14 @@ def refinements() -> dict:
                                                                POOL), jnp.float32),
                          count=jnp.ones(POOL, jnp.float32))
         one = step.refine(strategy, state, pool, opt, 3, key, POOL)
-        parts, order = sharded_state.balanced(4, (pool, opt, state))
+        parts, order = sharded_state.balanced(4, (pool, opt, state), [VIEW])
         s4, p4, o4, report, order = sharded_state.refine(strategy, parts[2], parts[0], parts[1],
-                                                         order, 3, key, POOL, 4)
+                                                         order, 3, key, POOL, 4, [VIEW])
         back = sharded_state.in_slot_order(4, (p4, o4, s4), order)
         same = [bool(np.array_equal(a, b)) for a, b in zip(
             jax.tree.leaves((one[1], one[2], one[0])), jax.tree.leaves(back))]
         out[name] = dict(same=same, per_device=report["per_device"],
+                         per_device_work=report["per_device_work"], heaviest=report["heaviest"],
                          before=int(np.sum(pool.active)), after=int(np.sum(one[1].active)))
     return out
 
