@@ -178,7 +178,7 @@ def test_depth_order_is_the_stable_order_of_depths(dtype, seed):
                        np.finfo(dtype).max, np.inf], dtype)
     depth = rng.choice(values, 64)
     valid = rng.random(64) < 0.8
-    p = Projected(mean2d=None, cov2d=None, conic=None, depth=jnp.asarray(depth),
+    p = Projected(mean2d=None, mean2d_lo=None, cov2d=None, conic=None, depth=jnp.asarray(depth),
                   opacity=None, rgb=None, valid=jnp.asarray(valid), invalid=None)
     key = np.where(valid, depth + dtype(0), np.inf)  # −0 + 0 = +0
     np.testing.assert_array_equal(depth_order(p), np.argsort(key, kind="stable"))
@@ -212,6 +212,7 @@ def test_slot_starts_past_int32_keep_the_nearest_pairs():
     with jax.enable_x64(False):
         ones = jnp.ones((n,), jnp.float32)
         p = Projected(mean2d=jnp.tile(jnp.array([[1920.0, 1080.0]]), (n, 1)),
+                      mean2d_lo=jnp.zeros((n, 2)),
                       cov2d=jnp.tile(jnp.array([[1e8, 0.0, 1e8]]), (n, 1)),
                       conic=jnp.tile(jnp.array([[1e-8, 0.0, 1e-8]]), (n, 1)),
                       depth=jnp.arange(1, n + 1, dtype=jnp.float32), opacity=0.9 * ones,

@@ -248,7 +248,8 @@ def test_binning_covers_faint_huge_gaussians_at_the_corner():
     conic[0] = [8.78369e-08, -1.38928e-08, 1.0472e-07]
     mean = np.where(np.arange(N)[:, None] == 0, 0.0, rng.uniform(-3, 3, (N, 2)))
     f32 = lambda x: jnp.asarray(x, jnp.float32)
-    p = Projected(mean2d=f32(mean), cov2d=f32(np.zeros((N, 3))), conic=f32(conic),
+    p = Projected(mean2d=f32(mean), mean2d_lo=f32(np.zeros((N, 2))), cov2d=f32(np.zeros((N, 3))),
+                  conic=f32(conic),
                   depth=f32(np.ones(N)), opacity=f32(opacity), rgb=f32(np.zeros((N, 3))),
                   valid=jnp.ones(N, bool), invalid=jnp.zeros(N, bool))
     col, row = (x.ravel() for x in np.meshgrid(np.arange(48), np.arange(48)))

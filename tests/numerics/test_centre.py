@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 from hypothesis import given, strategies as st
 
-from numerics import centre, split
+from lgs_jax import twofloat
+from numerics import centre
 from tests.scenes import float_arrays
 
 
@@ -18,15 +19,15 @@ def _magnitudes():
 
 @given(a=_magnitudes(), b=_magnitudes(), scale=st.sampled_from([1e-8, 1.0, 1e8]))
 def test_error_free_transformations_are_exact(a, b, scale):
-    """two_sum and two_prod return the exact sum and product of float32 numbers (as float64,
-    which holds them: the product of two 24-bit significands has 48 bits), where no partial
-    product underflows (XLA flushes subnormals to zero)."""
+    """lgs_jax.twofloat's two_sum and two_prod return the exact sum and product of float32
+    numbers (as float64, which holds them: the product of two 24-bit significands has 48
+    bits), where no partial product underflows (XLA flushes subnormals to zero)."""
     a = jnp.asarray(a, jnp.float32)
     b = jnp.asarray(b * scale, jnp.float32)
     up = lambda x: np.asarray(x, np.float64)
-    s, e = split.two_sum(a, b)
+    s, e = twofloat.two_sum(a, b)
     np.testing.assert_array_equal(up(s) + up(e), up(a) + up(b))
-    p, e = split.two_prod(a, b)
+    p, e = twofloat.two_prod(a, b)
     exact = up(a) * up(b)
     assert np.all(np.abs(up(p) + up(e) - exact) <= 2.0**-44 * np.abs(exact))
 
