@@ -27,10 +27,23 @@ correction term, so that a contraction cannot change what the transformations co
 only: a 53-bit float64 significand has no bit-mask split whose partial products are exact
 (float64's own floor, 2^-53·|μ|, is 2e-12 px at 16K; lgs_jax.projection keeps lo = 0 there).
 
-Cost (float32 operations per Gaussian as written here, `tests/test_projection.py` counts them
-in the jaxpr): `camera_coordinates` 303 (the plain transform: 18), `screen_centre` 161 and 4
-divisions (the plain centre: 4 multiply-adds, 2 divisions); per offset one addition more per
-axis than the plain μ − p.
+Cost per Gaussian, as written (float32 operations on the (N,) columns, counted in the jaxpr by
+tests/test_projection.py; XLA merges the repeated splits of t_z): `camera_coordinates` 309
+additions, subtractions and multiplications and 3 bit masks (the plain t = W·m + T: 18),
+`screen_centre` 154, 6 bit masks and 4 divisions (the plain centre: 4 and 2 divisions). The
+projection keeps the plain centre for its derivative only (`with_tangent_of`). Per offset
+(`offset`) one addition per axis more than the plain μ − p. Where the library pays that:
+
+  per Gaussian  the split above; two columns more in `pairs.gaussian_table` (8 bytes in
+                float32) and in each exchanged record of Gaussian parallelism;
+  per pair      one addition per axis for Δ (Eq. 8 and the Pallas kernels' difference
+                records, which hold Δ = (hi − T) + lo where they held μ: two operations
+                more per axis); the strip masks of the difference form take the hoisted
+                form's error bound too (`pairs.strip_mask_columns`: 60 jaxpr operations
+                and a logarithm more per pair; the hoisted form's: 8);
+  per exponent  one addition per axis in the XLA difference form (lgs_jax.composite:
+                reference, brute, tiles); none in the Pallas kernels (d = Δ − x', as the
+                plain μ − p) nor in the hoisted forms (V·B, Eq. 10, unchanged).
 """
 
 from __future__ import annotations
