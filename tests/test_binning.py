@@ -14,7 +14,7 @@ from hypothesis import given, strategies as st
 
 import lgs_jax
 from lgs_jax import binning
-from lgs_jax.composite import gaussian_alpha
+from lgs_jax.composite import centre_offsets, gaussian_alpha
 from lgs_jax.config import ALPHA_MIN
 from lgs_jax.projection import Projected, depth_order, project
 from tests import scenes
@@ -29,11 +29,11 @@ def _alpha_pass(p: Projected, width, height, cap=0.99):
     jj, ii = jnp.meshgrid(jnp.arange(width), jnp.arange(height))
     px, py = (jj + 0.5).astype(dt), (ii + 0.5).astype(dt)
 
-    def one(m, c, o):
-        power, alpha = gaussian_alpha(m, c, o, px, py, jnp.asarray(cap, dt))
+    def one(m, lo, c, o):
+        power, alpha = gaussian_alpha(centre_offsets(m, lo, px, py), c, o, jnp.asarray(cap, dt))
         return (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
 
-    return jax.vmap(one)(p.mean2d, p.conic, p.opacity) & p.valid[:, None, None]
+    return jax.vmap(one)(p.mean2d, p.mean2d_lo, p.conic, p.opacity) & p.valid[:, None, None]
 
 
 def _check_covered(p: Projected, width=W, height=H):
