@@ -151,9 +151,8 @@ def record_columns(cols, tx, ty, config: RasterConfig, mask=None):
     (lgs_jax.backends.pallas.steps), from Δ = μ − T relative to the tile's origin
     (`table_offsets`): hoisted, V (Eq. 8) and ln o; the difference form, Δ (the kernels take
     d = Δ − x' in the hoisting frame), the conic, o and 0; then rgb, z and the strip mask as a
-    float
-    (`mask`: int32, None for 0). On columns, as `strip_mask_columns`. The zeros (the difference
-    form's o · 0, no mask's z · 0) are products of the lanes' own data: a constant
+    float (`mask`: int32, None for 0). On columns, as `strip_mask_columns`. The zeros (the
+    difference form's o · 0, no mask's z · 0) are products of the lanes' own data: a constant
     (`zeros_like`) reaches the Mosaic GPU kernels' lane-strided shared-memory stores as a
     splat they cannot take, and the kernel fails to build for the H200 (LLVM translation: an
     unrealized_conversion_cast; on the GPU the test hung instead of raising)."""

@@ -36,11 +36,12 @@ projection keeps the plain centre for its derivative only (`with_tangent_of`). P
 
   per Gaussian  the split above; two columns more in `pairs.gaussian_table` (8 bytes in
                 float32) and in each exchanged record of Gaussian parallelism;
-  per pair      one addition per axis for Δ (Eq. 8 and the Pallas kernels' difference
-                records, which hold Δ = (hi − T) + lo where they held μ: two operations
-                more per axis); the strip masks of the difference form take the hoisted
-                form's error bound too (`pairs.strip_mask_columns`: 60 jaxpr operations
-                and a logarithm more per pair; the hoisted form's: 8);
+  per pair      one addition per axis for Δ before Eq. 8; the Pallas kernels' difference
+                records hold Δ = (hi − T) + lo where they held μ (two operations per axis,
+                which the vanilla kernel does per pair from its rows); the strip masks of
+                the difference form take the hoisted form's error bound too
+                (`pairs.strip_mask_columns`: 60 jaxpr equations more per pair, a logarithm
+                among them; the hoisted form's masks: 8 more);
   per exponent  one addition per axis in the XLA difference form (lgs_jax.composite:
                 reference, brute, tiles); none in the Pallas kernels (d = Δ − x', as the
                 plain μ − p) nor in the hoisted forms (V·B, Eq. 10, unchanged).
