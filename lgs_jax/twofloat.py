@@ -36,9 +36,10 @@ projection keeps the plain centre for its derivative only (`with_tangent_of`). P
 
   per Gaussian  the split above; two columns more in `pairs.gaussian_table` (8 bytes in
                 float32) and in each exchanged record of Gaussian parallelism;
-  per pair      one addition per axis for Δ before Eq. 8; the Pallas kernels' difference
-                records hold Δ = (hi − T) + lo where they held μ (two operations per axis,
-                which the vanilla kernel does per pair from its rows); the strip masks of
+  per pair      one addition per axis for Δ before Eq. 8, and 8 of the 48 bytes of the
+                table row every pair gathers (float32); the Pallas kernels' difference
+                records hold Δ = (hi − T) + lo, not μ (two operations per axis, which the
+                vanilla kernel does per pair from its rows); the strip masks of
                 the difference form take the hoisted form's error bound too
                 (`pairs.strip_mask_columns`: 60 jaxpr equations more per pair, a logarithm
                 among them; the hoisted form's masks: 8 more);
