@@ -22,9 +22,8 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
            formulas on the device; the final ones and gsplat's: `report.heldout_metrics`).
 Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by default, with the
 3DGS compositing rule, alpha cap 0.99, or gsplat's with --convention gsplat; gsplat's: 0.999).
-Time per step: the loop's wall time (gsplat's: one host sync per step, as simple_trainer's
-progress bar does; ours: `fit`'s, which dispatches a step before reading the previous one's
-metrics) without evaluations; ours also without compilation (compiling ahead in a thread counts
+Time per step: the loop's wall time (gsplat's: a host sync per step, as simple_trainer's bar
+does; ours: `fit`'s, a step dispatched before the last one's read) without evaluations; ours also without compilation (compiling ahead in a thread counts
 only its waits: --compile-ahead off for the steps alone); gsplat's after one warm-up render.
 Wall time (`process_s`): each worker from its start to its last output, imports, data and
 compiles included. Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use.
