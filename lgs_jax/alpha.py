@@ -6,7 +6,9 @@ Pallas kernels compute α with the same arithmetic in the same order, and each k
 is one call away. (Forward and backward must agree to the bit: a 1-ulp difference in α flips
 alpha tests between them and, through T_k = T_{k+1}/(1 − α_k), grows into NaNs in training.)
 
-Difference form (the contract, lgs_jax.composite), with d = μ − pixel centre:
+Difference form (the contract, lgs_jax.composite), with d = μ − pixel centre formed by the
+caller (`composite.centre_offsets`: (mean2d − p) + mean2d_lo; the Pallas kernels' pair records
+from the tile corner, lgs_jax.backends.pallas.steps):
     power = −½(a·dx² + c·dy²) − b·dx·dy,  α = min(cap, o·e^power),
     hit = power <= 0 and α >= 1/255.
   Derivative, where the cap does not bind (o·e^power < cap), ∂α/∂power = α:
@@ -33,17 +35,18 @@ from .composite import gaussian_alpha, passes
 from .config import ALPHA_MIN
 
 
-def difference(mean, conic, opacity, px, py, cap):
-    """(α, hit, power) of the difference form; mean = (μx, μy), conic = (a, b, c)."""
-    power, alpha = gaussian_alpha(mean, conic, opacity, px, py, cap)
+def difference(d, conic, opacity, cap):
+    """(α, hit, power) of the difference form; d = (dx, dy) = μ − pixel, conic = (a, b, c)."""
+    power, alpha = gaussian_alpha(d, conic, opacity, cap)
     return alpha, passes(power, alpha), power
 
 
-def difference_vjp(d_alpha, alpha, power, mean, conic, opacity, px, py, cap):
-    """∂L/∂(μx, μy, a, b, c, o) per pixel from ∂L/∂α (zero where the pair does not hit)."""
+def difference_vjp(d_alpha, alpha, power, d, conic, opacity, cap):
+    """∂L/∂(μx, μy, a, b, c, o) per pixel from ∂L/∂α (zero where the pair does not hit), at
+    the offsets d = (dx, dy) `difference` took."""
     unclamped = opacity * jnp.exp(power) < cap
     d_power = jnp.where(unclamped, d_alpha * alpha, 0)
-    dx, dy = mean[0] - px, mean[1] - py
+    dx, dy = d
     a, b, c = conic
     return [-d_power * (a * dx + b * dy), -d_power * (c * dy + b * dx),
             -0.5 * d_power * dx * dx, -d_power * dx * dy, -0.5 * d_power * dy * dy,

@@ -21,6 +21,13 @@ For 2γK >= 1/2 (float32: K >~ 5e5, needles whose float32 conic cannot bound the
 treated as unbounded and the Gaussian is binned to every tile: slow but exact, and counted in
 `RenderStats.n_unbounded`. The ellipse q <= τ_pad has the exact half-extents
 rx = √(τ_pad·c/det), ry = √(τ_pad·a/det); pixel column j is inside iff |j + 0.5 − mx| <= rx.
+
+The centre is μ = mean2d + mean2d_lo (lgs_jax.projection) and the test's offset
+d = (mean2d − p) + mean2d_lo errs by at most 2u relative to d (one rounding where mean2d − p is
+exact, Sterbenz's lemma; otherwise |mean2d − p| >= |mean2d|/2 >= |mean2d_lo|/u), within γ. The
+boxes are centred at mx = mean2d, |mean2d_lo| <= u·|mx| from μ, which their slack
+8u·(|mx| + r + 1) holds besides its own rounding (as the strip masks' slack does,
+lgs_jax.warp_masks).
 """
 
 from __future__ import annotations

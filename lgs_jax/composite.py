@@ -1,7 +1,9 @@
 """Per-pixel front-to-back compositing, exactly as docs/conventions.md "Compositing" defines it.
 
 For each pixel, over Gaussians in (depth, index) order:
-    d = mean2d − pixel_centre;  power = −½(a·dx² + c·dy²) − b·dx·dy
+    d = (mean2d − pixel_centre) + mean2d_lo  (the centre μ = mean2d + mean2d_lo,
+        lgs_jax.projection; the large parts cancel before the correction is added);
+    power = −½(a·dx² + c·dy²) − b·dx·dy
     skip if power > 0;  α = min(cap, o·exp(power));  skip if α < 1/255
     test_T = T·(1 − α);  if test_T < 1e-4 (<= in the gsplat convention): pixel done, not blended
     else C += rgb·α·T;  D += z·α·T;  T = test_T
@@ -18,6 +20,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from . import twofloat
 from .config import ALPHA_MIN, T_STOP, RasterConfig
 
 
@@ -45,9 +48,17 @@ def stops(trans, config: RasterConfig):
     return (trans <= t_stop) if config.stop_inclusive else (trans < t_stop)
 
 
-def gaussian_alpha(mean2d, conic, opacity, px, py, cap):
-    """(power, α) of one Gaussian at pixel centres (px, py), in the 3DGS difference form."""
-    dx, dy = mean2d[0] - px, mean2d[1] - py
+def centre_offsets(mean2d, mean2d_lo, px, py):
+    """d = μ − pixel centre (dx, dy) of a centre μ = mean2d + mean2d_lo (pairs (x, y)) at
+    pixel centres (px, py): (mean2d − p) + mean2d_lo (`lgs_jax.twofloat.offset`)."""
+    return (twofloat.offset(mean2d[0], mean2d_lo[0], px),
+            twofloat.offset(mean2d[1], mean2d_lo[1], py))
+
+
+def gaussian_alpha(d, conic, opacity, cap):
+    """(power, α) of one Gaussian at offsets d = (dx, dy) from its centre (`centre_offsets`),
+    in the 3DGS difference form."""
+    dx, dy = d
     power = -0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) - conic[1] * dx * dy
     alpha = jnp.minimum(cap, opacity * jnp.exp(power))
     return power, alpha
@@ -78,12 +89,13 @@ def blend_weights(trans, alpha, hit, config: RasterConfig):
     return jnp.where(take, alpha * trans, 0), jnp.where(take, test_t, trans), stopped
 
 
-def blend(state: PixelState, mean2d, conic, opacity, rgb, depth, active, px, py,
+def blend(state: PixelState, mean2d, mean2d_lo, conic, opacity, rgb, depth, active, px, py,
           config: RasterConfig) -> PixelState:
     """Composite one Gaussian over pixels (px, py) with exact blending (`blend_weights`);
     `active` (scalar bool) gates it entirely."""
     dt = state.trans.dtype
-    power, alpha = gaussian_alpha(mean2d, conic, opacity, px, py, jnp.asarray(config.alpha_cap, dt))
+    power, alpha = gaussian_alpha(centre_offsets(mean2d, mean2d_lo, px, py), conic, opacity,
+                                  jnp.asarray(config.alpha_cap, dt))
     hit = active & ~state.done & passes(power, alpha)
     w, trans, stopped = blend_weights(state.trans, alpha, hit, config)
     return PixelState(color=state.color + w[:, None] * rgb, trans=trans,

@@ -7,7 +7,10 @@ Implements docs/conventions.md, "Camera and projection":
       tx' = tz·clip(tx/tz, −lim_x−, lim_x+),  lim_x+ = (W − cx)/fx + 0.3·W/(2fx),
       lim_x− = cx/fx + 0.3·W/(2fx) (y likewise);
   Σ2 = J Σc Jᵀ + 0.3·I;  det = Σ2xx·Σ2yy − Σ2xy², invalid if det <= 0;
-  conic (a, b, c) = (Σ2yy, −Σ2xy, Σ2xx)/det;  mean2d = (fx·tx/tz + cx, fy·ty/tz + cy);
+  conic (a, b, c) = (Σ2yy, −Σ2xy, Σ2xx)/det;  μ = (fx·tx/tz + cx, fy·ty/tz + cy),
+      carried as mean2d + mean2d_lo (float32: the split centre of lgs_jax.twofloat, from the
+      same float32 parameters to O(u²)·|μ|; mean2d is μ rounded to float32, the derivative
+      is that of μ, mean2d_lo is a constant correction; float64: mean2d_lo = 0);
   rgb = max(SH(dir) + 0.5, 0), dir = normalise(μ − camera centre);
   or, given per-Gaussian `colors` (N, C), rgb = colors as given (any C >= 1, no clamp).
 Antialiased (`RasterConfig(antialiased=True)`, gsplat's rasterize_mode="antialiased", the
@@ -28,6 +31,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from . import twofloat
 from .config import ALPHA_MIN
 from .scene import Camera, Gaussians
 from .sh import sh_basis_terms, sh_sums
@@ -46,9 +50,15 @@ class Projected:
     non-finite colour). `valid` marks those that can reach the image: not invalid and
     opacity >= 1/255. Rows that are not valid hold finite placeholders (unit conic, zero
     colour, opacity and depth), so no NaN can leak.
+
+    The centre is μ = mean2d + mean2d_lo (lgs_jax.twofloat): every consumer forms its offset
+    as (mean2d − p) + mean2d_lo (`twofloat.offset`), so that it rounds at its own size, not at
+    the image's. Code that builds a `Projected` from a centre it holds in one number passes
+    mean2d_lo = zeros.
     """
 
-    mean2d: Any  # (N, 2) pixel coordinates (x, y)
+    mean2d: Any  # (N, 2) pixel coordinates (x, y) of the centre μ, rounded to the dtype
+    mean2d_lo: Any  # (N, 2) μ − mean2d (|mean2d_lo| <= ulp(mean2d)/2; not differentiated)
     cov2d: Any  # (N, 3) Σ2 as (xx, xy, yy), dilation included
     conic: Any  # (N, 3) (a, b, c) = Σ2⁻¹ entries (xx, xy, yy)
     depth: Any  # (N,) camera-space z
@@ -56,6 +66,17 @@ class Projected:
     rgb: Any  # (N, 3), or (N, C): the `colors` given to `project`
     valid: Any  # (N,) bool: can reach the image
     invalid: Any  # (N,) bool: invalid per the contract (a subset of ~valid)
+
+
+def shifted(p: Projected, offsets) -> Projected:
+    """`p` with its centres moved by `offsets` (N, 2) pixels, exactly: μ + offsets carried as
+    mean2d + mean2d_lo again (the sum's rounding goes to mean2d_lo, `twofloat.two_sum`),
+    differentiated as mean2d + offsets. Zero offsets return `p`'s values."""
+    offsets = offsets.astype(p.mean2d.dtype)
+    moved = p.mean2d + offsets
+    s, e = twofloat.two_sum(lax.stop_gradient(p.mean2d), lax.stop_gradient(offsets))
+    hi, lo = twofloat.two_sum(s, lax.stop_gradient(p.mean2d_lo) + e)
+    return dataclasses.replace(p, mean2d=twofloat.with_tangent_of(hi, moved), mean2d_lo=lo)
 
 
 def quat_to_rotmat(q):
@@ -210,7 +231,8 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
     det_ok = det > 0
     det_safe = jnp.where(det_ok, det, 1.0)
     conic = (syy / det_safe, -sxy / det_safe, sxx / det_safe)
-    mean2d = (fx * tx / tz_safe + cx, fy * ty / tz_safe + cy)
+    mean2d, mean2d_lo = _centre(mean, viewmat, (fx, fy, cx, cy), in_range,
+                                (fx * tx / tz_safe + cx, fy * ty / tz_safe + cy))
 
     opacity = jax.nn.sigmoid(jnp.where(input_ok, logit_opacities, 0.0))
     if antialiased:
@@ -218,12 +240,13 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
     rgb = (_sh_colour(mean, sh, viewmat, input_ok) if colors is None
            else [jnp.where(input_ok, x, 0.0) for x in colour_in])
 
-    finite = all_of([jnp.isfinite(x) for x in mean2d + conic + tuple(rgb)])
+    finite = all_of([jnp.isfinite(x) for x in mean2d + mean2d_lo + conic + tuple(rgb)])
     invalid = ~(input_ok & in_range & det_ok & finite)
     valid = ~invalid & (opacity >= jnp.asarray(ALPHA_MIN, dt))
     keep = lambda xs, fill: tuple(jnp.where(valid, x, f) for x, f in zip(xs, fill))
     return dict(
         mean2d=keep(mean2d, (0.0, 0.0)),
+        mean2d_lo=keep(mean2d_lo, (0.0, 0.0)),
         cov2d=keep((sxx, sxy, syy), (1.0, 0.0, 1.0)),
         conic=keep(conic, (1.0, 0.0, 1.0)),
         depth=jnp.where(valid, tz, 0.0),
@@ -232,6 +255,22 @@ def _projected_columns(mean, quat, log_scale, logit_opacities, sh, cam: Camera,
         valid=valid,
         invalid=invalid,
     )
+
+
+def _centre(mean, viewmat, intrinsics, in_range, plain):
+    """(mean2d, mean2d_lo) columns of the centre whose float32 rounding is `plain` (μ computed
+    in the dtype): in float32 the split centre of the same parameters (lgs_jax.twofloat:
+    t = W·m + T compensated, then the perspective step in double-float32; the division by 1
+    where t_z is out of range, as `plain`'s), differentiated as `plain`; otherwise `plain` and
+    zeros."""
+    if plain[0].dtype != jnp.float32:
+        return plain, tuple(jnp.zeros_like(x) for x in plain)
+    fixed = lax.stop_gradient  # the correction is a constant: bit masks have no derivative
+    t = twofloat.camera_coordinates(fixed(viewmat), [fixed(m) for m in mean])
+    tz = (jnp.where(in_range, t[2][0], 1.0), jnp.where(in_range, t[2][1], 0.0))
+    split = twofloat.screen_centre(t[0], t[1], tz, *(fixed(v) for v in intrinsics))
+    return (tuple(twofloat.with_tangent_of(hi, like) for (hi, _), like in zip(split, plain)),
+            tuple(lo for _, lo in split))
 
 
 def _sh_colour(mean, sh, viewmat, input_ok):

@@ -34,7 +34,7 @@ from .backends import REGISTRY, BackendInputs, RasterResult
 from .composite import PixelState, finish
 from .config import RasterConfig
 from .layout import tile_grid, tiles_to_image
-from .projection import Projected, project
+from .projection import Projected, project, shifted
 from .scene import (Camera, Gaussians, validate_background, validate_camera,
                     validate_gaussians)
 
@@ -175,7 +175,7 @@ def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterC
             colors=None) -> RenderOutput:
     p = project(g, cam, config.antialiased, colors)
     if screen_offsets is not None:
-        p = dataclasses.replace(p, mean2d=p.mean2d + screen_offsets.astype(p.mean2d.dtype))
+        p = shifted(p, screen_offsets)
     return composite_projected(p, cam.width, cam.height, background, backend, config, capacity,
                                row_capacity)
 

@@ -14,8 +14,12 @@ bits from the first to the last strip (Eq. 21).
 
 Unlike the paper's published code (which shrinks the box by 0.95 and loses pixels) the mask is
 conservative: τ is the padded threshold of the evaluated form (the difference form's bound from
-lgs_jax.binning, and for hoisted forms also lgs_jax.hoist.error_bound), the determinant is a lower
-bound, and every square root and coordinate gets outward slack for its own rounding.
+lgs_jax.binning, widened by lgs_jax.hoist.error_bound for the pair records' forms, which take
+their offsets from the tile's origin: lgs_jax.pairs), the determinant is a lower bound, and
+every square root and coordinate gets outward slack for its own rounding. The box is
+centred at mean2d, within |mean2d_lo| <= u·|mean2d| of the centre the forms evaluate from
+(lgs_jax.projection), which the slack on x̃ (4u·(|left| + 16 + |μx|)) and on the rows
+(8u·(|μy| + ...)) holds besides the rounding it pads.
 """
 
 from __future__ import annotations

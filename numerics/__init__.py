@@ -8,12 +8,14 @@
                            paper's Eq. 11–12 reproduced; half precision; the centre sweep and the
                            costs; summary.csv, centre.csv, cost*.csv, plots, REPORT.md written by
                            `numerics.report`; the sweep's design in `numerics.sampling`);
-  `numerics.split`         the split centre μ = hi + lo from float32 parameters (error-free
-                           transformations) and the offsets taken from it;
+  `numerics.split`         the split centre μ = hi + lo from float32 parameters (the library's
+                           error-free transformations, lgs_jax.twofloat), the plain float32
+                           centre, and the offsets taken from them;
   `numerics.axes`          the principal axes of the projected covariance in float32, from its
                            factor J·W·R·S;
-  `numerics.centre`        the centre floor from float32 world-space parameters, current forms
-                           against the split centre and the whitened principal axes,
+  `numerics.centre`        the centre floor from float32 world-space parameters, the centre in
+                           one float32 number against the split centre (the library's) and
+                           the whitened principal axes,
                            `python -m numerics.centre [--quick] --out DIR`;
   `numerics.cost`          each form's evaluation cost and the per-Gaussian work upstream,
                            `python -m numerics.cost`;

@@ -1,23 +1,25 @@
-"""The float32 centre floor, and the split centre that removes it.
+"""The float32 centre floor, and the split centre that removes it (the library's centre).
 
     python -m numerics.centre [--quick] --out DIR
 
-A float32 screen-space centre μ = fx·tx/tz + cx carries the rounding of numbers as large as the
-image: ulp(μ)/2 = 2^-24·|μ| (3e-5 px at 1K, 5e-4 px at 16K), and before that the camera
-transform t = W·m + T rounds at the size of the scene's coordinates. Every exponent form takes
-d = μ − p (or Δ = μ − T for the hoist) from that μ, so they share a floor that grows with the
-image (numerics/results/REPORT.md, "Reading"). The exponent's gradient at the 1/255 edge is
+A float32 screen-space centre μ = fx·tx/tz + cx carried in one number (`split.plain_centre`,
+as 3DGS computes it) carries the rounding of numbers as large as the image: ulp(μ)/2 =
+2^-24·|μ| (3e-5 px at 1K, 5e-4 px at 16K), and before that the camera transform t = W·m + T
+rounds at the size of the scene's coordinates. Every exponent form takes d = μ − p (or
+Δ = μ − T for the hoist) from that μ, so they share a floor that grows with the image
+(numerics/results/REPORT.md, "Reading"). The exponent's gradient at the 1/255 edge is
 |Q·d| <= √(τ·λmax(Q)), up to ~6 px⁻¹ with the 0.3 px² dilation, so the floor in ln α is about
 6·ulp(μ)/2.
 
 The split centre carries μ as two float32 numbers, μ = hi + lo with |lo| <= ulp(hi)/2, computed
-from the float32 parameters with error-free transformations (numerics.split.centre_split): the
-camera transform as a compensated dot product, then the perspective division, the focal length
-and the principal point in double-float32 arithmetic. Every consumer forms its small offset
+from the float32 parameters with error-free transformations (lgs_jax.twofloat): the camera
+transform as a compensated dot product, then the perspective division, the focal length and
+the principal point in double-float32 arithmetic. The library projects every centre so
+(`lgs_jax.projection`: mean2d = hi, mean2d_lo = lo) and every consumer forms its small offset
 first, where the large parts cancel exactly, and adds lo after:
 
-    difference form   d  = (hi − p) + lo      (per exponent)
-    hoisted forms     Δ  = (hi − T) + lo      (per pair, before Eq. 8)
+    difference form   d  = (hi − p) + lo      (per exponent; lgs_jax.composite)
+    hoisted forms     Δ  = (hi − T) + lo      (per pair, before Eq. 8; lgs_jax.pairs)
 
 hi − p is exact when p is within a factor of two of hi (Sterbenz's lemma; otherwise |d| is
 as large as |hi|/2 and the one rounding costs what it costs now), so the offset rounds once, at
@@ -44,19 +46,20 @@ from lgs_jax.projection import EPS2D, project
 
 from . import axes, forms
 from .sampling import RESOLUTIONS, sample as sample_2d
-from .split import centre_split, log_alpha_split
+from .split import centre_split, log_alpha_split, plain_centre
 
 OFFSETS = (0, 16, 1024)
 ANISOTROPY = (1.0, 1e2, 1e4, 1e6)
 QUICK_SAMPLES, QUICK_RESOLUTIONS = 300, (1024, 16384)  # --quick (numerics.study's too)
 FORMS = ("difference", "local_corner", "difference+split", "local_corner+split",
          "local_corner+split_perspective", "local_corner+split_exact", "whitened+split")
-"""`+split`: μ from `split.centre_split`; `+split_perspective`: the camera transform in plain
-float32, the rest split (`centre_split(..., compensated_transform=False)`); `+split_exact`: hi,
-lo from the float64 centre (what a perfect centre would give: the remaining error is the
-conic's and the evaluation's); `whitened+split`: the principal-axes form, whitened
-(numerics.forms), its axes from the covariance's factor in float32 (numerics.axes), and the
-split centre."""
+"""`difference`, `local_corner`: the centre in one float32 number (`split.plain_centre`);
+`+split`: the library's centre, `lgs_jax.projection`'s (mean2d, mean2d_lo);
+`+split_perspective`: the camera transform in plain float32, the rest split
+(`centre_split(..., compensated_transform=False)`); `+split_exact`: hi, lo from the float64
+centre (what a perfect centre would give: the remaining error is the conic's and the
+evaluation's); `whitened+split`: the principal-axes form, whitened (numerics.forms), its axes
+from the covariance's factor in float32 (numerics.axes), and the library's centre."""
 
 
 # ------------------------------------------------------------------ the measurement
@@ -113,6 +116,7 @@ def _camera(cam, dtype):
 
 
 _project = jax.jit(project)
+_plain = jax.jit(plain_centre)
 _split = jax.jit(centre_split, static_argnames="compensated_transform")
 _axes = jax.jit(lambda *args: axes.principal_axes(axes.factor(*args)),
                 static_argnums=(8, 9))
@@ -128,10 +132,11 @@ def measure(rng, n, resolution, offset_px, kappa):
     log_o = np.log(f64(p64.opacity))
     exact = forms.log_alpha("difference", f64(p64.mean2d), pixel, f64(p64.conic), log_o)
     inside = np.asarray(p64.valid) & np.asarray(p32.valid) & (exact >= np.log(1 / 255))
-    mean32, conic32 = np.asarray(p32.mean2d), np.asarray(p32.conic)
+    conic32 = np.asarray(p32.conic)
     log_o32, pixel32 = np.log(np.asarray(p32.opacity)), pixel.astype(np.float32)
     view, fx, fy, cx, cy = (jnp.asarray(v) for v in cam[:5])
-    splits = {"split": _split(g.means, view, fx, fy, cx, cy),
+    mean32 = np.asarray(_plain(g.means, view, fx, fy, cx, cy))
+    splits = {"split": (p32.mean2d, p32.mean2d_lo),
               "split_perspective": _split(g.means, view, fx, fy, cx, cy,
                                           compensated_transform=False)}
     hi64 = f64(p64.mean2d).astype(np.float32)

@@ -161,13 +161,6 @@ def measure(n=16384, repeat=20):
             for f in FORMS]
 
 
-def plain_centre(means, viewmat, fx, fy, cx, cy):
-    """μ = fx·tx/tz + cx (and y), t = W·m + T, in float32 as `lgs_jax.projection` computes it."""
-    t = [viewmat[i, 0] * means[:, 0] + viewmat[i, 1] * means[:, 1] + viewmat[i, 2] * means[:, 2]
-         + viewmat[i, 3] for i in range(3)]
-    return jnp.stack([fx * t[0] / t[2] + cx, fy * t[1] / t[2] + cy], -1)
-
-
 def conic_from_factor(*args):
     """The conic (N, 3) from Σ2 = A·Aᵀ + 0.3·I (numerics.axes.factor), entry by entry as
     `lgs_jax.projection` forms and inverts it."""
@@ -187,7 +180,8 @@ def axes_from_factor(*args):
 def measure_per_gaussian(n=16384, repeat=20):
     """Rows (centre, ns_per_gaussian, device) of per-Gaussian work, timed in the same
     interleaved rounds: the screen-space centre from float32 world means, plain
-    (`plain_centre`) and split (`numerics.split.centre_split`); the 2D shape from the 3D one,
+    (`numerics.split.plain_centre`) and split (`numerics.split.centre_split`, the library's
+    arithmetic, as lgs_jax.projection computes it); the 2D shape from the 3D one,
     as a conic (`conic_from_factor`) and as principal axes (`axes_from_factor`)."""
     rng = np.random.default_rng(0)
     view = np.eye(4, dtype=np.float32)
@@ -200,7 +194,7 @@ def measure_per_gaussian(n=16384, repeat=20):
     args = (means, jnp.asarray(view)) + tuple(jnp.float32(v) for v in (fx, fy, cx, cy))
     shape_args = (means, jnp.asarray(rng.normal(size=(n, 4)).astype(np.float32)),
                   jnp.asarray(rng.uniform(-6, -2, (n, 3)).astype(np.float32))) + args[1:]
-    fns = {"plain": (jax.jit(plain_centre), args),
+    fns = {"plain": (jax.jit(split.plain_centre), args),
            "split": (jax.jit(split.centre_split), args),
            "conic": (jax.jit(conic_from_factor, static_argnums=(8, 9)), shape_args + (4096, 2304)),
            "axes": (jax.jit(axes_from_factor, static_argnums=(8, 9)), shape_args + (4096, 2304))}

@@ -61,7 +61,8 @@ def _reading_section(data):
             f"image: {floor[RESOLUTIONS[0]]:.2g} at {RESOLUTIONS[0]} px wide, "
             f"{floor[RESOLUTIONS[-1]]:.2g} at {RESOLUTIONS[-1]} px. It is the float32 rounding "
             "of the centre coordinate itself (ulp ≈ 1e-3 px at 16K), which no evaluation form "
-            "removes: only carrying the centre relative to its tile from higher precision would.",
+            "removes: carrying the centre in two float32 numbers does, and the library carries "
+            "it so (the split centre, last section).",
             "- The global expansion's error grows with resolution, as Eq. 11 says; the paper's "
             "claim that tile-local coordinates remove it holds against the global expansion.",
             "- The original 3DGS difference form never expands globally; compare its column with "
@@ -158,8 +159,8 @@ def _recommendation_section(data, costs):
             "are within 1/255 of float64 on all but 8e-7 of the pixels up to 8K. It is the "
             "form to use where the conic itself is ill-conditioned (no dilation, or "
             "half-precision storage).",
-            "- The floor that remains at 8K–16K is the float32 centre coordinate; the split "
-            "centre removes it (next section)."]
+            "- The floor at 8K–16K is the float32 centre coordinate; the split centre removes "
+            "it, and lgs_jax.projection carries every centre so (last section)."]
 
 
 def _training_section(data):
@@ -221,11 +222,12 @@ def _centre_section(centre_rows, costs, per_gaussian):
     lines += ["",
               "- The floor is the centre's: with hi, lo from the float64 centre "
               "(`local_corner+split_exact`) the local form's error is its own evaluation's, the "
-              "same at every width; the split centre computed in float32 "
-              "(`numerics.split.centre_split`) reaches it, so the 16K error is back below the "
-              "1K level of the current forms. The camera transform must be compensated too: "
-              "splitting only the perspective step (`+split_perspective`) leaves most of the "
-              "floor.",
+              "same at every width; the split centre computed in float32, the library's own "
+              "(`+split`: lgs_jax.projection's mean2d, mean2d_lo, lgs_jax.twofloat), reaches "
+              "it, so the 16K error is back below the 1K level of the centre in one float32 "
+              "number (`difference`, `local_corner`: numerics.split.plain_centre, as 3DGS "
+              "computes it). The camera transform must be compensated too: splitting only the "
+              "perspective step (`+split_perspective`) leaves most of the floor.",
               f"- Cost here ({costs[0]['device']}, same run, CPU time of all threads): per "
               "Gaussian the split centre "
               f"{work['split']:.1f} ns against the plain centre's {work['plain']:.1f}; per pair "

@@ -176,7 +176,8 @@ def projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, ed
                else np.asarray(edge_pixel)) + 0.5
         mean = np.where((qv > 0)[:, None], pix + r[:, None] * v, mean)
     valid = (det > 0) & np.all(np.isfinite(conic), -1) & (opacity >= dtype(ALPHA_MIN))
-    return Projected(mean2d=jnp.asarray(mean, dtype), cov2d=jnp.asarray(cov),
+    return Projected(mean2d=jnp.asarray(mean, dtype), mean2d_lo=jnp.zeros((n, 2), dtype),
+                     cov2d=jnp.asarray(cov),
                      conic=jnp.asarray(np.where(valid[:, None], conic, 1.0), dtype),
                      depth=jnp.ones(n, dtype), opacity=jnp.asarray(np.where(valid, opacity, 0)),
                      rgb=jnp.zeros((n, 3), dtype), valid=jnp.asarray(valid),

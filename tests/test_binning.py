@@ -14,7 +14,7 @@ from hypothesis import given, strategies as st
 
 import lgs_jax
 from lgs_jax import binning
-from lgs_jax.composite import gaussian_alpha
+from lgs_jax.composite import centre_offsets, gaussian_alpha
 from lgs_jax.config import ALPHA_MIN
 from lgs_jax.projection import Projected, depth_order, project
 from tests import scenes
@@ -29,11 +29,11 @@ def _alpha_pass(p: Projected, width, height, cap=0.99):
     jj, ii = jnp.meshgrid(jnp.arange(width), jnp.arange(height))
     px, py = (jj + 0.5).astype(dt), (ii + 0.5).astype(dt)
 
-    def one(m, c, o):
-        power, alpha = gaussian_alpha(m, c, o, px, py, jnp.asarray(cap, dt))
+    def one(m, lo, c, o):
+        power, alpha = gaussian_alpha(centre_offsets(m, lo, px, py), c, o, jnp.asarray(cap, dt))
         return (power <= 0) & (alpha >= jnp.asarray(ALPHA_MIN, dt))
 
-    return jax.vmap(one)(p.mean2d, p.conic, p.opacity) & p.valid[:, None, None]
+    return jax.vmap(one)(p.mean2d, p.mean2d_lo, p.conic, p.opacity) & p.valid[:, None, None]
 
 
 def _check_covered(p: Projected, width=W, height=H):
@@ -178,7 +178,7 @@ def test_depth_order_is_the_stable_order_of_depths(dtype, seed):
                        np.finfo(dtype).max, np.inf], dtype)
     depth = rng.choice(values, 64)
     valid = rng.random(64) < 0.8
-    p = Projected(mean2d=None, cov2d=None, conic=None, depth=jnp.asarray(depth),
+    p = Projected(mean2d=None, mean2d_lo=None, cov2d=None, conic=None, depth=jnp.asarray(depth),
                   opacity=None, rgb=None, valid=jnp.asarray(valid), invalid=None)
     key = np.where(valid, depth + dtype(0), np.inf)  # −0 + 0 = +0
     np.testing.assert_array_equal(depth_order(p), np.argsort(key, kind="stable"))
@@ -212,6 +212,7 @@ def test_slot_starts_past_int32_keep_the_nearest_pairs():
     with jax.enable_x64(False):
         ones = jnp.ones((n,), jnp.float32)
         p = Projected(mean2d=jnp.tile(jnp.array([[1920.0, 1080.0]]), (n, 1)),
+                      mean2d_lo=jnp.zeros((n, 2)),
                       cov2d=jnp.tile(jnp.array([[1e8, 0.0, 1e8]]), (n, 1)),
                       conic=jnp.tile(jnp.array([[1e-8, 0.0, 1e-8]]), (n, 1)),
                       depth=jnp.arange(1, n + 1, dtype=jnp.float32), opacity=0.9 * ones,

@@ -41,9 +41,9 @@ from hypothesis import HealthCheck, assume, event, given, settings, strategies a
 import lgs_jax
 from lgs_jax import alpha as alpha_forms
 from lgs_jax import binning, hoist
-from lgs_jax.composite import gaussian_alpha, passes
+from lgs_jax.composite import centre_offsets, gaussian_alpha, passes
 from lgs_jax.layout import TILE
-from lgs_jax.pairs import strip_mask_columns, table_columns
+from lgs_jax.pairs import strip_mask_columns, table_columns, table_offsets
 from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_render_close
@@ -158,19 +158,21 @@ def _float_tests(p, gauss, col, row, width, height):
     frame (RasterConfig's default) and its alpha test. One compile per dtype: the image size
     is traced."""
     dt = p.mean2d.dtype
-    mx, my, a, b, c, o = (x[gauss] for x in table_columns(p)[:6])
+    cols = [x[gauss] for x in table_columns(p)]
+    mx, my, a, b, c, o = cols[:6]
     px, py = (col + 0.5).astype(dt), (row + 0.5).astype(dt)
-    power, alpha = gaussian_alpha((mx, my), (a, b, c), o, px, py, jnp.asarray(CAP, dt))
+    power, alpha = gaussian_alpha(centre_offsets((mx, my), cols[10:12], px, py), (a, b, c), o,
+                                  jnp.asarray(CAP, dt))
     x0, x1, y0, y1, _ = (t[gauss] for t in binning.pixel_box(p, width, height))
     tx0, ty0, nx, ny, _ = (t[gauss] for t in binning.tile_rects(p, width, height))
     tx, ty = col // TILE, row // TILE
     strip = (row % TILE) // 2
-    in_strip = [(strip_mask_columns([mx, my, a, b, c, o], tx, ty,
-                                    lgs_jax.RasterConfig(hoist=h)) >> strip) & 1 == 1
-                for h in (False, True)]
+    in_strip = [(strip_mask_columns(cols, tx, ty, lgs_jax.RasterConfig(hoist=h)) >> strip) & 1
+                == 1 for h in (False, True)]
     origin = jnp.stack([tx * TILE, ty * TILE], -1).astype(dt)
     log_o = jnp.log(o)
-    v = hoist.hoist(jnp.stack([mx, my], -1), jnp.stack([a, b, c], -1), log_o, origin)
+    delta = jnp.stack(table_offsets(cols, tx, ty, lgs_jax.RasterConfig()), -1)
+    v = hoist.hoist(delta, jnp.stack([a, b, c], -1), log_o, jnp.zeros_like(delta))
     raw = hoist.evaluate_terms([v[:, k] for k in range(6)], px - origin[:, 0],
                                py - origin[:, 1])
     _, hoisted_pass, _ = alpha_forms.hoisted(raw, log_o, jnp.asarray(CAP, dt))
@@ -189,9 +191,12 @@ def check_binning_covers(p, width, height, gauss, col, row, keep):
     got = {k: np.asarray(v) for k, v in _float_tests(
         p, jnp.asarray(gauss, jnp.int32), jnp.asarray(col, jnp.int32),
         jnp.asarray(row, jnp.int32), jnp.int32(width), jnp.int32(height)).items()}
-    cols = [np.asarray(c)[gauss] for c in table_columns(p)][:6]
-    # The exact test on the same inputs: q <= τ (the product o·e^power >= 1/255, power <= 0).
+    table = [np.asarray(c)[gauss] for c in table_columns(p)]
+    cols = table[:6]
+    # The exact test on the same inputs: q <= τ (the product o·e^power >= 1/255, power <= 0),
+    # at the centre μ = mean2d + mean2d_lo.
     up = [np.asarray(x, np.float64) for x in cols]
+    up[0], up[1] = (up[i] + np.asarray(table[10 + i], np.float64) for i in range(2))
     dx, dy = up[0] - (col + 0.5), up[1] - (row + 0.5)
     power64 = -0.5 * (up[2] * dx * dx + up[4] * dy * dy) - up[3] * dx * dy
     exact_pass = (power64 <= 0) & (up[5] * np.exp(power64) >= ALPHA_MIN)
@@ -248,7 +253,8 @@ def test_binning_covers_faint_huge_gaussians_at_the_corner():
     conic[0] = [8.78369e-08, -1.38928e-08, 1.0472e-07]
     mean = np.where(np.arange(N)[:, None] == 0, 0.0, rng.uniform(-3, 3, (N, 2)))
     f32 = lambda x: jnp.asarray(x, jnp.float32)
-    p = Projected(mean2d=f32(mean), cov2d=f32(np.zeros((N, 3))), conic=f32(conic),
+    p = Projected(mean2d=f32(mean), mean2d_lo=f32(np.zeros((N, 2))), cov2d=f32(np.zeros((N, 3))),
+                  conic=f32(conic),
                   depth=f32(np.ones(N)), opacity=f32(opacity), rgb=f32(np.zeros((N, 3))),
                   valid=jnp.ones(N, bool), invalid=jnp.zeros(N, bool))
     col, row = (x.ravel() for x in np.meshgrid(np.arange(48), np.arange(48)))

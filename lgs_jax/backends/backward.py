@@ -33,6 +33,7 @@ from jax import lax
 from .. import alpha as alpha_model
 from .. import hoist
 from ..binning import TileBins
+from ..composite import centre_offsets
 from ..config import RasterConfig
 
 PAIR_COLUMNS = 10  # ∂L/∂(mean2d x, y; conic a, b, c; opacity; rgb r, g, b; depth)
@@ -112,22 +113,25 @@ def walk(bins: TileBins, rgb, depth, trans, stop_at, g_color, g_trans, g_depth, 
     return lax.while_loop(lambda c: c[0] < jnp.max(end - start), body, init)[3]
 
 
-def difference_alpha(mean2d, conic, opacity, pixels, config: RasterConfig, gate=None):
-    """The walk's `pair_alpha` of the difference form (lgs_jax.alpha.difference): six model
-    columns, ∂L/∂(μx, μy, a, b, c, o). `gate(kk)` (optional): which pixels a pair may touch."""
+def difference_alpha(mean2d, mean2d_lo, conic, opacity, pixels, config: RasterConfig,
+                     gate=None):
+    """The walk's `pair_alpha` of the difference form (lgs_jax.alpha.difference, at the
+    offsets `composite.centre_offsets`): six model columns, ∂L/∂(μx, μy, a, b, c, o).
+    `gate(kk)` (optional): which pixels a pair may touch."""
     px, py = pixels
     cap = jnp.asarray(config.alpha_cap, mean2d.dtype)
 
     def pair_alpha(kk, g):
-        m, q, o = mean2d[g], conic[g], opacity[g][:, None]
-        mean, conic_g = (m[:, 0:1], m[:, 1:2]), (q[:, 0:1], q[:, 1:2], q[:, 2:3])
-        alpha, hit, power = alpha_model.difference(mean, conic_g, o, px, py, cap)
+        m, lo, q, o = mean2d[g], mean2d_lo[g], conic[g], opacity[g][:, None]
+        d = centre_offsets((m[:, 0:1], m[:, 1:2]), (lo[:, 0:1], lo[:, 1:2]), px, py)
+        conic_g = (q[:, 0:1], q[:, 1:2], q[:, 2:3])
+        alpha, hit, power = alpha_model.difference(d, conic_g, o, cap)
         if gate is not None:
             hit = hit & gate(kk)
 
         def grads(d_alpha):
             return [jnp.sum(col, -1) for col in alpha_model.difference_vjp(
-                d_alpha, alpha, power, mean, conic_g, o, px, py, cap)]
+                d_alpha, alpha, power, d, conic_g, o, cap)]
 
         return alpha, hit, grads
 
@@ -160,10 +164,11 @@ def hoisted_alpha(vectors, basis, config: RasterConfig, gate=None):
 def pair_rows(fields, bins: TileBins, pixels, config: RasterConfig, trans, stop_at, g_color,
               g_trans, g_depth):
     """(capacity, PAIR_COLUMNS) gradient rows of the difference form (the reference backend).
-    fields = (mean2d, conic, opacity, rgb, depth); pixels = (px, py), (n_tiles, 256)."""
-    mean2d, conic, opacity, rgb, depth = fields
+    fields = (mean2d, mean2d_lo, conic, opacity, rgb, depth); pixels = (px, py),
+    (n_tiles, 256)."""
+    mean2d, mean2d_lo, conic, opacity, rgb, depth = fields
     return walk(bins, rgb, depth, trans, stop_at, g_color, g_trans, g_depth,
-                difference_alpha(mean2d, conic, opacity, pixels, config), 6)
+                difference_alpha(mean2d, mean2d_lo, conic, opacity, pixels, config), 6)
 
 
 SUM_CHUNK = 16  # rows summed sequentially per chunk in `segment_sums`

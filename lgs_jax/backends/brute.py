@@ -26,8 +26,8 @@ def composite_pixels(p: Projected, width: int, height: int, config: RasterConfig
 
     def body(k, state):
         g = order[k]
-        return blend(state, p.mean2d[g], p.conic[g], p.opacity[g], p.rgb[g], p.depth[g],
-                     p.valid[g], px, py, config)
+        return blend(state, p.mean2d[g], p.mean2d_lo[g], p.conic[g], p.opacity[g], p.rgb[g],
+                     p.depth[g], p.valid[g], px, py, config)
 
     return lax.fori_loop(0, order.shape[0], body, PixelState.empty(width * height, dt))
 

@@ -28,7 +28,8 @@ def differentiable(forward, gradients, forward_for_gradients=None):
     there are none); `static`: the backend's hashable configuration. `forward_for_gradients`
     (same signature; default `forward`) is the forward run when the backward will follow
     (under `jax.grad` / `jax.vjp`). The projection's other fields (cov2d, valid, invalid) get
-    no cotangent: the backward's gradients are the projected fields' whole derivative.
+    no cotangent: the backward's gradients are the projected fields' whole derivative; nor
+    does mean2d_lo, a constant correction of the centre (lgs_jax.projection).
     """
     @functools.partial(jax.custom_vjp, nondiff_argnums=(3, 4, 5))
     def composite(p: Projected, bins, extra, width: int, height: int, static):
@@ -51,8 +52,9 @@ def differentiable(forward, gradients, forward_for_gradients=None):
         g_depth = None if isinstance(g_depth, SymbolicZero) else g_depth
         per = gradients(p, bins, extra, width, height, static, trans, stop_at, saved,
                         (g_color, g_trans, g_depth))
-        grad_p = Projected(mean2d=per[:, 0:2], cov2d=None, conic=per[:, 2:5], depth=per[:, 9],
-                           opacity=per[:, 5], rgb=per[:, 6:9], valid=None, invalid=None)
+        grad_p = Projected(mean2d=per[:, 0:2], mean2d_lo=None, cov2d=None, conic=per[:, 2:5],
+                           depth=per[:, 9], opacity=per[:, 5], rgb=per[:, 6:9], valid=None,
+                           invalid=None)
         return grad_p, None, None
 
     # Symbolic zeros: a loss of the image alone leaves the depth's cotangent a symbolic zero,

@@ -28,8 +28,8 @@ from .interface import Backend, BackendInputs, RasterResult
 def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
     """Per tile (n_tiles, 256): the composited state and each pixel's stop position (the list
     index of the Gaussian whose stop test fired, or the tile's end).
-    fields = (mean2d, conic, opacity, rgb, depth)."""
-    mean2d, conic, opacity, rgb, depth = fields
+    fields = (mean2d, mean2d_lo, conic, opacity, rgb, depth)."""
+    mean2d, mean2d_lo, conic, opacity, rgb, depth = fields
     dt = mean2d.dtype
 
     def one_tile(px, py, start, end):
@@ -40,8 +40,8 @@ def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
         def body(carry):
             k, state, stop_at = carry
             g = bins.gauss[k]
-            new = blend(state, mean2d[g], conic[g], opacity[g], rgb[g], depth[g], True, px, py,
-                        config)
+            new = blend(state, mean2d[g], mean2d_lo[g], conic[g], opacity[g], rgb[g], depth[g],
+                        True, px, py, config)
             return k + 1, new, jnp.where(new.done & ~state.done, k, stop_at)
 
         init = (start, PixelState.empty(TILE_PIXELS, dt), jnp.full((TILE_PIXELS,), end))
@@ -52,7 +52,7 @@ def composite_tiles(fields, bins: TileBins, pixels, config: RasterConfig):
 
 
 def _fields(p: Projected):
-    return p.mean2d, p.conic, p.opacity, p.rgb, p.depth
+    return p.mean2d, p.mean2d_lo, p.conic, p.opacity, p.rgb, p.depth
 
 
 def _forward(p: Projected, bins: TileBins, extra, width: int, height: int,

@@ -52,7 +52,7 @@ from jax import lax
 from .. import alpha as alpha_model
 from .. import hoist, pairs
 from ..binning import TileBins
-from ..composite import PixelState, blend_weights, stops
+from ..composite import PixelState, blend_weights, centre_offsets, stops
 from ..config import RasterConfig
 from ..layout import (STRIP_PIXELS, STRIPS, TILE_PIXELS, frame, pixel_centres, strip_pixels,
                       tile_grid)
@@ -95,10 +95,11 @@ def evaluate(p: Projected, g, v, basis, px, py, config: RasterConfig):
         raw = hoist.dot_basis(jnp.swapaxes(v, 0, 1)[:, :, None, :6], basis[None])
         alpha, hit, _ = alpha_model.hoisted(raw, v[..., 6].T[:, :, None], cap)
         return alpha, hit
-    m, q = jnp.swapaxes(p.mean2d[g], 0, 1), jnp.swapaxes(p.conic[g], 0, 1)  # (G, n, ...)
-    alpha, hit, _ = alpha_model.difference((m[:, :, None, 0], m[:, :, None, 1]),
-                                           tuple(q[:, :, None, i] for i in range(3)),
-                                           p.opacity[g].T[:, :, None], px[None], py[None], cap)
+    m, lo, q = (jnp.swapaxes(x[g], 0, 1)[:, :, None]  # (G, n, 1, ...)
+                for x in (p.mean2d, p.mean2d_lo, p.conic))
+    d = centre_offsets((m[..., 0], m[..., 1]), (lo[..., 0], lo[..., 1]), px[None], py[None])
+    alpha, hit, _ = alpha_model.difference(d, tuple(q[..., i] for i in range(3)),
+                                           p.opacity[g].T[:, :, None], cap)
     return alpha, hit
 
 
@@ -290,7 +291,7 @@ def gradients(p: Projected, bins: TileBins, extra, width: int, height: int,
               backward.depth_cotangent(g_depth, trans))
     if not config.hoist:
         rows = backward.walk(*common, backward.difference_alpha(
-            p.mean2d, p.conic, p.opacity, (px, py), config, gate), 6)
+            p.mean2d, p.mean2d_lo, p.conic, p.opacity, (px, py), config, gate), 6)
     else:
         basis = pixel_basis(jnp.broadcast_to(lx, px.shape), jnp.broadcast_to(ly, px.shape), px,
                             py, config)

@@ -13,10 +13,11 @@ bit of them, even where another compilation of the same rectangle (a fusion cont
 multiply-add its own way) would round an edge into the band.
 
 Records. A projected Gaussian travels as one row of `record_width(C)` numbers of its dtype:
-mean2d (2), conic (3), depth, opacity, colour (C), the fields `render.composite_projected`
-reads. The validity flag is not sent: a valid Gaussian has opacity >= 1/255 and every other
-row opacity 0 (`projection.Projected`), so valid = opacity > 0 at the destination. `cov2d` is
-not sent either (the compositing never reads it; the destination holds the unit placeholder).
+mean2d (2), mean2d_lo (2), conic (3), depth, opacity, colour (C), the fields
+`render.composite_projected` reads. The validity flag is not sent: a valid Gaussian has
+opacity >= 1/255 and every other row opacity 0 (`projection.Projected`), so valid = opacity > 0
+at the destination. `cov2d` is not sent either (the compositing never reads it; the
+destination holds the unit placeholder).
 
 Packing. Per destination d, the records of the Gaussians reaching band d fill `capacity` slots
 in ascending local index (the k-th slot holds the k-th such Gaussian, found by a binary search
@@ -45,12 +46,12 @@ from .. import binning
 from ..layout import TILE
 from ..projection import Projected
 
-RECORD_FIELDS = (("mean2d", 2), ("conic", 3), ("depth", 1), ("opacity", 1))
+RECORD_FIELDS = (("mean2d", 2), ("mean2d_lo", 2), ("conic", 3), ("depth", 1), ("opacity", 1))
 """Fields of an exchanged record before the colour, and their widths."""
 
 
 def record_width(channels: int = 3) -> int:
-    """Numbers per exchanged record: 7 + the colour's channels (10 for RGB)."""
+    """Numbers per exchanged record: 9 + the colour's channels (12 for RGB)."""
     return sum(w for _, w in RECORD_FIELDS) + channels
 
 
@@ -86,14 +87,14 @@ def to_records(p: Projected):
 def from_records(rows) -> Projected:
     """The `Projected` a destination composites from received record rows (valid where the
     opacity is positive; padding and culled rows hold the projection's placeholders)."""
-    mean2d, conic, depth, opacity, rgb = (rows[:, 0:2], rows[:, 2:5], rows[:, 5], rows[:, 6],
-                                          rows[:, 7:])
+    mean2d, mean2d_lo, conic, depth, opacity, rgb = (rows[:, 0:2], rows[:, 2:4], rows[:, 4:7],
+                                                     rows[:, 7], rows[:, 8], rows[:, 9:])
     valid = opacity > 0
     unit = jnp.asarray([1.0, 0.0, 1.0], rows.dtype)
     conic = jnp.where(valid[:, None], conic, unit)
-    return Projected(mean2d=mean2d, cov2d=jnp.broadcast_to(unit, conic.shape), conic=conic,
-                     depth=depth, opacity=opacity, rgb=rgb, valid=valid,
-                     invalid=jnp.zeros_like(valid))
+    return Projected(mean2d=mean2d, mean2d_lo=mean2d_lo,
+                     cov2d=jnp.broadcast_to(unit, conic.shape), conic=conic, depth=depth,
+                     opacity=opacity, rgb=rgb, valid=valid, invalid=jnp.zeros_like(valid))
 
 
 def packed_indices(mask, capacity: int):

@@ -53,7 +53,7 @@ from jax.sharding import PartitionSpec as P
 from .. import binning
 from ..config import RasterConfig
 from ..layout import TILE
-from ..projection import Projected, project
+from ..projection import Projected, project, shifted
 from ..render import (BACKENDS, CapacityError, composite_projected, default_backend,
                       pair_capacity)
 from ..scene import Camera, validate_background, validate_camera, validate_gaussians
@@ -143,7 +143,7 @@ def _one_view(g, cam, background, offsets, **static):
     """`_composite_band` of this device's Gaussians `g` projected through `cam` (step 1)."""
     p = project(g, cam, static["config"].antialiased)
     if offsets is not None:
-        p = dataclasses.replace(p, mean2d=p.mean2d + offsets.astype(p.mean2d.dtype))
+        p = shifted(p, offsets)
     return _composite_band(p, background, width=cam.width, height=cam.height, **static)
 
 
@@ -232,7 +232,7 @@ def _source_plan(g, cam, offsets, *, devices: int, antialiased: bool):
     width, height = cam.width, cam.height
     p = project(g, cam, antialiased)
     if offsets is not None:
-        p = dataclasses.replace(p, mean2d=p.mean2d + offsets.astype(p.mean2d.dtype))
+        p = shifted(p, offsets)
     masks = exchange.band_masks(p, width, height, devices)
     counts = jnp.sum(masks, axis=1, dtype=jnp.int32)
     return jnp.stack([counts, exchange.band_pairs(p, masks, width, height)])[None]

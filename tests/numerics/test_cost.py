@@ -26,12 +26,12 @@ def test_cost_kernels_compute_the_forms():
         assert np.all(np.abs(got - want) <= bound + 1e-4 * np.abs(want)), form
 
 
-def test_plain_centre_is_the_projection_and_split_centre_is_exact():
-    """cost.plain_centre computes lgs_jax.projection's float32 centre (to a few ulps: the two
-    programs are compiled apart, and XLA contracts the camera transform's multiply-adds into
-    fused ones differently: a few ulps of the terms, which are ~width/2);
-    split.centre_split (jitted, as timed) equals the float64 centre of the same float32
-    parameters to 1e-8 px at 16K, where the plain centre errs by ~1e-3 px."""
+def test_projection_carries_the_split_centre_and_plain_centre_has_the_floor():
+    """lgs_jax.projection's float32 centre mean2d + mean2d_lo and split.centre_split (jitted,
+    as timed: the same arithmetic, compiled apart) equal the float64 centre of the same float32
+    parameters to 1e-8 px at 16K, mean2d being that centre rounded (|mean2d_lo| <= ulp/2);
+    split.plain_centre, the centre in one float32 number, errs by ~1e-3 px (a few ulps of its
+    terms, which are ~width/2: the camera transform's rounding at the scene's size)."""
     import jax
 
     import lgs_jax
@@ -45,12 +45,16 @@ def test_plain_centre_is_the_projection_and_split_centre_is_exact():
     p32 = project(g, lgs_jax.Camera(viewmat=view, fx=fx, fy=fy, cx=cx, cy=cy, width=width,
                                     height=height))
     valid = np.asarray(p32.valid)
-    plain = np.asarray(jax.jit(cost.plain_centre)(*args))[valid]
-    ulp = np.spacing(np.float32(width))  # of the centre's terms (fx·tx/tz and cx are ~width/2)
-    assert np.abs(plain - np.asarray(p32.mean2d)[valid]).max() <= 8 * ulp
-    hi, lo = jax.jit(split.centre_split)(*args)
     t = np.asarray(g.means, np.float64) @ view[:3, :3].T.astype(np.float64) + view[:3, 3]
     exact = np.stack([float(fx) * t[:, 0] / t[:, 2] + float(cx),
-                      float(fy) * t[:, 1] / t[:, 2] + float(cy)], -1)
-    assert np.abs(np.asarray(hi, np.float64) + np.asarray(lo, np.float64) - exact).max() < 1e-8
-    assert np.abs(np.asarray(p32.mean2d, np.float64) - exact)[valid].max() > 1e-4
+                      float(fy) * t[:, 1] / t[:, 2] + float(cy)], -1)[valid]
+    up = lambda x: np.asarray(x, np.float64)[valid]
+    hi, lo = p32.mean2d, p32.mean2d_lo
+    assert np.abs(up(hi) + up(lo) - exact).max() < 1e-8
+    assert np.all(np.abs(up(lo)) <= np.spacing(np.abs(np.asarray(hi)[valid])) / 2)
+    hi, lo = jax.jit(split.centre_split)(*args)
+    assert np.abs(up(hi) + up(lo) - exact).max() < 1e-8
+    plain = np.asarray(jax.jit(split.plain_centre)(*args))[valid]
+    ulp = np.spacing(np.float32(width))  # of the centre's terms (fx·tx/tz and cx are ~width/2)
+    assert np.abs(plain - np.asarray(p32.mean2d)[valid]).max() <= 8 * ulp
+    assert np.abs(plain - exact).max() > 1e-4

@@ -75,6 +75,6 @@ def test_gaussian_parallel_exchange_error_names_the_fix():
 
 def test_gaussian_parallel_traffic_counts_off_device_records():
     t = parallel.traffic(np.asarray([[5, 2], [3, 7]]), capacity=8)
-    assert (t.forward, t.backward) == (5 * 40, 5 * 40)
-    assert t.buffer == 2 * 2 * 1 * 8 * 40  # both directions, 2 devices x 1 peer x 8 rows
-    assert parallel.record_width(3) == 10 and parallel.record_width(1) == 8
+    assert (t.forward, t.backward) == (5 * 48, 5 * 48)
+    assert t.buffer == 2 * 2 * 1 * 8 * 48  # both directions, 2 devices x 1 peer x 8 rows
+    assert parallel.record_width(3) == 12 and parallel.record_width(1) == 10

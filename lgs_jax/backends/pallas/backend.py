@@ -175,7 +175,7 @@ def gradients(p: Projected, bins: TileBins, gaussian_table, width: int, height: 
         rows = mosaic_backward.backward_rows(config, plan_.interpret, plan_.backward_pixels,
                                              tiles_x, segs, bins, layout, second, lane_rows,
                                              dt, entry if g_depth is not None else entry[:4])
-        # the table's first columns are the fields `sums` reads
+        # the table holds the fields `sums` reads
         return gaussian_grads.sums(rows, layout, second, tiles_x, config, plan_.interpret)
     rows = triton.backward_rows(config, plan_.interpret, tiles_x, tile_order, bins, layout,
                                 first, second, lane_rows, dt)

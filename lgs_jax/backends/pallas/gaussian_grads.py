@@ -13,7 +13,8 @@ rows in order,
 
     hoisted (Eq. 8):  Σ_pairs [∂L/∂μ, ∂L/∂(a, b, c), ∂L/∂ln o + clamp, ∂L/∂rgb, ∂L/∂z]
                       with ∂L/∂(a, b, c, Δ, ln o) = hoist.hoist_terms_vjp(∂L/∂V, a, b, c, Δ),
-                      Δ = μ − T(tile), then ∂L/∂o = Σ ∂L/∂ln o / o;
+                      Δ = μ − T(tile) = (mean2d − T) + mean2d_lo (pairs.origin_offsets, as
+                      the forward's records), then ∂L/∂o = Σ ∂L/∂ln o / o;
     difference form:  Σ_pairs [∂L/∂μ, ∂L/∂(a, b, c), ∂L/∂o, ∂L/∂rgb, ∂L/∂z],
 
 the blocks of a pair added in block order first. One lane owns one Gaussian's sum, so the
@@ -46,10 +47,9 @@ from jax import lax
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as plt
 
-from ... import hoist
+from ... import hoist, pairs
 from ...binning import TileBins
 from ...config import RasterConfig
-from ...layout import tile_origin_axis
 from ...projection import Projected
 from ..interface import tile_last
 from . import steps as ks
@@ -123,15 +123,14 @@ def rows_of(bins: TileBins, stop, rows: int | None) -> RowLayout:
 def _pair_terms(vals, tile, fields, tiles_x: int, config: RasterConfig):
     """One pair's contribution to its Gaussian's COLUMNS sums (∂L/∂ln o in the opacity column
     for the hoisted form, divided by o once at the end). vals: the row's GRAD_VALUES values
-    (blocks added); tile: its tile index (int32); fields = (μx, μy, a, b, c)."""
+    (blocks added); tile: its tile index (int32); fields = (μx, μy, a, b, c, lo_x, lo_y)
+    (mean2d, the conic, mean2d_lo)."""
     if not config.hoist:
         return list(vals[0:6]) + list(vals[7:11])
-    mx, my, a, b, c = fields
-    dt = mx.dtype
-    ox = tile_origin_axis(tile % tiles_x, config, dt)
-    oy = tile_origin_axis(tile // tiles_x, config, dt)
-    d_a, d_b, d_c, d_dx, d_dy, d_ln_o = hoist.hoist_terms_vjp(vals[0:6], a, b, c, mx - ox,
-                                                              my - oy)
+    mx, my, a, b, c, lo_x, lo_y = fields
+    dx, dy = pairs.origin_offsets((mx, my), (lo_x, lo_y), tile % tiles_x, tile // tiles_x,
+                                  config)
+    d_a, d_b, d_c, d_dx, d_dy, d_ln_o = hoist.hoist_terms_vjp(vals[0:6], a, b, c, dx, dy)
     return [d_dx, d_dy, d_a, d_b, d_c, d_ln_o + vals[6]] + list(vals[7:11])
 
 
@@ -145,19 +144,20 @@ def _finish(acc, opacity, config: RasterConfig):
 
 
 def _sources(fields):
-    """(arrays, spec) where Gaussian g's (μx, μy, a, b, c, o) are arrays[i][g, col] for
-    (i, col) in spec (arrays[i][g] where col is None): from a `Projected`, or from a table
-    (N, >= 6) whose first six columns are these (`pairs.gaussian_table`, which the Mosaic GPU
+    """(arrays, spec) where Gaussian g's (μx, μy, a, b, c, lo_x, lo_y, o) (mean2d, the conic,
+    mean2d_lo, the opacity) are arrays[i][g, col] for (i, col) in spec (arrays[i][g] where col
+    is None): from a `Projected`, or from `pairs.gaussian_table` (which the Mosaic GPU
     backward reads anyway: reading it here keeps the separate (N, 2), (N, 3) and (N,) fields
     from living through the backward kernel)."""
     if isinstance(fields, Projected):
-        return ((fields.mean2d, fields.conic, fields.opacity),
-                ((0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, None)))
-    return (fields,), tuple((0, i) for i in range(6))
+        return ((fields.mean2d, fields.conic, fields.mean2d_lo, fields.opacity),
+                ((0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (3, None)))
+    return (fields,), tuple((0, i) for i in (0, 1, 2, 3, 4, 10, 11, 5))
 
 
 def _take(arrays, spec, g):
-    """Gaussian(s) g's (μx, μy, a, b, c, o) (`_sources`; g an index array or a full slice)."""
+    """Gaussian(s) g's (μx, μy, a, b, c, lo_x, lo_y, o) (`_sources`; g an index array or a
+    full slice)."""
     return [arrays[i][g] if col is None else arrays[i][g, col] for i, col in spec]
 
 
@@ -168,7 +168,7 @@ def _walk(rows, blocks: int, first, count, fields, opacity, tiles_x: int,
     slot order; `rows` is the (blocks, capacity, >= n + 1) ref (kernel) or array
     (`reference`), indexed alike: n = GRAD_VALUES values, then the tile in column n; rows of
     `steps.row_width(False)` columns have no ∂L/∂z (n = GRAD_VALUES − 1, the depth's
-    sums zero). fields = (μx, μy, a, b, c), opacity: of those Gaussians."""
+    sums zero). fields = (μx, μy, a, b, c, lo_x, lo_y), opacity: of those Gaussians."""
     n = ks.GRAD_VALUES if rows.shape[-1] > ks.row_width(False) else ks.GRAD_VALUES - 1
 
     def body(i, acc):
@@ -208,7 +208,8 @@ def sums(rows, layout: RowLayout, fields, tiles_x: int, config: RasterConfig,
     tile in column TILE_COLUMN − 1) (module docstring), by the Triton kernel with
     `lanes` Gaussians per program (a multiple of 32: one warp per 32; each program loops to
     its lanes' longest count, so fewer lanes idle less where counts vary). `fields`: the
-    Gaussians' μ, conic and opacity, a `Projected` or a table (`_sources`).
+    Gaussians' centre (mean2d, mean2d_lo), conic and opacity, a `Projected` or a table
+    (`_sources`).
 
     In float32 the kernel takes `layout.first` and `count` as float32 bits and writes its
     first two columns into their buffers (aliased outputs: a lane reads its Gaussian's first

@@ -236,12 +236,12 @@ def localgs_kernel(order_ref, ranges_ref, gauss_ref, table_ref, *refs,
     tile = order_ref[tid]
     start, end = ranges_ref[tile, 0], ranges_ref[tile, 1]
     k, strip, cols = lanes(wg, pixels)
-    frame, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
+    frame = ks.lane_coordinates(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), strip)
     write = _forward_store(image, block_stops, tiles_x, wg, pixels)
 
     def evaluate(rec, mask_word):  # mask_word None: a pair known to have this lane's bit
-        alpha, hit, _ = ks.record_alpha(rec, frame, pixel, config)
+        alpha, hit, _ = ks.record_alpha(rec, frame, config)
         if config.warp_cull and mask_word is not None:
             hit = hit & ((mask_word & bit) != 0)
         return alpha, hit, rec[7:10], rec[10]
@@ -285,8 +285,9 @@ def vanilla_kernel(order_ref, ranges_ref, gauss_ref, rows_ref, *out_refs,
     tid, wg = block_index(rows), lax.axis_index("wg")
     tile = order_ref[tid]
     k, _, cols = lanes(wg, pixels)
-    _, pixel = ks.lane_coordinates(tile, k, tiles_x, config, dt)
-    fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
+    frame = ks.lane_coordinates(tile, k, tiles_x, config, dt)
+    fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, tile, tiles_x, frame, config,
+                                         last_pair)
     store(out_refs, tile, cols,
           ks.staged_loop(ranges_ref[tile, 0], ranges_ref[tile, 1], k.shape[0], dt, fetch,
                          pair_alpha, config, UNROLL_VANILLA,

@@ -8,9 +8,15 @@ GPU kernels themselves from per-Gaussian rows (lgs_jax.backends.pallas.staging; 
 `pairs.record_columns`):
   pair record (Local-GS kernel, `pair_records`, one row per pair in pair order, no indirection):
     hoisted: V (Eq. 8, 6 values) relative to the pair's tile origin, ln o, rgb, z, strip mask;
-    difference form: μx, μy, a, b, c, o, 0, rgb, z, strip mask.
+    difference form: Δx, Δy, a, b, c, o, 0, rgb, z, strip mask, with Δ = μ − T from the tile
+    origin T (`pairs.origin_offsets`: (mean2d − T) + mean2d_lo).
   Gaussian row (vanilla kernel, `gaussian_rows`, loaded through each pair's Gaussian id as the
-    original rasterizer does): μx, μy, a, b, c, ln o, o, rgb, z, 0.
+    original rasterizer does): μx, μy, a, b, c, lo_x, o, rgb, z, lo_y (μ = mean2d + mean2d_lo).
+Both forms are evaluated in the hoisting frame x' = pixel centre − T (lgs_jax.layout.frame):
+the difference form at d = Δ − x', Δ from the record or, in the vanilla kernel, formed from
+the row per pair as the records form it, so that the vanilla forward and its backward (the
+Local-GS backward's difference form) compute the same bits. d then rounds at the size of Δ
+and d (tile-local coordinates), not of the image: the split centre's accuracy at any width.
 """
 
 from __future__ import annotations
@@ -45,10 +51,10 @@ def row_width(depth: bool) -> int:
 
 
 def gaussian_rows(p: Projected):
-    """(N, ROW) per-Gaussian rows of the vanilla kernel."""
-    o = p.opacity
+    """(N, ROW) per-Gaussian rows of the vanilla kernel (module docstring)."""
     cols = [p.mean2d[:, 0], p.mean2d[:, 1], p.conic[:, 0], p.conic[:, 1], p.conic[:, 2],
-            jnp.log(o), o, p.rgb[:, 0], p.rgb[:, 1], p.rgb[:, 2], p.depth, jnp.zeros_like(o)]
+            p.mean2d_lo[:, 0], p.opacity, p.rgb[:, 0], p.rgb[:, 1], p.rgb[:, 2], p.depth,
+            p.mean2d_lo[:, 1]]
     return jnp.stack(cols, -1)
 
 
@@ -64,23 +70,27 @@ def pair_records(pg: pairs.PairGaussians, bins: TileBins, tiles_x: int, config: 
 
 
 def lane_coordinates(tile, k, tiles_x: int, config: RasterConfig, dt):
-    """(frame, pixel) of pixels k of `tile`: the hoisting frame (x', y') and the pixel centre
-    (px, py) (lgs_jax.layout)."""
-    lx, ly, px, py = pixel_centres(tile, k, tiles_x, dt)
-    return frame(lx, ly, px, py, config), (px, py)
+    """The hoisting frame (x', y') of pixels k of `tile` (lgs_jax.layout)."""
+    return frame(*pixel_centres(tile, k, tiles_x, dt), config)
 
 
-def record_alpha(rec, frame_xy, pixel, config: RasterConfig):
+def lane_offsets(delta, frame_xy):
+    """The difference form's d = Δ − x' (per lane) from a pair's Δ = μ − T (module docstring)."""
+    return delta[0] - frame_xy[0], delta[1] - frame_xy[1]
+
+
+def record_alpha(rec, frame_xy, config: RasterConfig):
     """(α, hit, aux) of one pair record at a lane vector of pixels (lgs_jax.alpha): hoisted,
-    raw = `hoist.evaluate_terms` (Eq. 10) and aux = (ln α, raw); or the difference form, aux =
-    power."""
+    raw = `hoist.evaluate_terms` (Eq. 10) and aux = (ln α, raw); or the difference form at
+    d = `lane_offsets`, aux = (power, d)."""
     cap = jnp.asarray(config.alpha_cap, frame_xy[0].dtype)
     if config.hoist:
         raw = hoist.evaluate_terms(rec[:6], *frame_xy)
         alpha, hit, ln_a = alpha_model.hoisted(raw, rec[6], cap)
         return alpha, hit, (ln_a, raw)
-    alpha, hit, power = alpha_model.difference(rec[0:2], rec[2:5], rec[5], *pixel, cap)
-    return alpha, hit, power
+    d = lane_offsets(rec[0:2], frame_xy)
+    alpha, hit, power = alpha_model.difference(d, rec[2:5], rec[5], cap)
+    return alpha, hit, (power, d)
 
 
 NOT_STOPPED = jnp.iinfo(jnp.int32).max  # a stop pair no pair has (indices are int32 offsets)
@@ -166,17 +176,22 @@ def empty_state(lanes: int, dt):
             jnp.full((lanes,), NOT_STOPPED, jnp.int32))
 
 
-def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: int):
+def vanilla_pairs(gauss_ref, rows_ref, tile, tiles_x: int, frame_xy, config: RasterConfig,
+                  last_pair: int):
     """The vanilla kernels' (fetch, pair_alpha) for `staged_loop`: a pair's Gaussian id, then
-    that Gaussian's row, the difference form at `pixel`."""
+    that Gaussian's row, the difference form at lanes `frame_xy` of `tile` (its Δ formed from
+    the row as `pairs.origin_offsets` forms the records')."""
     cap = jnp.asarray(config.alpha_cap, rows_ref.dtype)
+    tx, ty = tile % tiles_x, tile // tiles_x
 
     def fetch(j):
         return gauss_ref[jnp.minimum(j, last_pair)]
 
     def pair_alpha(gi):
-        row = [rows_ref[gi, c] for c in range(ROW - 1)]
-        alpha, hit, _ = alpha_model.difference(row[0:2], row[2:5], row[6], *pixel, cap)
+        row = [rows_ref[gi, c] for c in range(ROW)]
+        delta = pairs.origin_offsets(row[0:2], (row[5], row[11]), tx, ty, config)
+        alpha, hit, _ = alpha_model.difference(lane_offsets(delta, frame_xy), row[2:5], row[6],
+                                               cap)
         return alpha, hit, row[7:10], row[10]
 
     return fetch, pair_alpha
@@ -184,13 +199,13 @@ def vanilla_pairs(gauss_ref, rows_ref, pixel, config: RasterConfig, last_pair: i
 
 def backward_lanes(tile, k, tiles_x: int, config: RasterConfig, dt, trans, stop_at, cotangents):
     """The per-lane data of `backward_step` for lanes k of `tile`, from the rows of the final
-    T, stop pairs and cotangents (r, g, b, T, D) the kernel loaded: (frame, pixel, strip bit,
-    stop pair, ḡ_r, ḡ_g, ḡ_b, ḡ_D, ḡ_T·T_N); D None where the loss does not reach the depth
+    T, stop pairs and cotangents (r, g, b, T, D) the kernel loaded: (frame, strip bit, stop
+    pair, ḡ_r, ḡ_g, ḡ_b, ḡ_D, ḡ_T·T_N); D None where the loss does not reach the depth
     (`backward.walk_step` leaves its terms out)."""
-    frame_xy, pixel = lane_coordinates(tile, k, tiles_x, config, dt)
+    frame_xy = lane_coordinates(tile, k, tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), k // STRIP_PIXELS)  # each lane's strip
     g_r, g_g, g_b, g_t, g_d = cotangents
-    return frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_t * trans
+    return frame_xy, bit, stop_at, g_r, g_g, g_b, g_d, g_t * trans
 
 
 class Scaled(NamedTuple):
@@ -225,9 +240,9 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig, quotient
     α-model columns, ∂L/∂rgb, ∂L/∂z; arrays, `Scaled` or `Product` products or None for a
     zero term, each `term`'s value; the kernels reduce them over their pixels) and the new
     carry (T_{k+1}, S_r, S_g, S_b, S_Z). `quotients`: `backward.walk_step`'s."""
-    frame_xy, pixel, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
+    frame_xy, bit, stop_at, g_r, g_g, g_b, g_d, g_bg = lane
     cap = jnp.asarray(config.alpha_cap, rec[0].dtype)
-    alpha, hit, aux = record_alpha(rec, frame_xy, pixel, config)
+    alpha, hit, aux = record_alpha(rec, frame_xy, config)
     hit = hit & (j < stop_at)
     if config.warp_cull:
         hit = hit & ((mask_word & bit) != 0)
@@ -244,8 +259,7 @@ def backward_step(j, rec, mask_word, lane, carry, config: RasterConfig, quotient
         model = [Scaled(d_raw, x * x), Scaled(d_raw, x * y), Scaled(d_raw, y * y),
                  Scaled(d_raw, x), Scaled(d_raw, y), d_raw, d_ln_o]
     else:
-        model = alpha_model.difference_vjp(d_alpha, alpha, aux, rec[0:2], rec[2:5], rec[5],
-                                           *pixel, cap) + [None]
+        model = alpha_model.difference_vjp(d_alpha, alpha, *aux, rec[2:5], rec[5], cap) + [None]
     colour = [Product(w, g_r), Product(w, g_g), Product(w, g_b),
               None if g_d is None else Product(w, g_d)]
     return model + colour, (t,) + sums

@@ -4,7 +4,7 @@ Triton kernel (`gaussian_table`), beside its plain-jnp reference (`reference`).
 XLA writes the table, a concatenate along the minor axis, one column at a time: a warp's 32
 stores of a column land a row apart, one memory sector each. Here each program reads `lanes`
 Gaussians' fields as (N,) columns (`pairs.table_columns`) and stores their rows as one
-(lanes, 16) block masked to the TABLE_COLUMNS (10), whose consecutive lanes write consecutive
+(lanes, 16) block masked to the TABLE_COLUMNS (12), whose consecutive lanes write consecutive
 bytes. Every value is a copy: the table equals `reference`'s bit for bit.
 """
 

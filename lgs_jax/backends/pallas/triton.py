@@ -76,8 +76,8 @@ def localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
     dt = rec_ref.dtype
     pid = pl.program_id(0)
     tile, s = order_ref[pid // STRIPS], pid % STRIPS
-    frame, pixel = ks.lane_coordinates(tile, s * STRIP_PIXELS + lax.iota(jnp.int32, STRIP_PIXELS),
-                                       tiles_x, config, dt)
+    frame = ks.lane_coordinates(tile, s * STRIP_PIXELS + lax.iota(jnp.int32, STRIP_PIXELS),
+                                tiles_x, config, dt)
     bit = jnp.left_shift(jnp.int32(1), s)
 
     def fetch(j):
@@ -86,7 +86,7 @@ def localgs_kernel(order_ref, start_ref, end_ref, mask_ref, rec_ref, *out_refs,
 
     def pair_alpha(fetched):
         rec = [rec_ref[fetched[0], c] for c in range(ks.REC - 1)]
-        alpha, hit, _ = ks.record_alpha(rec, frame, pixel, config)
+        alpha, hit, _ = ks.record_alpha(rec, frame, config)
         return alpha, hit, rec[7:10], rec[10]
 
     # With warp culling, the strip's mask bit decides (a warp-uniform branch, Sec. III-C).
@@ -100,8 +100,9 @@ def vanilla_kernel(order_ref, start_ref, end_ref, gauss_ref, rows_ref, *out_refs
                    config: RasterConfig, tiles_x: int, last_pair: int):
     dt = rows_ref.dtype
     tile = order_ref[pl.program_id(0)]
-    _, pixel = ks.lane_coordinates(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt)
-    fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, pixel, config, last_pair)
+    frame = ks.lane_coordinates(tile, lax.iota(jnp.int32, TILE_PIXELS), tiles_x, config, dt)
+    fetch, pair_alpha = ks.vanilla_pairs(gauss_ref, rows_ref, tile, tiles_x, frame, config,
+                                         last_pair)
     _store(out_refs, tile, ks.staged_loop(start_ref[tile], end_ref[tile], TILE_PIXELS, dt, fetch,
                                           pair_alpha, config, UNROLL_VANILLA))
 
