@@ -14,7 +14,8 @@ Per scene, seed after seed, back to back on one machine, each run a subprocess o
            BIG` (no evaluation or checkpoint inside the run unless --eval-every), wall time
            from the process's start to its final scene.ply (the file's modification time: the
            final held-out evaluation, which comes before it, included), with a warm compile
-           cache (its own, OUT/jax_cache/SCENE: an untimed run of the scene first fills it;
+           cache (its own, CACHE/SCENE, --cache-dir, default OUT/jax_cache (on a device
+           call, a folder outside $OUT): an untimed run of the scene first fills it;
            with --cold that first run starts from an empty cache and is recorded as
            lgs_jax_cold).
 Rows (results.csv, one per trainer x scene x seed; a rerun replaces its rows, so several
@@ -83,6 +84,7 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--trainers", nargs="+", default=["gsplat", "ours"],
                     choices=["gsplat", "ours"])
     ap.add_argument("--out", default="time_to_quality_out", help="CSVs (merged across runs)")
+    ap.add_argument("--cache-dir", help="compilation caches, one per scene (default OUT/jax_cache)")
     ap.add_argument("--run-dir", help="the runs' folders (default: a temporary one, removed)")
     ap.add_argument("--downscale", type=int, default=1, help="image downscale, both trainers")
     ap.add_argument("--steps", type=int, help="our steps (default: the fast recipe's)")
@@ -140,6 +142,11 @@ def fit_command(args, scene: str, seed: int, out: str, extra=()) -> list[str]:
     if args.steps is not None:
         cmd += ["--steps", str(args.steps)]
     return cmd + list(extra) + args.fit_args.split()
+
+
+def _cache_root(args) -> str:
+    """The folder of the scenes' compilation caches (--cache-dir, default OUT/jax_cache)."""
+    return os.path.abspath(args.cache_dir or os.path.join(args.out, "jax_cache"))
 
 
 def run_ours(args, scene: str, seed: int, cache: str, trainer: str = "lgs_jax_fast",
@@ -369,7 +376,7 @@ def summary(args) -> int:
 def _scene_runs(args, scene: str, gsplat: bool) -> list[dict]:
     """The rows of one scene (each with its curve kept as its run ends, `_kept`): the first
     (untimed, or --cold) run, then each seed's gsplat and ours back to back."""
-    cache = os.path.join(os.path.abspath(args.out), "jax_cache", scene)
+    cache = os.path.join(_cache_root(args), scene)
     rows = []
     if "ours" in args.trainers and (args.cold or not args.no_warmup):
         if args.cold and not args.dry_run:
@@ -398,7 +405,7 @@ def _kept(args, row: dict, curve: list[dict]) -> dict:
 
 
 def _ablate(args, scene: str) -> list[dict]:
-    cache = os.path.join(os.path.abspath(args.out), "jax_cache", scene)
+    cache = os.path.join(_cache_root(args), scene)
     rows = []
     for name in args.variants:
         if args.warm_ablation:  # fills the cache

@@ -38,11 +38,11 @@ from .checkpoint import CheckpointError
 from .config import FitConfig, Recipe, Setup
 from .evaluate import evaluate
 from .interrupt import Interrupted
-from .loop import check_out, fit
+from .loop import fit
 from .losses import loss_fn, psnr, ssim
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians, sh_mask
-from .rundir import RunDirError, run_dir_problem
+from .rundir import RunDirError, check_out, run_dir_problem
 from .step import train_step
 from .budget import BudgetStrategy
 from .recipes import STRATEGIES

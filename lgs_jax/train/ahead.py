@@ -7,7 +7,9 @@ predictable: the smallest one a growth can pick, `pair_capacity(capacity + 1, he
 `Stepper` wraps a jitted function (`step.train_step`): it calls it at a size, and compiles it for
 the following size in the background while steps go on; at the growth it uses that executable if
 it holds the pairs and was compiled for the same argument shapes (a pool that grew since needs
-its own compile), for every step at that size. The executable is the program `jax.jit` compiles
+its own compile), for every step at that size. `ahead` compiles for a later step's shapes (the
+next image level's, `fit` with several levels) at a given size, taken by the first step of
+those shapes at that size. The executable is the program `jax.jit` compiles
 for that size (with XLA's autotuning off, `step.COMPILER_OPTIONS`, so that a compile beside
 running steps picks the same kernels as one on an idle GPU): the same bits.
 
@@ -133,15 +135,50 @@ class Stepper:
         self._ready = {}  # signature -> (size, executable) taken from a finished job
         self._latest = []  # the signatures run latest, oldest first
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
+        self.waited = 0.0  # seconds `run` waited for compiles ahead since `take_waited`
 
     def run(self, args, size: tuple, sig: tuple):
         """One call at `size`; `sig` = signature(args)."""
         if not self._latest or self._latest[-1] != sig:  # another shape than the last step's
             self._keep_latest(sig)
+        job = self._jobs.get(sig)
+        if job is not None and job[0] == size:  # compiled ahead for these shapes (`ahead`)
+            del self._jobs[sig]
+            t0 = time.perf_counter()
+            try:
+                executable = job[1].result()  # None from a child: the jitted step loads it
+                if executable is not None:
+                    self._ready[sig] = (size, executable)
+            except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
+                self.failure = _reason(e)
+            self.waited += time.perf_counter() - t0
         ready = self._ready.get(sig)
         if ready is not None and ready[0] == size:
             return ready[1](*args)
         return self._fn(*args, **self._static(size))
+
+    @property
+    def compiles_ahead(self) -> bool:
+        """Whether this stepper compiles ahead at all (a mode)."""
+        return self._threads is not None
+
+    def take_waited(self) -> float:
+        """The seconds `run` waited for compiles ahead since the last call."""
+        waited, self.waited = self.waited, 0.0
+        return waited
+
+    def ahead(self, args, size: tuple) -> None:
+        """Start compiling `fn` at `size` for arguments shaped as `args` (arrays or
+        `jax.ShapeDtypeStruct`s: a later step's, whose arrays need not exist yet), unless one
+        is under way or done for those shapes; the first `run` of those shapes at `size` takes
+        it, waiting where it is unfinished."""
+        if self._threads is None:
+            return
+        sig = signature(args)
+        if sig in self._jobs or sig in self._ready:
+            return
+        self._keep_latest(sig)  # kept among the latest until its step runs
+        self._submit(args, size, sig)
 
     def _keep_latest(self, sig: tuple) -> None:
         """`sig` the latest signature run; forget the compiles of those no longer among the
@@ -165,12 +202,16 @@ class Stepper:
             if job[0] == following:
                 return
             job[1].cancel()  # not started yet (else it finishes, unused)
-        abstract, static = _abstract(args), self._static(following)
+        self._submit(args, following, sig)
+
+    def _submit(self, args, size: tuple, sig: tuple) -> None:
+        """Compile `fn` at `size` for `args`' shapes in the background, as the job of `sig`."""
+        abstract, static = _abstract(args), self._static(size)
         if self._mode == "process":
             compile_ = lambda: _compile_in_child(self._fn, abstract, static)
         else:
             compile_ = lambda: self._fn.lower(*abstract, **static).compile()
-        self._jobs[sig] = (following, self._threads.submit(compile_))
+        self._jobs[sig] = (size, self._threads.submit(compile_))
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at

@@ -27,7 +27,6 @@ come before config.steps (`early_stop`: when the training loss stops falling).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import os
@@ -41,6 +40,7 @@ from ..render import default_backend, pair_capacity
 from . import heldout, outputs, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
+from .rundir import claimed
 from .config import FitConfig, Setup
 from .early_stop import EarlyStop
 from .feed import RunData, nbytes, prepare, streams
@@ -87,6 +87,7 @@ class _Run:
     pending: dict | None = None  # the metrics (on the device) of the next step, dispatched ahead
     stopped_early: bool = False
     level: int | None = None  # the image level of the last step run (`levels`)
+    next_level: tuple | None = None  # (level, pair capacity) compiled ahead (`_level_ahead`)
     eval_seconds: float = 0.0  # held-out evaluations during the run
     checkpoint_seconds: float = 0.0  # checkpoints during the run
 
@@ -104,18 +105,62 @@ def _enter_level(run: _Run, feed: LevelFeed) -> None:
     resolution (a coarse level's step needs a fraction of the pairs; the capacity changes no
     bit, `docs/determinism-and-capacities.md`), times the pool's slots over its active
     Gaussians: room for the pairs of a pool filled during the level (the fast recipe's budget
-    rises through the coarse levels), so a level compiles once rather than at every growth."""
+    rises through the coarse levels), so a level compiles once rather than at every growth.
+    Where the level's step was compiled ahead (`_level_ahead`) at a capacity that holds this
+    one and is at most twice it, that capacity."""
     st, level = run.st, feed.level(run.st.step)
     if len(feed.levels) == 1 or level == run.level:
         return
     run.level = level
     lv = feed.levels[level]
-    pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
-    filled = st.pool.size / max(int(jnp.sum(st.pool.active)), 1)
-    st.capacity = pair_capacity(int(pairs * filled), run.config.pair_headroom)
+    st.capacity = _level_capacity(run, lv)
+    ahead = run.next_level
+    took = ahead is not None and ahead[0] == level and st.capacity <= ahead[1] <= 2 * st.capacity
+    if took:
+        st.capacity = ahead[1]
     run.say(f"step {st.step + 1}: images at {lv.sizes[0][0]}x{lv.sizes[0][1]} "
             f"({'full size' if lv.factor == 1 else f'1/{lv.factor}'}), pair capacity "
-            f"{st.capacity}")
+            f"{st.capacity}" + (" (compiled ahead)" if took else ""))
+
+
+def _level_capacity(run: _Run, lv) -> int:
+    """The pair capacity of level `lv` for the pool as it is (`_enter_level`)."""
+    st = run.st
+    pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
+    filled = st.pool.size / max(int(jnp.sum(st.pool.active)), 1)
+    return pair_capacity(int(pairs * filled), run.config.pair_headroom)
+
+
+def _level_ahead(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
+    """Halfway through a level that has a next one, where the stepper compiles ahead: the
+    next level's step compiled in the background (`Stepper.ahead`, for its first training
+    view's image size) at the capacity `_enter_level` would give it with the pool as it is
+    now, so that the coarse steps hide the trace, lowering and compile of the finer one."""
+    st = run.st
+    level = feed.level(st.step)
+    if not steps.compiles_ahead or level + 1 >= len(feed.levels):
+        return
+    if run.next_level is not None and run.next_level[0] > level:
+        return
+    start, end = feed.starts[level], feed.starts[level + 1]
+    if st.step < (start + end) // 2:
+        return
+    lv = feed.levels[level + 1]
+    run.next_level = (level + 1, _level_capacity(run, lv))
+    images, idx = feed.args(st.step)
+    width, height = lv.sizes[0]
+    shaped = jax.ShapeDtypeStruct((images.shape[0], height, width) + images.shape[3:],
+                                  images.dtype)
+    field = SECOND[run.setup.gaussian_devices > 1][0]
+    steps.ahead(_args(run, lv.cams, shaped, idx, end, run.go),
+                (run.next_level[1], getattr(st, field)))
+
+
+def _args(run: _Run, cams, images, idx, step: int, go) -> tuple:
+    """`train_step`'s arguments for 0-based `step` on the run's state."""
+    st = run.st
+    return (st.pool, st.opt_state, st.strategy_state, st.views, cams, images, idx,
+            run.background, step, run.key, st.order, go)
 
 
 def _dispatch(run: _Run, feed: LevelFeed, steps: Stepper, step: int, size: tuple, go):
@@ -124,8 +169,7 @@ def _dispatch(run: _Run, feed: LevelFeed, steps: Stepper, step: int, size: tuple
     returns (its metrics on the device, the signature of its arguments)."""
     st = run.st
     images, idx = feed.args(step)
-    args = (st.pool, st.opt_state, st.strategy_state, st.views, feed.cams(step), images, idx,
-            run.background, step, run.key, st.order, go)
+    args = _args(run, feed.cams(step), images, idx, step, go)
     sig = signature(args)
     new = steps.run(args, size, sig)
     feed.prefetch(step + 1)  # while the step runs
@@ -134,23 +178,25 @@ def _dispatch(run: _Run, feed: LevelFeed, steps: Stepper, step: int, size: tuple
     return new[4], sig
 
 
-def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, ahead: bool) -> dict:
+def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool) -> dict:
     """Run step st.step (capacity grown until nothing overflows), unless it was dispatched
-    ahead (run.pending); with `ahead`, dispatch step st.step + 1 before reading step st.step's
-    metrics (module docstring). Returns step st.step's metrics."""
+    ahead (run.pending); with `then_next`, dispatch step st.step + 1 before reading step
+    st.step's metrics (module docstring). Returns step st.step's metrics."""
     st = run.st
     field, flag, needed, name = SECOND[run.setup.gaussian_devices > 1]
     pending, run.pending = run.pending, None
     if pending is None:
         _enter_level(run, feed)
+    _level_ahead(run, feed, steps)
     while True:
         size = (st.capacity, getattr(st, field))
         if pending is not None:
             (metrics, sig), pending = pending, None
         else:
             metrics, sig = _dispatch(run, feed, steps, st.step, size, run.go)
-        if ahead:
+        if then_next:
             run.pending = _dispatch(run, feed, steps, st.step + 1, size, metrics["fits"])
+        clock.waited(steps.take_waited())
         m = {k: v.item() for k, v in jax.device_get(metrics).items()}
         if not (m["overflow"] or m[flag]):
             return m
@@ -371,36 +417,6 @@ def _check_hooks(watch, watch_every, devices: int, gaussian_devices: int = 1) ->
                              f"{jax.default_backend()} devices here), got {count!r}")
 
 
-def check_out(config: FitConfig, data_path: str) -> None:
-    """Raise `rundir.RunDirError` where config.out cannot take this run: a folder holding
-    another run, one that cannot be written, or (resume) a checkpoint that does not continue
-    with this configuration and `data_path` (`rundir.resume_problem`); a checkpoint that
-    cannot be read raises `checkpoint.CheckpointError`. Nothing is written but the folder
-    itself."""
-    _check_folder(config)
-    wrong = rundir.resume_problem(config, data_path)
-    if wrong:
-        raise wrong
-
-
-def _check_folder(config: FitConfig) -> None:
-    problem = rundir.run_dir_problem(config.out, config.resume, config.overwrite)
-    if problem is None:
-        problem = rundir.writable_problem(config.out)
-    if problem:
-        raise rundir.RunDirError("out", problem)
-
-
-@contextlib.contextmanager
-def _claimed(config: FitConfig, data_path: str):
-    """config.out locked (`rundir.Lock`) for the block, and checked (`check_out`) under the
-    lock (another run may fill it until then)."""
-    _check_folder(config)
-    with rundir.Lock(config.out):
-        check_out(config, data_path)
-        yield
-
-
 def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0,
         log=print) -> dict:
     """Train as `config` says (`FitConfig`: data, run folder, steps, recipe, strategy, ...) into
@@ -433,7 +449,7 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     _check_hooks(watch, watch_every, config.devices, config.gaussian_devices)
     mode_of(config.compile_ahead)  # checks "process" has its cache
     data_path = dataset.path if dataset is not None else config.data
-    with _claimed(config, data_path):
+    with claimed(config, data_path):
         return _run(config, dataset, data_path, _Watch(watch, float(watch_every),
                                                        config.devices,
                                                        config.gaussian_devices > 1), log)

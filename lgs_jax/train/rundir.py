@@ -134,3 +134,34 @@ class Lock:
         with contextlib.suppress(FileNotFoundError):
             os.remove(self.path)
         self.file.close()  # releases the lock
+
+
+def check_out(config, data_path: str) -> None:
+    """Raise `RunDirError` where config.out cannot take this run: a folder holding
+    another run, one that cannot be written, or (resume) a checkpoint that does not continue
+    with this configuration and `data_path` (`resume_problem`); a checkpoint that
+    cannot be read raises `checkpoint.CheckpointError`. Nothing is written but the folder
+    itself."""
+    _check_folder(config)
+    wrong = resume_problem(config, data_path)
+    if wrong:
+        raise wrong
+
+
+def _check_folder(config) -> None:
+    """Raise `RunDirError` where config.out holds another run or cannot be written."""
+    problem = run_dir_problem(config.out, config.resume, config.overwrite)
+    if problem is None:
+        problem = writable_problem(config.out)
+    if problem:
+        raise RunDirError("out", problem)
+
+
+@contextlib.contextmanager
+def claimed(config, data_path: str):
+    """config.out locked (`Lock`) for the block, and checked (`check_out`) under the
+    lock (another run may fill it until then)."""
+    _check_folder(config)
+    with Lock(config.out):
+        check_out(config, data_path)
+        yield

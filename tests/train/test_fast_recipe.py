@@ -261,7 +261,8 @@ class _Stop(Exception):
 
 def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path):
     """Run twice (a, b): the same bits; each level starts with its own pair capacity (which
-    changes no bit); c dies after step 7 (its checkpoint: step 5, at the coarse level) and is
+    changes no bit); b compiles the full-resolution step ahead from halfway through the coarse
+    level (`compile_ahead="thread"`, the GPU's default) and takes it there; c dies after step 7 (its checkpoint: step 5, at the coarse level) and is
     resumed: a's bits; resumed again after its early stop, it stops at
     once. The early stop ends each at step 20, where the rule over metrics.jsonl's training
     losses says so."""
@@ -274,7 +275,11 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     entered = [m.split(", pair capacity")[0] for m in lines if ", pair capacity" in m]
     assert entered == ["step 1: images at 8x8 (1/2)", "step 13: images at 16x16 (full size)"]
     timing = {k for k in result if k.endswith("seconds")} | {"ms_per_step"}
-    second = train.fit(_fast(data, tmp_path / "b"), log=lambda m: None)
+    later = []
+    train.train_step.clear_cache()
+    second = train.fit(_fast(data, tmp_path / "b", compile_ahead="thread"), log=later.append)
+    assert "step 13: images at 16x16 (full size), pair capacity 1024 (compiled ahead)" in later
+    assert train.train_step._cache_size() == 1  # the coarse level's; the fine one ran ahead's
     assert {k: v for k, v in second.items() if k not in timing} == {
         k: v for k, v in result.items() if k not in timing}
 

@@ -350,22 +350,27 @@ def test_steps_dispatched_ahead_change_no_bit(skull, tmp_path, monkeypatch):
     them reads the state (`loop._ahead`), passing it the previous one's fits as its go; where
     the previous one overflowed (0-based step 9 here: the pairs outgrow the capacity), the one
     dispatched ahead is told not to apply (`train_step`'s go: test_sizes) and both run again.
-    A checkpoint after every step leaves no step to dispatch ahead: the same bits."""
+    A checkpoint after every step leaves no step to dispatch ahead, not even after a growth
+    taken from the step compiled ahead (compile_ahead="thread"): the same bits."""
     order, dispatch = {}, loop._dispatch
 
     def tracked(run, feed, steps, step, size, go, seen):
         seen.append((step, bool(go)))
+        ahead.append(step - run.st.step)  # 1: dispatched before step `step - 1` was read
         return dispatch(run, feed, steps, step, size, go)
 
+    aheads = {}
     for every in (3, 1):
+        ahead = aheads[every] = []
         monkeypatch.setattr(loop, "_dispatch", functools.partial(tracked, seen=[]))
         order[every] = loop._dispatch.keywords["seen"]
-        _fit(skull, tmp_path / str(every), checkpoint_every=every)
+        _fit(skull, tmp_path / str(every), checkpoint_every=every, compile_ahead="thread")
     redo = [(9, True), (10, False), (9, True), (10, True), (11, True)]
     assert [s for s in order[3] if not s[1]] == [(10, False)], order[3]
     i = order[3].index((10, False))
     assert order[3][i - 1:i + 4] == redo and len(order[3]) == STEPS + 2, order[3]
     assert order[1] == [(s, True) for s in sorted(list(range(STEPS)) + [9])], order[1]
+    assert set(aheads[3]) == {0, 1} and not any(aheads[1]), aheads
     a, b = (np.load(tmp_path / r / "checkpoint.npz") for r in "31")
     assert sorted(a.files) == sorted(b.files)
     for name in a.files:
@@ -418,6 +423,24 @@ def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(need, same_sha
     if not taken:
         assert size == sizes.grown((1024, 800), need)
     assert stepper.run(args, size, other) == (want or ("jit", size))
+    stepper.close()
+
+
+@pytest.mark.parametrize("fail", [False, True])
+def test_stepper_takes_a_later_steps_compile_at_its_shapes_and_size(fail):
+    """`Stepper.ahead` (the next image level's step): compiled for shapes given as
+    ShapeDtypeStructs; the first run of those shapes at that size takes it, another size or
+    shape compiles its own; a failed compile is said and leaves the jitted step."""
+    stepper = ahead.Stepper(_Jitted(fail), lambda size: dict(size=size), ahead.Sizes(1.5))
+    now, later = (jnp.zeros(3, jnp.float32), 7), (jnp.zeros(5, jnp.float32), 7)
+    stepper.run(now, (1024, None), ahead.signature(now))
+    stepper.ahead((jax.ShapeDtypeStruct((5,), jnp.float32), 7), (2048, None))
+    sig = ahead.signature(later)
+    assert stepper.run(later, (4096, None), sig) == ("jit", (4096, None))  # another size
+    want = ("jit", (2048, None)) if fail else ("executable", (2048, None))
+    assert stepper.run(later, (2048, None), sig) == want
+    assert (stepper.failure is not None) == fail and stepper.take_waited() >= 0
+    assert stepper.take_waited() == 0
     stepper.close()
 
 
