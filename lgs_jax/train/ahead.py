@@ -135,7 +135,7 @@ class Stepper:
         self._ready = {}  # signature -> (size, executable) taken from a finished job
         self._latest = []  # the signatures run latest, oldest first
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
-        self.waited = 0.0  # seconds `run` waited for compiles ahead since `take_waited`
+        self._waited = 0.0  # seconds `run` waited for compiles ahead since `take_waited`
 
     def run(self, args, size: tuple, sig: tuple):
         """One call at `size`; `sig` = signature(args)."""
@@ -143,15 +143,7 @@ class Stepper:
             self._keep_latest(sig)
         job = self._jobs.get(sig)
         if job is not None and job[0] == size:  # compiled ahead for these shapes (`ahead`)
-            del self._jobs[sig]
-            t0 = time.perf_counter()
-            try:
-                executable = job[1].result()  # None from a child: the jitted step loads it
-                if executable is not None:
-                    self._ready[sig] = (size, executable)
-            except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
-                self.failure = _reason(e)
-            self.waited += time.perf_counter() - t0
+            self._waited += self._take(sig, self._jobs.pop(sig))[0]
         ready = self._ready.get(sig)
         if ready is not None and ready[0] == size:
             return ready[1](*args)
@@ -164,8 +156,21 @@ class Stepper:
 
     def take_waited(self) -> float:
         """The seconds `run` waited for compiles ahead since the last call."""
-        waited, self.waited = self.waited, 0.0
+        waited, self._waited = self._waited, 0.0
         return waited
+
+    def _take(self, sig: tuple, job: tuple) -> tuple[float, bool]:
+        """(seconds waited, whether it compiled) for the finished or awaited compile `job` of
+        `sig`, its executable then ready for `run`; a failure is said in `failure`."""
+        t0 = time.perf_counter()
+        try:
+            executable = job[1].result()  # None from a child: the jitted step loads it
+        except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
+            self.failure = _reason(e)
+            return time.perf_counter() - t0, False
+        if executable is not None:
+            self._ready[sig] = (job[0], executable)
+        return time.perf_counter() - t0, True
 
     def ahead(self, args, size: tuple) -> None:
         """Start compiling `fn` at `size` for arguments shaped as `args` (arrays or
@@ -222,14 +227,9 @@ class Stepper:
         job, self.failure = self._jobs.pop(sig, None), None
         self._ready.pop(sig, None)
         if job is not None and self._sizes.holds(job[0], need):
-            t0 = time.perf_counter()
-            try:
-                executable = job[1].result()  # None from a child: the jitted step loads it
-                if executable is not None:
-                    self._ready[sig] = (job[0], executable)
-                return job[0], time.perf_counter() - t0, True
-            except Exception as e:  # noqa: BLE001 - any failure: the jitted step compiles instead
-                self.failure = _reason(e)
+            waited, compiled = self._take(sig, job)
+            if compiled:
+                return job[0], waited, True
         return self._sizes.grown(size, need), 0.0, False
 
     def close(self) -> None:

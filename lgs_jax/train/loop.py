@@ -239,7 +239,7 @@ def _refine(run: _Run) -> int:
         st.strategy_state, st.pool, st.opt_state, rep, st.order = sharded_state.refine(
             setup.strategy, st.strategy_state, st.pool, st.opt_state, st.order, st.step,
             run.key, run.config.max_gaussians, setup.gaussian_devices,
-            state.balance_views(run.rd), setup.recipe.antialiased)
+            state.balance_cameras(run.rd), setup.recipe.antialiased)
     else:
         st.strategy_state, st.pool, st.opt_state, rep = refine(
             setup.strategy, st.strategy_state, st.pool, st.opt_state, st.step, run.key,

@@ -2,12 +2,12 @@
 over D devices): placed balanced, refined in slot order, saved as the one-device run saves it,
 its buffers sized, its held-out views rendered sharded.
 
-- `balanced(devices, parts, cams)`: the rows of (pool, opt_state, strategy_state), given in
-  slot order, permuted by `balance.balanced_order(active, D, work)` and placed in blocks over
-  the mesh; returns them and `order` (row j holds slot order[j]). `work` (per slot, `work`):
-  Σ over a few training views (`balance_views`) of 1 + the Gaussian's tile pairs in the view,
-  the projection and binning a device does for it, so the blocks share the pairs, not just
-  the count (without views: by count).
+- `balanced(devices, parts, weights)`: the rows of (pool, opt_state, strategy_state), given
+  in slot order, permuted by `balance.balanced_order(active, D, weights)` and placed in blocks
+  over the mesh; returns them and `order` (row j holds slot order[j]). The weights are `work`
+  (per slot: Σ over a few training views, `balance_views`, of 1 + the Gaussian's tile pairs
+  in the view, the projection and binning a device does for it), so the blocks share the
+  pairs, not just the count (without weights: by count).
 - `in_slot_order(parts, order)`: back to slot order (the one-device layout): what a refinement
   runs on and a checkpoint holds, so a checkpoint is the one-device run's file and `--resume`
   takes it on any device count.
@@ -78,11 +78,10 @@ def work(pool: Pool, cams: list, antialiased: bool) -> jax.Array:
     return total
 
 
-def balanced(devices: int, parts: tuple, cams: list = (), antialiased: bool = False):
+def balanced(devices: int, parts: tuple, weights=None):
     """((pool, opt_state, strategy_state) with rows permuted by order and placed, order), from
-    `parts` in slot order (module docstring): the blocks balanced by `work` over `cams`, or
-    by count without them."""
-    weights = work(parts[0], cams, antialiased) if cams else None
+    `parts` in slot order (module docstring): the blocks balanced by `weights` (per slot, in
+    slot order: `work`), or by count without them."""
     order = jax.device_put(_order(parts[0].active, devices, weights), sharded.blocks(devices))
     return _permuted(parts, order, devices=devices), order
 
@@ -116,12 +115,12 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, order, step: int, ke
                                                     order)
     strategy_state, pool, opt_state, report = step_mod.refine(
         strategy, strategy_state, pool, opt_state, step, key, cap, devices)
+    weights = work(pool, cams, antialiased) if cams else None
     (pool, opt_state, strategy_state), order = balanced(devices, (pool, opt_state,
-                                                                  strategy_state),
-                                                        cams, antialiased)
+                                                                  strategy_state), weights)
     report["per_device"] = per_device(devices, pool)
     if cams:
-        w = jnp.where(pool.active, work(pool, cams, antialiased), 0.0)
+        w = jnp.where(pool.active, jnp.take(weights, order), 0.0)  # in row order
         report["per_device_work"] = [float(x) for x in jax.device_get(
             jnp.sum(jnp.reshape(w, (devices, -1)), axis=1))]
         report["heaviest"] = float(jnp.max(w))

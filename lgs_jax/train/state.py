@@ -114,7 +114,7 @@ def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     return RunState(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, views=views)
 
 
-def balance_views(rd: RunData) -> list:
+def balance_cameras(rd: RunData) -> list:
     """The training cameras a Gaussian-parallel run balances its blocks over
     (`sharded_state.balance_views`)."""
     return [rd.train_camera(i) for i in sharded_state.balance_views(len(rd.train_names))]
@@ -124,11 +124,12 @@ def _sharded(config: FitConfig, setup: Setup, rd: RunData, parts: tuple, step: i
              eval_capacity: int | None, skipped: int = 0) -> RunState:
     """The state of a run split over setup.gaussian_devices devices (`sharded_state`) from
     `parts` (pool, opt_state, strategy_state, views) in slot order: the pool padded to equal
-    blocks, balanced (`sharded_state.work` over `balance_views`) and placed; both buffers
+    blocks, balanced (`sharded_state.work` over `balance_cameras`) and placed; both buffers
     sized from the first training view."""
     d = setup.gaussian_devices
-    (pool, opt_state, sstate), order = sharded_state.balanced(
-        d, sharded_state.padded(parts[:3], d), balance_views(rd), setup.recipe.antialiased)
+    padded = sharded_state.padded(parts[:3], d)
+    weights = sharded_state.work(padded[0], balance_cameras(rd), setup.recipe.antialiased)
+    (pool, opt_state, sstate), order = sharded_state.balanced(d, padded, weights)
     views = sharded_state.place(d, (pool, opt_state, sstate), parts[3])[1]
     capacity, exchange = sharded_state.first_sizes(d, pool, rd.train_camera(0),
                                                    setup.recipe.antialiased,

@@ -114,7 +114,8 @@ def refinements() -> dict:
                                                                POOL), jnp.float32),
                          count=jnp.ones(POOL, jnp.float32))
         one = step.refine(strategy, state, pool, opt, 3, key, POOL)
-        parts, order = sharded_state.balanced(4, (pool, opt, state), [VIEW])
+        parts, order = sharded_state.balanced(4, (pool, opt, state),
+                                              sharded_state.work(pool, [VIEW], False))
         s4, p4, o4, report, order = sharded_state.refine(strategy, parts[2], parts[0], parts[1],
                                                          order, 3, key, POOL, 4, [VIEW])
         back = sharded_state.in_slot_order(4, (p4, o4, s4), order)
