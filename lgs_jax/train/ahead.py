@@ -13,8 +13,12 @@ those shapes at that size. The executable is the program `jax.jit` compiles
 for that size (with XLA's autotuning off, `step.COMPILER_OPTIONS`, so that a compile beside
 running steps picks the same kernels as one on an idle GPU): the same bits.
 
-Modes: "thread" compiles in a background thread (XLA compiles outside Python's lock, but tracing
-and lowering hold it and slow the steps meanwhile); "process" in a child process (`ahead_child`)
+Modes: "thread" compiles in a background thread. XLA compiles outside Python's lock, but tracing
+and lowering hold it: each time the loop's thread waits on the device (a step's metrics) it
+gives the lock up, and it gets it back only when the compiling thread's switch interval has run
+(Python's default, 5 ms, is a step's length), so while a compile ahead traces, the interval is
+`SWITCH_INTERVAL` (`sys.setswitchinterval`, restored after). "process" compiles in a child
+process (`ahead_child`)
 into JAX's persistent compilation cache, from which the jitted function loads the executable at
 the growth: it needs the cache (`jax_compilation_cache_dir`), and a child that fails, or a cache
 entry the step does not find (a JAX setting the child lacks), costs only the compile it was to
@@ -38,6 +42,7 @@ from ..render import pair_capacity
 
 MODES = ("thread", "process")
 KEPT_SIGNATURES = 8  # `Stepper` keeps compiles ahead for the shapes of this many latest steps
+SWITCH_INTERVAL = 1e-4  # seconds: Python's thread switch interval while a thread compiles ahead
 
 # JAX settings a child compile must share with this process for its cache entry to be the one
 # this process looks up (the cache's key covers the program, the devices and the options).
@@ -215,7 +220,7 @@ class Stepper:
         if self._mode == "process":
             compile_ = lambda: _compile_in_child(self._fn, abstract, static)
         else:
-            compile_ = lambda: self._fn.lower(*abstract, **static).compile()
+            compile_ = lambda: _compile_switching_often(self._fn, abstract, static)
         self._jobs[sig] = (size, self._threads.submit(compile_))
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
@@ -243,6 +248,17 @@ def _reason(e: Exception) -> str:
     """One line on why a compile ahead failed (a child's last line of stderr)."""
     lines = (getattr(e, "stderr", None) or b"").decode(errors="replace").strip().splitlines()
     return lines[-1] if lines else f"{type(e).__name__}: {e}"
+
+
+def _compile_switching_often(fn, abstract, static: dict):
+    """`fn.lower(*abstract, **static).compile()` with Python's switch interval at
+    `SWITCH_INTERVAL` meanwhile (module docstring), the one before restored after."""
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(SWITCH_INTERVAL)
+    try:
+        return fn.lower(*abstract, **static).compile()
+    finally:
+        sys.setswitchinterval(before)
 
 
 def _compile_in_child(fn, abstract, static: dict) -> None:

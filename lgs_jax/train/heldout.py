@@ -88,7 +88,9 @@ class Evaluations:
 
     def score(self, pool: Pool) -> tuple[float, float]:
         recipe = self.setup.recipe
-        need = max(int(_pairs(pool, cam, recipe.antialiased)) for cam in self.cams)
+        # every view's count dispatched before the one read: a single wait on the device
+        need = int(max(jax.device_get([_pairs(pool, cam, recipe.antialiased)
+                                       for cam in self.cams])))
         if need > self.capacity:
             self.capacity = pair_capacity(need, self.headroom)
         scores = jax.device_get([

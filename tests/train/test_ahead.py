@@ -3,6 +3,7 @@ process lands in the persistent compilation cache under the key this process loo
 hit at the growth, from a cache that was empty), and `fit`'s compile_ahead is checked."""
 
 import functools
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -97,3 +98,37 @@ def test_process_mode_without_the_cache_raises():
             ahead.mode_of("process")
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+class _Traced:
+    """A stand-in for a jitted function whose lowering records Python's switch interval."""
+
+    def __init__(self):
+        self.intervals = []
+
+    def __call__(self, *args, capacity):
+        return ("jit", capacity)
+
+    def lower(self, *args, capacity):
+        self.intervals.append(sys.getswitchinterval())
+        return self
+
+    def compile(self):
+        return lambda *args: "executable"
+
+
+def test_a_thread_compiling_ahead_switches_often_and_restores_the_interval():
+    """Mode "thread": while the compile ahead traces, Python's switch interval is
+    `ahead.SWITCH_INTERVAL` (the loop's thread gets the lock back promptly after each wait on
+    the device); the interval before is restored once it is done."""
+    before = sys.getswitchinterval()
+    fn = _Traced()
+    stepper = ahead.Stepper(fn, _static, ahead.Sizes(1.5), "thread")
+    args = (jnp.zeros(3),)
+    sig = ahead.signature(args)
+    stepper.prepare(args, (1024, None), sig)
+    size, _, taken = stepper.grow((1024, None), (1025, 0), sig)
+    assert taken and stepper.run(args, size, sig) == "executable"
+    assert fn.intervals == [pytest.approx(ahead.SWITCH_INTERVAL)] and before > 2 * ahead.SWITCH_INTERVAL
+    assert sys.getswitchinterval() == before
+    stepper.close()
