@@ -92,6 +92,9 @@ def parse(argv=None) -> argparse.Namespace:
                     help="our trainer's FitConfig.pair_headroom")
     ap.add_argument("--row-headroom", type=float, default=None,
                     help="our trainer's FitConfig.row_headroom (default: a row per pair slot)")
+    ap.add_argument("--stream-images", action="store_true",
+                    help="our trainer keeps only each step's views on the device "
+                         "(FitConfig.stream_images; default: fit's rule)")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)
@@ -120,6 +123,7 @@ def scene_setup(args, scene: str, out: str = ""):
         init_points=100_000, seed=args.seed, backend=args.backend,
         pair_headroom=args.pair_headroom, row_headroom=args.row_headroom,
         compile_ahead=args.compile_ahead, eval_every=args.eval_every,
+        stream_images=True if args.stream_images else None,
         checkpoint_every=max(args.steps, 1), overwrite=True)
     return d, config
 
