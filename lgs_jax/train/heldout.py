@@ -7,7 +7,11 @@ scoring runs in Python, where scikit-image took seconds per evaluation. The loop
 scores before its next step, so the renders' buffers never sit beside a training step's. The
 pair buffer of the held-out renders is sized by counting the views' pairs first with the run's
 pair headroom, so that it grows, a compile each, about as rarely as the training step's. The
-final evaluation (`outputs.finish`) is scikit-image's own (`report.heldout_metrics`), on the
+programs are compiled ahead as the training step's are (`ahead.Stepper`, the run's mode): the
+first evaluation's from the run's first step on (`Evaluations.ahead`), and after each
+evaluation the pair capacity a growth would pick next; the same renders and scores, whichever
+program runs them. The final evaluation (`outputs.finish`) renders through the same program
+(`Evaluations.images`) and scores with scikit-image's own (`report.heldout_metrics`), on the
 host.
 
 `view_scores` computes scikit-image's defaults, `peak_signal_noise_ratio(data_range=1)` and
@@ -26,7 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import RasterConfig
-from ..render import count_pairs, pair_capacity
+from ..render import count_pairs
+from .ahead import Sizes, Stepper, signature
 from .config import Setup
 from .pool import Pool, render_gaussians
 from .step import COMPILER_OPTIONS
@@ -61,13 +66,13 @@ def view_scores(image, target):
                    compiler_options=COMPILER_OPTIONS)
 def _scored(pool: Pool, cam, target, background, *, backend: str, capacity: int,
             config: RasterConfig):
-    """(PSNR, SSIM, overflow) of one held-out view rendered from `pool`."""
+    """(PSNR, SSIM, overflow, image) of one held-out view rendered from `pool`."""
     from ..render import render
 
     out = render(render_gaussians(pool.params, pool.active), cam, background=background,
                  backend=backend, capacity=capacity, config=config)
     psnr, ssim = view_scores(out.image, target)
-    return psnr, ssim, out.stats.overflow
+    return psnr, ssim, out.stats.overflow, out.image
 
 
 @functools.partial(jax.jit, static_argnames="antialiased")
@@ -75,29 +80,82 @@ def _pairs(pool: Pool, cam, antialiased: bool):
     return count_pairs(render_gaussians(pool.params, pool.active), cam, antialiased=antialiased)
 
 
+def compiled_programs() -> tuple[int, int]:
+    """How many programs `jax.jit` holds compiled for the evaluations' pair counts and
+    renders (compiles ahead are not among them)."""
+    return _pairs._cache_size(), _scored._cache_size()
+
+
 class Evaluations:
     """The held-out views of a run, scored on the device (module docstring): `score(pool)` is
-    the (PSNR, SSIM) of the pool over the views, averaged. `capacity`: the held-out renders'
-    pair buffer, grown here (a checkpoint keeps it)."""
+    the (PSNR, SSIM) of the pool over the views, averaged; `images(pool)` the renders.
+    `capacity`: the held-out renders' pair buffer, grown here (a checkpoint keeps it). `mode`:
+    the compiles ahead's (`ahead.Stepper`; None: none); `close` ends them."""
 
     def __init__(self, cams, targets, background, setup: Setup, capacity: int,
-                 headroom: float):
+                 headroom: float, mode: str | None = None):
         self.cams, self.targets = list(cams), targets
         self.background = jnp.asarray(background)
         self.setup, self.capacity, self.headroom = setup, capacity, headroom
+        raster = setup.recipe.raster
+        self._counts = Stepper(_pairs, lambda size: dict(antialiased=raster.antialiased),
+                               Sizes(headroom), mode)
+        self._renders = Stepper(_scored, lambda size: dict(
+            backend=setup.backend, capacity=size[0], config=raster), Sizes(headroom), mode)
+        self.started = False  # `ahead` ran
+
+    def _views(self, pool: Pool, targets=None) -> list[tuple]:
+        """Per view, `_pairs`' and `_scored`'s arguments for `pool`."""
+        targets = self.targets if targets is None else targets
+        return [((pool, cam), (pool, cam, target, self.background))
+                for cam, target in zip(self.cams, targets)]
+
+    def ahead(self, pool: Pool) -> None:
+        """Start compiling the programs of an evaluation of a pool shaped as `pool`, for each
+        size of the views, at the current capacity (a no-op after the first call)."""
+        if self.started:
+            return
+        self.started = True
+        shapes = lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype)
+        for counted, rendered in self._views(pool, [shapes(t) for t in self.targets]):
+            self._counts.ahead(counted, (0, None))
+            self._renders.ahead(rendered, (self.capacity, None))
+
+    def _rendered(self, pool: Pool) -> list[tuple]:
+        """(PSNR, SSIM, overflow, image) per view, on the device, the pair buffer grown to
+        the views' need first."""
+        views = self._views(pool, [jnp.asarray(t) for t in self.targets])
+        sigs = [(signature(c), signature(r)) for c, r in views]
+        # every view's count dispatched before the one read: a single wait on the device
+        need = int(max(jax.device_get([self._counts.run(c, (0, None), s)
+                                       for (c, _), (s, _) in zip(views, sigs)])))
+        size = (self.capacity, None)
+        if need > self.capacity:
+            size = self._renders.grow(size, (need, 0), sigs[0][1])[0]
+            self.capacity = size[0]
+        out = [self._renders.run(r, size, s) for (_, r), (_, s) in zip(views, sigs)]
+        self._renders.prepare(views[0][1], size, sigs[0][1])  # the next growth's, ahead
+        return out
 
     def score(self, pool: Pool) -> tuple[float, float]:
-        recipe = self.setup.recipe
-        # every view's count dispatched before the one read: a single wait on the device
-        need = int(max(jax.device_get([_pairs(pool, cam, recipe.antialiased)
-                                       for cam in self.cams])))
-        if need > self.capacity:
-            self.capacity = pair_capacity(need, self.headroom)
-        scores = jax.device_get([
-            _scored(pool, cam, jnp.asarray(target), self.background,
-                    backend=self.setup.backend, capacity=self.capacity, config=recipe.raster)
-            for cam, target in zip(self.cams, self.targets)])
-        if any(bool(o) for _, _, o in scores):  # counted just before: cannot happen
-            raise RuntimeError("a held-out view overflowed its pair buffer")
+        scores = _read([o[:3] for o in self._rendered(pool)], flag=2)
         return (float(np.mean([p for p, _, _ in scores])),
                 float(np.mean([s for _, s, _ in scores])))
+
+    def images(self, pool: Pool) -> list[np.ndarray]:
+        """Each held-out view of `pool` rendered, (H, W, 3) float numpy clipped to [0, 1]."""
+        return [np.clip(np.asarray(image), 0.0, 1.0)
+                for _, image in _read([o[2:] for o in self._rendered(pool)], flag=0)]
+
+    def close(self) -> None:
+        """End the compiles ahead (a compile under way finishes unwaited)."""
+        self._counts.close()
+        self._renders.close()
+
+
+def _read(outputs: list, flag: int) -> list[tuple]:
+    """The views' outputs on the host, in one wait; o[flag] is each one's overflow."""
+    got = jax.device_get(outputs)
+    if any(bool(o[flag]) for o in got):  # the pairs were counted first: cannot happen
+        raise RuntimeError("a held-out view overflowed its pair buffer")
+    return got

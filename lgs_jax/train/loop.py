@@ -306,6 +306,8 @@ def _after_step(run: _Run, m: dict, watch: _Watch, data: dict, last: bool) -> No
     st, config = run.st, run.config
     if run.pending is None:  # else the state is the next step's (`_ahead`: not due then)
         watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]), force=last)
+    if run.evaluations is not None:  # compiled from the first step on, beside the steps
+        run.evaluations.ahead(state.scene(st))
     if run.evaluations is not None and st.step % config.eval_every == 0 and not last:
         t0 = time.perf_counter()
         psnr, ssim = run.evaluations.score(state.scene(st))
@@ -368,7 +370,9 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
         kind = (sharded_state.Evaluations if run.setup.gaussian_devices > 1
                 else heldout.Evaluations)
         run.evaluations = kind(run.rd.test_cams, run.rd.test_images, run.rd.background,
-                               run.setup, st.eval_capacity, config.pair_headroom)
+                               run.setup, st.eval_capacity, config.pair_headroom,
+                               # compiled ahead as the step is on one device (not sharded)
+                               mode_of(config.compile_ahead) if run.setup.devices == 1 else None)
     _place(run.setup, st)
     watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
     try:
@@ -468,22 +472,28 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
         for name in rundir.run_files(out):
             os.remove(os.path.join(out, name))
     setup = Setup.of(config, rd.scene_scale, config.backend or default_backend())
-    with StopRequest() as stop:
-        if config.resume and os.path.exists(os.path.join(out, "checkpoint.json")):
-            st = state.resumed(config, setup, rd, log)
-        else:
-            st = state.fresh(config, setup, rd, log)
-        start, clock, data = st.step, report.CompileClock(), data_of(config, data_path)
-        run = _Run(config, setup, rd, st, log)
-        loaded = time.perf_counter() - t0
-        with clock.listening():
-            busy = _loop(run, clock, watch, stop, data)
-        if st.step < config.steps and not run.stopped_early:  # stopped by Ctrl-C
-            state.save(out, config, st, data)
-            raise Interrupted(st.step, config.steps, out)
-    ran = max(st.step - start, 0)
-    times = dict(seconds=time.perf_counter() - t0, ms_per_step=1e3 * busy / ran if ran else None,
-                 compile_seconds=clock.seconds, load_seconds=loaded, step_seconds=busy,
-                 eval_seconds=run.eval_seconds, checkpoint_seconds=run.checkpoint_seconds,
-                 stopped_early_at=st.step if run.stopped_early else None)
-    return outputs.finish(out, setup, st, rd, times, log)
+    run = None
+    try:
+        with StopRequest() as stop:
+            if config.resume and os.path.exists(os.path.join(out, "checkpoint.json")):
+                st = state.resumed(config, setup, rd, log)
+            else:
+                st = state.fresh(config, setup, rd, log)
+            start, clock, data = st.step, report.CompileClock(), data_of(config, data_path)
+            run = _Run(config, setup, rd, st, log)
+            loaded = time.perf_counter() - t0
+            with clock.listening():
+                busy = _loop(run, clock, watch, stop, data)
+            if st.step < config.steps and not run.stopped_early:  # stopped by Ctrl-C
+                state.save(out, config, st, data)
+                raise Interrupted(st.step, config.steps, out)
+        ran = max(st.step - start, 0)
+        times = dict(seconds=time.perf_counter() - t0,
+                     ms_per_step=1e3 * busy / ran if ran else None,
+                     compile_seconds=clock.seconds, load_seconds=loaded, step_seconds=busy,
+                     eval_seconds=run.eval_seconds, checkpoint_seconds=run.checkpoint_seconds,
+                     stopped_early_at=st.step if run.stopped_early else None)
+        return outputs.finish(out, setup, st, rd, times, log, run.evaluations)
+    finally:  # the held-out evaluations' compiles ahead end with the run
+        if run is not None and run.evaluations is not None:
+            run.evaluations.close()

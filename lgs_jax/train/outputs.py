@@ -21,7 +21,7 @@ import numpy as np
 
 from ..io.cameras import save_cameras
 from ..io.ply import save_ply
-from . import appearance, bilateral_grid, camera_opt, color_opt, report, sharded_state
+from . import appearance, bilateral_grid, camera_opt, color_opt, heldout, report, sharded_state
 from .config import Setup
 from .feed import RunData
 from ..files import written
@@ -30,16 +30,22 @@ from .state import RunState, scene
 from .step import render_views
 
 
-def evaluate(st: RunState, rd: RunData, setup: Setup, out: str | None = None):
+def evaluate(st: RunState, rd: RunData, setup: Setup, out: str | None = None,
+             evaluations: heldout.Evaluations | None = None):
     """Held-out (PSNR, SSIM), (None, None) without held-out views; renders beside the ground
-    truth written to `out` when given."""
+    truth written to `out` when given. `evaluations`: the run's, whose programs render the
+    views (else `step.render_views`')."""
     if not rd.test_cams:
         return None, None
-    render = render_views
-    if setup.gaussian_devices > 1:
-        render = functools.partial(sharded_state.render_views, setup.gaussian_devices)
-    images, st.eval_capacity = render(scene(st), rd.test_cams, jnp.asarray(rd.background),
-                                      setup.backend, st.eval_capacity, setup.recipe.raster)
+    if evaluations is not None:
+        images = evaluations.images(scene(st))
+        st.eval_capacity = evaluations.capacity
+    else:
+        render = render_views
+        if setup.gaussian_devices > 1:
+            render = functools.partial(sharded_state.render_views, setup.gaussian_devices)
+        images, st.eval_capacity = render(scene(st), rd.test_cams, jnp.asarray(rd.background),
+                                          setup.backend, st.eval_capacity, setup.recipe.raster)
     if out:
         report.save_renders(out, images, rd.test_images, rd.test_names)
     return report.heldout_metrics(images, rd.test_images)
@@ -83,13 +89,15 @@ def time_parts(run: dict) -> str:
     return f"{run['seconds']:.1f} s in all: " + ", ".join(said)
 
 
-def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log) -> dict:
-    """The final evaluation and outputs (module docstring); returns the result: the steps done
+def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log,
+           evaluations: heldout.Evaluations | None = None) -> dict:
+    """The final evaluation (through `evaluations`, the run's, where given) and outputs
+    (module docstring); returns the result: the steps done
     (fewer than the run's where the early stop ended it), held-out PSNR and SSIM, Gaussians,
     pool size, skipped steps, and `run` (the loop's times), with finish_seconds (this call's)
     added to its seconds; the time's parts are logged in a line."""
     t0 = time.perf_counter()
-    psnr, ssim = evaluate(st, rd, setup, out)
+    psnr, ssim = evaluate(st, rd, setup, out, evaluations)
     if psnr is None:
         log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
     else:

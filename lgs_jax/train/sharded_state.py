@@ -185,7 +185,8 @@ class Evaluations(heldout.Evaluations):
     through `parallel.render_sharded`, both buffers counted first and sized with the run's
     headroom."""
 
-    def __init__(self, cams, targets, background, setup, capacity: int, headroom: float):
+    def __init__(self, cams, targets, background, setup, capacity: int, headroom: float,
+                 mode: None = None):  # no compiles ahead
         super().__init__(cams, targets, background, setup, capacity, headroom)
         self.exchange = 1
 
@@ -205,6 +206,12 @@ class Evaluations(heldout.Evaluations):
             raise RuntimeError("a held-out view overflowed its buffers")
         return (float(np.mean([p for p, _, _ in scores])),
                 float(np.mean([s for _, s, _ in scores])))
+
+    def images(self, pool: Pool) -> list[np.ndarray]:
+        images, self.capacity = render_views(self.setup.gaussian_devices, pool, self.cams,
+                                             self.background, self.setup.backend,
+                                             self.capacity, self.setup.recipe.raster)
+        return images
 
 
 def render_views(devices: int, pool: Pool, cams, background, backend: str, capacity: int,

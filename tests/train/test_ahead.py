@@ -63,7 +63,8 @@ def test_a_failed_child_costs_only_the_compile(empty_cache):
     local = jax.jit(lambda x, capacity: _scaled(x, capacity=capacity),
                     static_argnames="capacity")
     stepper = ahead.Stepper(local, _static, ahead.Sizes(1.5), "process")
-    args = (jnp.linspace(0, 1, 5),)
+    # another shape than the cache-hit test's: its compile of _scaled must not be in memory
+    args = (jnp.linspace(0, 1, 6),)
     sig = ahead.signature(args)
     stepper.run(args, (1024, None), sig)
     stepper.prepare(args, (1024, None), sig)

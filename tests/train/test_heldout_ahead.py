@@ -1,0 +1,38 @@
+"""lgs_jax.train.heldout's compiles ahead: the evaluation's programs compiled in a thread before
+the first evaluation (`Evaluations.ahead`) are the ones it runs, with the scores of the
+programs `jax.jit` compiles at the evaluation, and `Evaluations.images` renders what
+`step.render_views` does."""
+
+import numpy as np
+
+import lgs_jax
+from lgs_jax.train import heldout
+from lgs_jax.train.config import Setup
+from lgs_jax.train.pool import from_gaussians
+from lgs_jax.train.step import render_views
+from tests import scenes
+
+CAPACITY = 4099  # a capacity no other test renders at: the jit caches hold none at it yet
+
+
+def test_evaluations_run_the_programs_compiled_ahead_with_the_same_scores():
+    g = scenes.cast(scenes.scene(4), np.float32)
+    cams = [scenes.camera(yaw=y) for y in (0.0, 0.3)]
+    background = np.asarray(scenes.BACKGROUND, np.float32)
+    targets = [np.asarray(lgs_jax.render(g, c, background=background).image) for c in cams]
+    setup = Setup(backend="tiles")
+    pool = from_gaussians(scenes.cast(scenes.scene(5), np.float32), 64)
+    ahead = heldout.Evaluations(cams, targets, background, setup, CAPACITY, 2.0, "thread")
+    ahead.ahead(pool)
+    cached = heldout.compiled_programs()
+    got = ahead.score(pool)
+    assert heldout.compiled_programs() == cached  # the executables compiled ahead ran
+    plain = heldout.Evaluations(cams, targets, background, setup, CAPACITY, 2.0)
+    assert plain.score(pool) == got  # jit's compile of the same program: the same bits
+    assert heldout.compiled_programs() != cached
+    assert ahead.capacity == plain.capacity == CAPACITY  # the views need fewer pairs
+    images = ahead.images(pool)
+    want, _ = render_views(pool, cams, background, "tiles", CAPACITY, setup.recipe.raster)
+    for image, w in zip(images, want):
+        np.testing.assert_allclose(image, w, rtol=0, atol=1e-6)
+    ahead.close()
