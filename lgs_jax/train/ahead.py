@@ -33,6 +33,7 @@ import os
 import pickle
 import subprocess
 import sys
+import threading
 import time
 from typing import Callable
 
@@ -250,15 +251,26 @@ def _reason(e: Exception) -> str:
     return lines[-1] if lines else f"{type(e).__name__}: {e}"
 
 
+_switching = dict(compiles=0, before=None)  # compiles under way in threads (any Stepper's)
+_switching_lock = threading.Lock()
+
+
 def _compile_switching_often(fn, abstract, static: dict):
     """`fn.lower(*abstract, **static).compile()` with Python's switch interval at
-    `SWITCH_INTERVAL` meanwhile (module docstring), the one before restored after."""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(SWITCH_INTERVAL)
+    `SWITCH_INTERVAL` while any such compile is under way (module docstring), the interval
+    before the first restored after the last."""
+    with _switching_lock:
+        if _switching["compiles"] == 0:
+            _switching["before"] = sys.getswitchinterval()
+            sys.setswitchinterval(SWITCH_INTERVAL)
+        _switching["compiles"] += 1
     try:
         return fn.lower(*abstract, **static).compile()
     finally:
-        sys.setswitchinterval(before)
+        with _switching_lock:
+            _switching["compiles"] -= 1
+            if _switching["compiles"] == 0:
+                sys.setswitchinterval(_switching["before"])
 
 
 def _compile_in_child(fn, abstract, static: dict) -> None:

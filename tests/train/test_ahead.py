@@ -4,6 +4,7 @@ hit at the growth, from a cache that was empty), and `fit`'s compile_ahead is ch
 
 import functools
 import sys
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -130,6 +131,44 @@ def test_a_thread_compiling_ahead_switches_often_and_restores_the_interval():
     stepper.prepare(args, (1024, None), sig)
     size, _, taken = stepper.grow((1024, None), (1025, 0), sig)
     assert taken and stepper.run(args, size, sig) == "executable"
-    assert fn.intervals == [pytest.approx(ahead.SWITCH_INTERVAL)] and before > 2 * ahead.SWITCH_INTERVAL
+    assert fn.intervals == [pytest.approx(ahead.SWITCH_INTERVAL)]
+    assert before > 2 * ahead.SWITCH_INTERVAL
     assert sys.getswitchinterval() == before
     stepper.close()
+
+
+def test_overlapping_compiles_ahead_restore_the_interval_after_the_last():
+    """Two steppers' compiles ahead under way at once (the step's and the evaluations'): the
+    interval stays `SWITCH_INTERVAL` until the last ends, then the one before is back."""
+    before = sys.getswitchinterval()
+    started, gate, seen = threading.Event(), threading.Event(), []
+
+    class Quick(_Traced):  # starts first, ends once the slow one has started
+        def compile(self):
+            started.wait(10)
+            return lambda *args: "executable"
+
+    class Slow(_Traced):
+        def lower(self, *args, capacity):
+            started.set()
+            return self
+
+        def compile(self):
+            gate.wait(10)
+            seen.append(sys.getswitchinterval())
+            return lambda *args: "executable"
+
+    slow, quick = Slow(), Quick()
+    steppers = [ahead.Stepper(fn, _static, ahead.Sizes(1.5), "thread") for fn in (slow, quick)]
+    args = (jnp.zeros(3),)
+    sig = ahead.signature(args)
+    steppers[1].prepare(args, (1024, None), sig)
+    steppers[0].prepare(args, (1024, None), sig)
+    assert steppers[1].grow((1024, None), (1025, 0), sig)[2]  # the quick one done first
+    assert sys.getswitchinterval() == pytest.approx(ahead.SWITCH_INTERVAL)
+    gate.set()
+    assert steppers[0].grow((1024, None), (1025, 0), sig)[2]
+    assert seen == [pytest.approx(ahead.SWITCH_INTERVAL)]
+    assert sys.getswitchinterval() == before
+    for s in steppers:
+        s.close()
