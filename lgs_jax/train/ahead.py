@@ -207,13 +207,20 @@ class Stepper:
         docstring), unless it is under way or done for these shapes."""
         if self._threads is None:
             return
-        following = self._sizes.following(size)
+        self.prepare_at(args, self._sizes.following(size), sig)
+
+    def prepare_at(self, args, size: tuple, sig: tuple) -> None:
+        """Start compiling `fn` at `size` for the shapes `sig` of `args`, the one a growth
+        takes (`grow`), unless it is under way or done; a compile ahead at another size for
+        those shapes is dropped."""
+        if self._threads is None:
+            return
         job = self._jobs.get(sig)
         if job is not None:
-            if job[0] == following:
+            if job[0] == size:
                 return
             job[1].cancel()  # not started yet (else it finishes, unused)
-        self._submit(args, following, sig)
+        self._submit(args, size, sig)
 
     def _submit(self, args, size: tuple, sig: tuple) -> None:
         """Compile `fn` at `size` for `args`' shapes in the background, as the job of `sig`."""

@@ -121,14 +121,41 @@ class Evaluations:
             self._counts.ahead(counted, (0, None))
             self._renders.ahead(rendered, (self.capacity, None))
 
+    def after_step(self, step: int, every: int, steps: int, pool) -> None:
+        """After step `step` of `steps` (evaluations every `every` steps and at the end;
+        `pool()` the pool): the first step starts the compiles `ahead`; half an interval
+        before each evaluation, `prepare`."""
+        if not self._renders.compiles_ahead:
+            return
+        if not self.started:
+            self.ahead(pool())
+        lead = max(1, min(every, steps) // 2)
+        if (step + lead) % every == 0 or step + lead == steps:
+            self.prepare(pool())
+
+    def prepare(self, pool: Pool) -> None:
+        """Ahead of an evaluation: where the views of `pool` need more pairs than the
+        capacity, start compiling the render at the capacity they would grow it to (a growth
+        by the evaluation takes it where it holds the evaluation's need)."""
+        if not self._renders.compiles_ahead:
+            return
+        views = self._views(pool, [jnp.asarray(t) for t in self.targets])
+        need = self._need(views, [(signature(c), signature(r)) for c, r in views])
+        if need > self.capacity:
+            size = Sizes(self.headroom).grown((self.capacity, None), (need, 0))
+            self._renders.prepare_at(views[0][1], size, signature(views[0][1]))
+
+    def _need(self, views: list[tuple], sigs: list[tuple]) -> int:
+        """The most pairs of a view; every count dispatched before the one read."""
+        return int(max(jax.device_get([self._counts.run(c, (0, None), s)
+                                       for (c, _), (s, _) in zip(views, sigs)])))
+
     def _rendered(self, pool: Pool) -> list[tuple]:
         """(PSNR, SSIM, overflow, image) per view, on the device, the pair buffer grown to
         the views' need first."""
         views = self._views(pool, [jnp.asarray(t) for t in self.targets])
         sigs = [(signature(c), signature(r)) for c, r in views]
-        # every view's count dispatched before the one read: a single wait on the device
-        need = int(max(jax.device_get([self._counts.run(c, (0, None), s)
-                                       for (c, _), (s, _) in zip(views, sigs)])))
+        need = self._need(views, sigs)
         size = (self.capacity, None)
         if need > self.capacity:
             size = self._renders.grow(size, (need, 0), sigs[0][1])[0]

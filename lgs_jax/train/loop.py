@@ -306,8 +306,9 @@ def _after_step(run: _Run, m: dict, watch: _Watch, data: dict, last: bool) -> No
     st, config = run.st, run.config
     if run.pending is None:  # else the state is the next step's (`_ahead`: not due then)
         watch(st, dict(loss=m["loss"], psnr=m["psnr"], gaussians=m["count"]), force=last)
-    if run.evaluations is not None:  # compiled from the first step on, beside the steps
-        run.evaluations.ahead(state.scene(st))
+    if run.evaluations is not None:  # their programs compiled ahead, beside the steps
+        run.evaluations.after_step(st.step, config.eval_every, config.steps,
+                                   lambda: state.scene(st))
     if run.evaluations is not None and st.step % config.eval_every == 0 and not last:
         t0 = time.perf_counter()
         psnr, ssim = run.evaluations.score(state.scene(st))

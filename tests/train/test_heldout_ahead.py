@@ -1,7 +1,8 @@
 """lgs_jax.train.heldout's compiles ahead: the evaluation's programs compiled in a thread before
 the first evaluation (`Evaluations.ahead`) are the ones it runs, with the scores of the
 programs `jax.jit` compiles at the evaluation, and `Evaluations.images` renders what
-`step.render_views` does."""
+`step.render_views` does; a growth of the pair buffer counted ahead (`Evaluations.prepare`)
+runs the program compiled ahead for it."""
 
 import numpy as np
 
@@ -35,4 +36,21 @@ def test_evaluations_run_the_programs_compiled_ahead_with_the_same_scores():
     want, _ = render_views(pool, cams, background, "tiles", CAPACITY, setup.recipe.raster)
     for image, w in zip(images, want):
         np.testing.assert_allclose(image, w, rtol=0, atol=1e-6)
+    ahead.close()
+
+
+def test_a_growth_prepared_ahead_runs_the_program_compiled_for_it():
+    g = scenes.cast(scenes.scene(4), np.float32)
+    cams = [scenes.camera(yaw=y) for y in (0.0, 0.3)]
+    background = np.asarray(scenes.BACKGROUND, np.float32)
+    targets = [np.asarray(lgs_jax.render(g, c, background=background).image) for c in cams]
+    setup = Setup(backend="tiles")
+    pool = from_gaussians(scenes.cast(scenes.scene(5), np.float32), 64)
+    ahead = heldout.Evaluations(cams, targets, background, setup, 1, 2.5, "thread")
+    ahead.prepare(pool)  # the views need more than one pair: compiled for their growth
+    cached = heldout.compiled_programs()
+    got = ahead.score(pool)
+    assert heldout.compiled_programs()[1] == cached[1]  # the render compiled ahead ran
+    plain = heldout.Evaluations(cams, targets, background, setup, 1, 2.5)
+    assert plain.score(pool) == got and ahead.capacity == plain.capacity > 1
     ahead.close()
