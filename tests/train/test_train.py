@@ -180,10 +180,11 @@ STRATEGY = train.DefaultStrategy(refine_start_iter=3, refine_every=4, grow_grad2
 
 def _config(data, out, **kwargs) -> train.FitConfig:
     """One configuration for every fit below, so they share one compiled step: the views' own
-    parameters optimized too (pose deltas, colour corrections, appearance embeddings);
-    headroom 1.5 (not the default 3), so that the pairs outgrow the first capacity (at step
-    10)."""
-    recipe = train.Recipe(pose_opt=True, color_opt=True, app_opt=True)
+    parameters optimized too (pose deltas, colour corrections, appearance embeddings); SH
+    degree 0 (within `STEPS` the higher bands are masked anyway, `Recipe.sh_every`, and their
+    evaluation costs each compile a third more); headroom 1.5 (not the default 3), so that the
+    pairs outgrow the first capacity (at step 10)."""
+    recipe = train.Recipe(sh_degree=0, pose_opt=True, color_opt=True, app_opt=True)
     return train.FitConfig(data=data.path, out=str(out), steps=STEPS, recipe=recipe,
                            strategy=STRATEGY, max_gaussians=1024, pool_size=1024,
                            backend="reference", eval_every=kwargs.pop("eval_every", 100),
