@@ -6,12 +6,13 @@ OUT/logs.json holds what the folders cannot: each run's log lines.
 
 The runs (`PARTS`): "fast", the run on 1 device stopped (Ctrl-C) after step `HALF` and resumed
 on 1 and on 2 devices, the latter with buffers sized at the first view's needs exactly (they
-overflow and grow), all on every view (nothing held out, an evaluation due at every step), then each strategy's refinement of
-one state on 1 and 4 devices (`refinements`); "slow", the same run on 1, 2 and 4 devices, view
-0 held out and evaluated, and an MCMC run on 2 devices optimizing the views' poses, colours
-and bilateral grids. Few compiles (each costs seconds
-on a CPU): the runs share one configuration but for their device count and buffers."""
+overflow and grow), all on every view (nothing held out, an evaluation due at every step), then
+each strategy's refinement of one state on 1 and 4 devices (`refinements`); "slow", the same run
+on 1, 2 and 4 devices, view 0 held out and evaluated, and an MCMC run on 2 devices optimizing
+the views' poses, colours and bilateral grids. Few compiles (each costs seconds on a CPU): the
+runs share one configuration (`RECIPE`) but for their device count and buffers."""
 
+import dataclasses
 import json
 import os
 import shutil
@@ -49,6 +50,9 @@ REFINED = dict(  # `STRATEGY` (its one-device program compiled by the runs) and 
     default=STRATEGY, mcmc=train.MCMCStrategy(refine_start_iter=0, refine_every=1, cap_max=400))
 PARTS = dict(fast=("d1", "d1_resumed_on_d2"),
              slow=("d1", "d2", "d4", "mcmc_views_d2"))
+# SH degree 0: within the runs' steps the higher bands are masked anyway (`Recipe.sh_every`),
+# and their evaluation costs each step's compile a third more
+RECIPE = train.Recipe(batch=1, sh_degree=0)
 # the view the refinements balance their blocks' work over: 4 units in front of the points
 VIEW = lgs_jax.Camera(viewmat=np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]],
                                        np.float32), fx=np.float32(40), fy=np.float32(40),
@@ -86,8 +90,8 @@ def capture(path: str) -> Dataset:
 
 def config(out: str, devices: int, **kwargs) -> train.FitConfig:
     """The runs' configuration on `devices` devices (kwargs: other fields)."""
-    kwargs = dict(dict(pair_headroom=4.0, strategy=STRATEGY, recipe=train.Recipe(batch=1),
-                       eval_every=100), **kwargs)
+    kwargs = dict(dict(pair_headroom=4.0, strategy=STRATEGY, recipe=RECIPE, eval_every=100),
+                  **kwargs)
     return train.FitConfig(data=out, out=out, steps=STEPS, max_gaussians=POOL, pool_size=POOL,
                            backend="reference", gaussian_devices=devices, checkpoint_every=100,
                            **kwargs)
@@ -103,9 +107,9 @@ def refinements() -> dict:
     g = lgs_jax.Gaussians(
         rng.normal(size=(n, 3)).astype(np.float32), rng.normal(size=(n, 4)).astype(np.float32),
         rng.normal(-2, 0.7, (n, 3)).astype(np.float32), rng.normal(-3, 2, n).astype(np.float32),
-        rng.normal(size=(n, 16, 3)).astype(np.float32))
+        rng.normal(size=(n, (RECIPE.sh_degree + 1) ** 2, 3)).astype(np.float32))
     pool = train.from_gaussians(g, POOL)
-    opt = train.optimizer(train.Recipe(), STEPS, 1.0).init(pool.params)
+    opt = train.optimizer(RECIPE, STEPS, 1.0).init(pool.params)
     key, out = jax.random.key(5), {}
     for name, strategy in REFINED.items():
         state = strategy.init(pool, 1.0)
@@ -143,8 +147,8 @@ def main(out: str, part: str):
         fit("d1", 1)
         fit("d2", 2)
         fit("d4", 4)
-        fit("mcmc_views_d2", 2, strategy=MCMC, recipe=train.Recipe(
-            batch=1, pose_opt=True, color_opt=True, bilateral_grid=True))
+        fit("mcmc_views_d2", 2, strategy=MCMC, recipe=dataclasses.replace(
+            RECIPE, pose_opt=True, color_opt=True, bilateral_grid=True))
     else:
         stop = lambda step, *_: step == HALF and os.kill(os.getpid(), signal.SIGINT)
         try:

@@ -117,8 +117,9 @@ def test_each_view_is_rendered_at_its_size_against_its_image(capture):
     views = [5, 1]  # 24x32 (the first size is 24x32, view 2 is 32x24)
     targets = jnp.stack([jnp.asarray(rd.train_images[v]) for v in views])
     state = jax.tree.map(jnp.copy, (pool, opt_state, setup.strategy.init(pool, 1.0)))  # donated
-    m = train_step(*state, None, rd.train_cams,
-                   targets, jnp.asarray(views), jnp.asarray(BACKGROUND), 0, jax.random.key(0),
+    # go True, as `fit` passes it (an array): the program of the call below
+    m = train_step(*state, None, rd.train_cams, targets, jnp.asarray(views),
+                   jnp.asarray(BACKGROUND), 0, jax.random.key(0), None, jnp.asarray(True),
                    setup=setup, capacity=4096)[4]
     g = train_pool.render_gaussians(pool.params, pool.active)
     want = np.mean([float(losses.loss_fn(_image(g, rd.train_camera(v)),

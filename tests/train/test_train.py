@@ -160,13 +160,16 @@ def test_views_follow_one_shuffle_per_epoch():
 @pytest.fixture(scope="module")
 def skull(data_dir):
     """The skull at 1/32 size (33x22 pixels), 300 of its SfM points, 2 training and 2 held-out
-    views (any 4 consecutive steps then see each training view twice)."""
+    views (any 4 consecutive steps then see each training view twice); the first training
+    view's photo darkened (x0.6), so that its colour correction darkens against the other's."""
     path = os.path.join(data_dir, "skull")
     if not os.path.isdir(path):
         pytest.skip("skull not found")
     d = lgs_jax.load_dataset(path, downscale=32)
     keep = np.linspace(0, len(d.points) - 1, 300).astype(int)
-    return dataclasses.replace(d, points=d.points[keep], colors=d.colors[keep],
+    images = d.images.copy()
+    images[d.train[0]] *= 0.6
+    return dataclasses.replace(d, images=images, points=d.points[keep], colors=d.colors[keep],
                                train=d.train[:2], test=d.test[:2])
 
 
@@ -176,10 +179,12 @@ STRATEGY = train.DefaultStrategy(refine_start_iter=3, refine_every=4, grow_grad2
 
 
 def _config(data, out, **kwargs) -> train.FitConfig:
-    """One configuration for every fit below, so they share one compiled step; headroom 1.5
-    (not the default 3), so that the pairs outgrow the first capacity (at step 10)."""
-    recipe = train.Recipe(**{k: kwargs.pop(k) for k in ("pose_opt", "color_opt", "app_opt")
-                             if k in kwargs})
+    """One configuration for every fit below, so they share one compiled step: the views' own
+    parameters optimized too (pose deltas, colour corrections, appearance embeddings); SH
+    degree 0 (within `STEPS` the higher bands are masked anyway, `Recipe.sh_every`, and their
+    evaluation costs each compile a third more); headroom 1.5 (not the default 3), so that the
+    pairs outgrow the first capacity (at step 10)."""
+    recipe = train.Recipe(sh_degree=0, pose_opt=True, color_opt=True, app_opt=True)
     return train.FitConfig(data=data.path, out=str(out), steps=STEPS, recipe=recipe,
                            strategy=STRATEGY, max_gaussians=1024, pool_size=1024,
                            backend="reference", eval_every=kwargs.pop("eval_every", 100),
@@ -193,11 +198,22 @@ def _fit(data, out, **kwargs):
     return train.fit(_config(data, out, **kwargs), data, **hooks)
 
 
-def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
+@pytest.fixture(scope="module")
+def uninterrupted(skull, tmp_path_factory):
+    """A run of `STEPS` steps, evaluated every 2 steps and watched (`fit`'s `watch`) at its
+    start and after every step: (its folder, its result, the watch's calls). What
+    test_fit_densifies_and_the_loss_falls reads, and the run that
+    test_resume_is_bit_identical's interrupted runs end as."""
+    out = tmp_path_factory.mktemp("uninterrupted")
     train.train_step.clear_cache()  # another test of this process may have compiled it
     seen = []
-    result = _fit(skull, tmp_path, eval_every=2, watch=lambda *a: seen.append(a), watch_every=0)
-    rows = report.read_metrics(str(tmp_path / "metrics.jsonl"))
+    result = _fit(skull, out, eval_every=2, watch=lambda *a: seen.append(a), watch_every=0)
+    return out, result, seen
+
+
+def test_fit_densifies_and_the_loss_falls(skull, uninterrupted, tmp_path):
+    run, result, seen = uninterrupted
+    rows = report.read_metrics(str(run / "metrics.jsonl"))
     steps = [r for r in rows if "loss" in r]
     assert [r["step"] for r in steps] == list(range(1, STEPS + 1))
     # watched at the start and after every step: the Gaussians as rendered, the step's metrics
@@ -208,16 +224,13 @@ def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
     last = seen[-1][1]
     shown = np.isfinite(np.asarray(last.logit_opacities))
     assert last.num == 1024 and shown.sum() == result["gaussians"]
-    ply = lgs_jax.load_ply(str(tmp_path / "scene.ply"))
+    ply = lgs_jax.load_ply(str(run / "scene.ply"))
     for name in ("means", "quats", "log_scales", "logit_opacities", "sh"):
         np.testing.assert_array_equal(np.asarray(getattr(last, name))[shown],
                                       getattr(ply, name), err_msg=name)
-    cams = lgs_jax.load_cameras(str(tmp_path / "cameras.json"))  # training, then held-out
-    assert [c["img_name"] for c in json.load(open(tmp_path / "cameras.json"))] == [
+    # training (at their optimized poses: test_resume_is_bit_identical), then held-out
+    assert [c["img_name"] for c in json.load(open(run / "cameras.json"))] == [
         "02", "03", "01", "09"]
-    for cam, i in zip(cams, list(skull.train) + list(skull.test)):
-        np.testing.assert_allclose(np.asarray(cam.viewmat), np.asarray(skull.cameras[i].viewmat),
-                                   atol=1e-6)
     # the saved scene scores what fit's last evaluation scored, view by view
     scores = train.evaluate(ply, skull, backend="reference", out=str(tmp_path / "eval"))
     assert scores["psnr"] == pytest.approx(result["heldout_psnr"], abs=1e-4)
@@ -234,11 +247,11 @@ def test_fit_densifies_and_the_loss_falls(skull, tmp_path):
     assert held[-1] > held[0] + 0.3, held  # from step 2 to the end
     first, last = (np.mean([r["loss"] for r in part]) for part in (steps[:4], steps[-4:]))
     assert last < 0.95 * first, (first, last)
-    assert lgs_jax.load_ply(str(tmp_path / "scene.ply")).num == result["gaussians"]
+    assert lgs_jax.load_ply(str(run / "scene.ply")).num == result["gaussians"]
     import matplotlib.image
-    side = matplotlib.image.imread(str(tmp_path / f"heldout_{skull.names[0][:-4]}.png"))
+    side = matplotlib.image.imread(str(run / f"heldout_{skull.names[0][:-4]}.png"))
     assert side.shape[:2] == (22, 66)  # render beside ground truth
-    assert os.path.getsize(tmp_path / "curves.png") > 0 and result["skipped_steps"] == 0
+    assert os.path.getsize(run / "curves.png") > 0 and result["skipped_steps"] == 0
     busy = 1e-3 * result["ms_per_step"] * STEPS  # steps and refinements, compiling included
     assert 0 < result["compile_seconds"] < busy <= result["seconds"]
     parts = [result[k] for k in ("load_seconds", "step_seconds", "eval_seconds",
@@ -252,23 +265,17 @@ class _Stop(Exception):
     pass
 
 
-def test_resume_is_bit_identical(skull, tmp_path):
+def test_resume_is_bit_identical(skull, uninterrupted, tmp_path):
     """A run that dies after step 7 (its last checkpoint: step 6) and is resumed ends with the
-    same bits as an uninterrupted run: pool, active mask, Adam state, strategy state, and the views'
-    own parameters (pose deltas, colour corrections and appearance embeddings with their head,
-    `view_params`) and their Adam states (both runs optimize them). The uninterrupted run is watched
-    (`fit`'s `watch`, at its start and end only) and the other streams its training images
-    (`FitConfig.stream_images`), which change nothing; a third is stopped by Ctrl-C and resumed.
-    The first training view's photo is darkened (x0.6), so that its colour correction darkens
-    against the other's."""
-    images = skull.images.copy()
-    images[skull.train[0]] *= 0.6
-    skull = dataclasses.replace(skull, images=images)
-    own = dict(pose_opt=True, color_opt=True, app_opt=True)
-    seen = []
-    _fit(skull, tmp_path / "a", watch=lambda step, *_: seen.append(step), watch_every=1e9,
-         **own)
-    assert seen == [0, STEPS]
+    same bits as the uninterrupted run (`uninterrupted`): pool, active mask, Adam state,
+    strategy state, and the views' own parameters (pose deltas, colour corrections and
+    appearance embeddings with their head, `view_params`) and their Adam states. The
+    uninterrupted run is evaluated and watched after every step (`fit`'s `watch`), the resumed
+    one streams its training images (`FitConfig.stream_images`) and is watched at its start and
+    end only (`watch_every`), which change nothing; a third is stopped by Ctrl-C and resumed.
+    The first training view's photo is darkened (`skull`), so that its colour correction
+    darkens against the other's."""
+    a_run = uninterrupted[0]
 
     def die(message):
         if message.startswith("step 7:"):
@@ -277,23 +284,26 @@ def test_resume_is_bit_identical(skull, tmp_path):
     lines = []
     with pytest.raises(_Stop):
         _fit(skull, tmp_path / "b", eval_every=7, log=lambda m: lines.append(m) or die(m),
-             stream=True, **own)
+             stream=True)
     assert any(m.startswith("training images streamed") for m in lines), lines
     assert json.load(open(tmp_path / "b" / "checkpoint.json"))["step"] == 6
-    _fit(skull, tmp_path / "b", resume=True, stream=True, **own)
+    seen = []
+    _fit(skull, tmp_path / "b", resume=True, stream=True,
+         watch=lambda step, *_: seen.append(step), watch_every=1e9)
+    assert seen == [6, STEPS]
     # Ctrl-C (SIGINT, here during the watch after step 4): the run stops at that step's
     # boundary, writes its checkpoint (step 4, between the periodic ones at 3 and 6) and raises
     # `Interrupted`; resumed, it ends with the same bits
     interrupt = lambda step, *_: step == 4 and os.kill(os.getpid(), signal.SIGINT)
     handler = signal.getsignal(signal.SIGINT)  # SIG_IGN where pytest was started in the background
     with pytest.raises(train.Interrupted) as stopped:
-        _fit(skull, tmp_path / "c", watch=interrupt, watch_every=0, **own)
+        _fit(skull, tmp_path / "c", watch=interrupt, watch_every=0)
     assert (stopped.value.step, stopped.value.steps) == (4, STEPS)
     assert json.load(open(tmp_path / "c" / "checkpoint.json"))["step"] == 4
     assert not (tmp_path / "c" / "result.json").exists()
     assert signal.getsignal(signal.SIGINT) is handler  # restored
-    _fit(skull, tmp_path / "c", resume=True, **own)
-    a, b, c = (np.load(tmp_path / r / "checkpoint.npz") for r in "abc")
+    _fit(skull, tmp_path / "c", resume=True)
+    a, b, c = (np.load(run / "checkpoint.npz") for run in (a_run, tmp_path / "b", tmp_path / "c"))
     for name in a.files:
         np.testing.assert_array_equal(a[name], c[name], err_msg=name)
     assert sorted(a.files) == sorted(b.files) and len(a.files) > 15
@@ -305,22 +315,21 @@ def test_resume_is_bit_identical(skull, tmp_path):
         assert np.all(np.abs(moved).max(1) > 0)
     for centred in (corrections, embeddings):
         np.testing.assert_allclose(centred.sum(0), 0, atol=1e-7)
-    saved = np.load(tmp_path / "a" / "appearance.npz")
+    saved = np.load(a_run / "appearance.npz")
     np.testing.assert_array_equal(saved["embeddings"], embeddings)
     assert list(saved["names"]) == ["02", "03"] and np.abs(saved["w3"]).max() > 0
-    assert saved["features"].shape == (lgs_jax.load_ply(str(tmp_path / "a" / "scene.ply")).num,
-                                       32)
-    colors = json.load(open(tmp_path / "a" / "colors.json"))
+    assert saved["features"].shape == (lgs_jax.load_ply(str(a_run / "scene.ply")).num, 32)
+    colors = json.load(open(a_run / "colors.json"))
     assert [c["img_name"] for c in colors] == ["02", "03"]
     grey = [np.mean(np.asarray(c["matrix"]) @ np.full(3, 0.5) + c["offset"]) for c in colors]
     assert grey[0] < 0.5 < grey[1], grey  # the darkened photo's view renders darker
-    cams = lgs_jax.load_cameras(str(tmp_path / "a" / "cameras.json"))  # at the moved poses
+    cams = lgs_jax.load_cameras(str(a_run / "cameras.json"))  # at the moved poses
     moved = [np.abs(np.asarray(c.viewmat) - np.asarray(skull.cameras[i].viewmat)).max()
              for c, i in zip(cams, list(skull.train) + list(skull.test))]
     assert all(0 < m < 1e-2 for m in moved[:2]) and max(moved[2:]) < 1e-6, moved
     for name in a.files:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
-    ply = [(tmp_path / r / "scene.ply").read_bytes() for r in "ab"]
+    ply = [(run / "scene.ply").read_bytes() for run in (a_run, tmp_path / "b")]
     assert ply[0] == ply[1]
     for run in "bc":
         rows = report.read_metrics(str(tmp_path / run / "metrics.jsonl"))
