@@ -85,16 +85,12 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--run-dir", help="our runs' folders (large; default: a temporary one)")
     ap.add_argument("--no-gsplat", action="store_true")
     ap.add_argument("--no-ours", action="store_true")
+    # our trainer's FitConfig fields of the same names
     ap.add_argument("--compile-ahead", choices=["thread", "process", "off"],
-                    help="our trainer's compiles ahead of pair-capacity growths "
-                         "(FitConfig.compile_ahead; default: thread on a GPU, off elsewhere)")
-    ap.add_argument("--pair-headroom", type=float, default=FitConfig.pair_headroom,
-                    help="our trainer's FitConfig.pair_headroom")
-    ap.add_argument("--row-headroom", type=float, default=None,
-                    help="our trainer's FitConfig.row_headroom (default: a row per pair slot)")
-    ap.add_argument("--stream-images", action="store_true",
-                    help="our trainer keeps only each step's views on the device "
-                         "(FitConfig.stream_images; default: fit's rule)")
+                    help="default: thread on a GPU, off elsewhere")
+    ap.add_argument("--pair-headroom", type=float, default=FitConfig.pair_headroom)
+    ap.add_argument("--row-headroom", type=float, help="default: a row per pair slot")
+    ap.add_argument("--stream-images", action="store_true")
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)
@@ -123,8 +119,8 @@ def scene_setup(args, scene: str, out: str = ""):
         init_points=100_000, seed=args.seed, backend=args.backend,
         pair_headroom=args.pair_headroom, row_headroom=args.row_headroom,
         compile_ahead=args.compile_ahead, eval_every=args.eval_every,
-        stream_images=True if args.stream_images else None,
-        checkpoint_every=max(args.steps, 1), overwrite=True)
+        stream_images=args.stream_images or None, checkpoint_every=max(args.steps, 1),
+        overwrite=True)
     return d, config
 
 

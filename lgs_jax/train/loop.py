@@ -59,15 +59,16 @@ SECOND = {False: ("rows", "row_overflow", "walked", "backward rows"),
 
 def stepper(config: FitConfig, setup: Setup) -> Stepper:
     """`train_step` of this run (its `setup`) behind an `ahead.Stepper` of the configured
-    mode; with Gaussian parallel, the exchange capacity grown with the pair headroom and no
-    compile ahead."""
+    mode on one device; with Gaussian parallel, the exchange capacity grown with the pair
+    headroom. No compile ahead on several devices (an executable compiled ahead is for
+    arguments on one device: the devices' shardings are not in the shapes it is given)."""
     if setup.gaussian_devices > 1:
         static = lambda size: dict(setup=setup, capacity=size[0], exchange=size[1])
         return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom),
                        None)
     static = lambda size: dict(setup=setup, capacity=size[0], rows=size[1])
     return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom),
-                   mode_of(config.compile_ahead))
+                   mode_of(config.compile_ahead) if setup.devices == 1 else None)
 
 
 @dataclasses.dataclass
@@ -372,7 +373,6 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
                 else heldout.Evaluations)
         run.evaluations = kind(run.rd.test_cams, run.rd.test_images, run.rd.background,
                                run.setup, st.eval_capacity, config.pair_headroom,
-                               # compiled ahead as the step is on one device (not sharded)
                                mode_of(config.compile_ahead) if run.setup.devices == 1 else None)
     _place(run.setup, st)
     watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)

@@ -1,6 +1,7 @@
 """lgs_jax.train.ahead's mode "process": the step for the next capacity compiled in a child
 process lands in the persistent compilation cache under the key this process looks up (a cache
-hit at the growth, from a cache that was empty), and `fit`'s compile_ahead is checked."""
+hit at the growth, from a cache that was empty); the thread mode's switch interval; compiles
+ahead on one device only; `fit`'s compile_ahead is checked."""
 
 import functools
 import sys
@@ -172,3 +173,19 @@ def test_overlapping_compiles_ahead_restore_the_interval_after_the_last():
     assert sys.getswitchinterval() == before
     for s in steppers:
         s.close()
+
+
+@pytest.mark.parametrize("devices,gaussian_devices,want", [(1, 1, True), (2, 1, False),
+                                                           (1, 2, False)])
+def test_steps_compile_ahead_on_one_device_only(devices, gaussian_devices, want):
+    """`fit`'s step compiles ahead on one device only (its evaluations likewise): an executable
+    compiled ahead is for arguments on one device, and a data-parallel step's are replicated
+    or split over several (calling it with them raises)."""
+    from lgs_jax.train import FitConfig, loop
+    from lgs_jax.train.config import Setup
+
+    config = FitConfig(data="unused", out="unused", compile_ahead="thread")
+    setup = Setup(devices=devices, gaussian_devices=gaussian_devices)
+    stepper = loop.stepper(config, setup)
+    assert stepper.compiles_ahead == want
+    stepper.close()
