@@ -94,10 +94,13 @@ def test_pair_capacity_is_a_power_of_two_then_eight_sizes_per_octave():
 
 
 def test_float32_stays_float32_with_x64_and_float64_is_float64(scene32):
+    """The outputs' dtypes, which tracing decides (`jax.eval_shape`: nothing compiled)."""
     assert jax.config.jax_enable_x64
-    out = lgs_jax.render(scene32, scenes.camera(dtype=np.float64))
+    shapes = lambda g, cam: jax.eval_shape(
+        lambda g, cam: lgs_jax.render(g, cam, capacity=scenes.CAPACITY), g, cam)
+    out = shapes(scene32, scenes.camera(dtype=np.float64))
     assert out.image.dtype == out.alpha.dtype == out.depth.dtype == jnp.float32
-    out64 = lgs_jax.render(scenes.cast(scene32, np.float64), scenes.camera())
+    out64 = shapes(scenes.cast(scene32, np.float64), scenes.camera())
     assert out64.image.dtype == jnp.float64
 
 
