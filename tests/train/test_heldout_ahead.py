@@ -16,13 +16,20 @@ from tests import scenes
 CAPACITY = 4099  # a capacity no other test renders at: the jit caches hold none at it yet
 
 
-def test_evaluations_run_the_programs_compiled_ahead_with_the_same_scores():
+def _views():
+    """Two held-out views of one scene (cameras, targets, background), the setup, and the pool
+    of another scene to evaluate."""
     g = scenes.cast(scenes.scene(4), np.float32)
     cams = [scenes.camera(yaw=y) for y in (0.0, 0.3)]
     background = np.asarray(scenes.BACKGROUND, np.float32)
     targets = [np.asarray(lgs_jax.render(g, c, background=background).image) for c in cams]
     setup = Setup(backend="tiles")
     pool = from_gaussians(scenes.cast(scenes.scene(5), np.float32), 64)
+    return cams, targets, background, setup, pool
+
+
+def test_evaluations_run_the_programs_compiled_ahead_with_the_same_scores():
+    cams, targets, background, setup, pool = _views()
     ahead = heldout.Evaluations(cams, targets, background, setup, CAPACITY, 2.0, "thread")
     ahead.ahead(pool)
     cached = heldout.compiled_programs()
@@ -40,12 +47,7 @@ def test_evaluations_run_the_programs_compiled_ahead_with_the_same_scores():
 
 
 def test_a_growth_prepared_ahead_runs_the_program_compiled_for_it():
-    g = scenes.cast(scenes.scene(4), np.float32)
-    cams = [scenes.camera(yaw=y) for y in (0.0, 0.3)]
-    background = np.asarray(scenes.BACKGROUND, np.float32)
-    targets = [np.asarray(lgs_jax.render(g, c, background=background).image) for c in cams]
-    setup = Setup(backend="tiles")
-    pool = from_gaussians(scenes.cast(scenes.scene(5), np.float32), 64)
+    cams, targets, background, setup, pool = _views()
     ahead = heldout.Evaluations(cams, targets, background, setup, 1, 2.5, "thread")
     ahead.prepare(pool)  # the views need more than one pair: compiled for their growth
     cached = heldout.compiled_programs()
