@@ -1,14 +1,15 @@
 """Gaussian-parallel training (`fit` with gaussian_devices, lgs_jax.train.sharded): a run
 stopped on one device and resumed on 2 simulated CPU devices, with buffers that overflow and
-grow, gives the scene of the same run on one device within the stated bound (the forward is the same bits; the
-gradients' sums are re-associated and Adam carries the difference at most a learning rate per
-step); its refinements decide the same and keep the blocks balanced by work (their Gaussians'
-projections and tile pairs in a few training views: `sharded_state.work`; a refinement on 4
-devices is the one-device refinement's bits, both strategies); each run writes one checkpoint
-and one scene.ply; trained on every view, with an evaluation due after every step, the runs
-evaluate nothing (the default set's check of a fit without held-out views: test_train.py's
-own such fit is in the slow set). The slow set runs the whole run on 2 and on 4 devices (the first step's loss,
-held-out views rendered sharded), and MCMC with the views' own parameters on 2.
+grow, gives the scene of the same run on one device within the stated bound (the forward is the
+same bits; the gradients' sums are re-associated and Adam carries the difference at most a
+learning rate per step); its refinements decide the same and keep the blocks balanced by work
+(their Gaussians' projections and tile pairs in a few training views: `sharded_state.work`; a
+refinement on 4 devices is the one-device refinement's bits, both strategies); each run writes
+one checkpoint and one scene.ply; trained on every view, with an evaluation due after every
+step, the runs evaluate nothing (the default set's check of a fit without held-out views:
+test_train.py's own such fit is in the slow set). The slow set runs the whole run on 2 and on 4
+devices (the first step's loss, held-out views rendered sharded), and MCMC with the views' own
+parameters on 2.
 
 The runs happen in one child process (tests/parallel/training_child.py: JAX simulates 4
 devices only when told before it starts); the test here checks their folders."""
