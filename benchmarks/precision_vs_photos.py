@@ -3,7 +3,7 @@
 
     python -m benchmarks.precision_vs_photos [--data-root DIR] [--scenes lego_train skull]
         [--forms local global difference] [--seeds 4] [--steps N] [--backend tiles|pallas]
-        [--out DIR] [--dry-run]
+        [--precision float32|float64] [--out DIR] [--dry-run]
     python -m benchmarks.precision_vs_photos --summary [--out DIR] [--inputs CSV ...]
 
 Per scene, seed and form (forms innermost, so that a call cut short keeps whole seeds), in this
@@ -32,11 +32,12 @@ the end of a run): mean ± standard deviation over the seeds per form and size, 
 PSNR change from local paired by seed (mean ± standard error), into OUT/summary.md.
 
 Backends: the form switches reach `tiles` and `pallas` only (`train.config.FORM_BACKENDS`); fit
-defaults to pallas on a GPU and tiles elsewhere, both honour them. Training is float32 only:
-fit's pool, Adam state, images and loss are float32, and the Pallas kernels compute in float32;
-a float64-trained column would need those in float64 (lgs_jax.train's pool, state, feed and
-loss) and a float64 backend (`tiles` or `reference`: not the Pallas kernels), so the float64
-here is the rendering's, not the training's.
+defaults to pallas on a GPU and tiles elsewhere, both honour them. `--precision float64` trains
+in float64 (`fit --precision float64`: the Gaussians, Adam's state, the images, the renders and
+their gradients, on `tiles`; jax_enable_x64 on for the process) and writes a float64 scene.ply:
+its f64 render is then the float64-trained scene's own image, its f32 render that scene rounded
+to float32. Rows carry their training precision; the summary pairs each float64-trained run
+with the float32-trained one of the same scene, form and seed where both are there.
 A CPU smoke run: --scenes lego_train --forms local global --seeds 1 --steps 50.
 """
 
@@ -45,6 +46,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import itertools
+import math
 import os
 import shutil
 import sys
@@ -66,11 +69,11 @@ SCENES = {  # folder, training downscale, default steps, evaluation sizes: (labe
                   evals=(("downscale2", 2, 1), ("downscale1", 1, 1))),
 }
 BIG = 10**9  # --eval-every / --checkpoint-every: never inside the run
-FIELDS = ("scene", "form", "seed", "eval", "width", "height", "photo_size", "views", "psnr",
-          "ssim", "psnr_f64", "ssim_f64", "psnr_vs_f64", "max_abs_vs_f64", "over_1_255",
+FIELDS = ("scene", "form", "precision", "seed", "eval", "width", "height", "photo_size", "views",
+          "psnr", "ssim", "psnr_f64", "ssim_f64", "psnr_vs_f64", "max_abs_vs_f64", "over_1_255",
           "fit_psnr", "steps", "gaussians", "train_s", "eval_s", "backend", "f64_backend",
           "device", "error")
-KEY = ("scene", "form", "seed", "eval")
+KEY = ("scene", "form", "precision", "seed", "eval")
 
 
 def parse(argv=None) -> argparse.Namespace:
@@ -84,6 +87,8 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--steps", type=int, help="training steps (default: the scene's, SCENES)")
     ap.add_argument("--backend", choices=["tiles", "pallas"],
                     help="fit's backend (default: fit's: pallas on a GPU, tiles elsewhere)")
+    ap.add_argument("--precision", choices=["float32", "float64"], default="float32",
+                    help="fit's training precision (default float32)")
     ap.add_argument("--f64-backend", choices=["tiles", "reference"], default="tiles",
                     help="the float64 render's backend (default: tiles)")
     ap.add_argument("--fit-args", default="", help="more options for fit (one string)")
@@ -109,6 +114,8 @@ def fit_words(args, scene: str, form: str, seed: int, out: str) -> list[str]:
              str(BIG), "--checkpoint-every", str(BIG)]
     if args.backend:
         words += ["--backend", args.backend]
+    if args.precision != "float32":
+        words += ["--precision", args.precision]
     return words + args.fit_args.split()
 
 
@@ -221,12 +228,12 @@ def evaluate_run(args, scene: str, ply: str, form: str, backend: str) -> list[di
 
 def run_one(args, scene: str, form: str, seed: int, device: str) -> list[dict]:
     """Fit, evaluate and keep (`keep`) the rows of one run."""
-    base = dict(scene=scene, form=form, seed=seed, device=device)
+    base = dict(scene=scene, form=form, precision=args.precision, seed=seed, device=device)
     if args.dry_run:
         print("$ python -m lgs_jax " + " ".join(fit_words(args, scene, form, seed, "RUN")))
         return []
     base_dir = args.run_dir or tempfile.mkdtemp(prefix="precision_")
-    out = os.path.join(base_dir, f"{scene}_{form}_{seed}")
+    out = os.path.join(base_dir, f"{scene}_{form}_{args.precision}_{seed}")
     r = run_fit(args, scene, form, seed, out)
     if "error" in r:
         rows = [dict(base, eval=label, error=r["error"]) for label, _, _ in
@@ -253,7 +260,7 @@ def keep(out: str, rows: list[dict]) -> None:
     """Merge `rows` into OUT/results.csv (replacing rows of the same KEY) and print them."""
     merge(os.path.join(out, "results.csv"), rows, FIELDS, KEY)
     for r in rows:
-        print(f"{r['scene']:10} {r['form']:10} seed {r['seed']:>2} {r['eval']:10} "
+        print(f"{r['scene']:10} {r['form']:10} {r['precision']} seed {r['seed']:>2} {r['eval']:10} "
               f"PSNR {_shown(r, 'psnr', '6.3f')} SSIM {_shown(r, 'ssim', '6.4f')} "
               f"vs f64 {_shown(r, 'psnr_vs_f64', '6.1f')} dB "
               f"(fit {_shown(r, 'fit_psnr', '6.3f')}) {r.get('error') or ''}", flush=True)
@@ -279,38 +286,48 @@ def _cell(values: list[float], spec: str) -> str:
     return format(m, spec) + ("" if sd is None else " ± " + format(sd, spec))
 
 
-def _paired(rows: list[dict], scene: str, ev: str, form: str) -> str:
-    """PSNR of `form` − local's, paired by seed: mean ± standard error."""
-    import math
+def _own(row: dict) -> float | None:
+    """The PSNR of the scene's own image: its render in the precision it was trained in."""
+    return _number(row["psnr_f64" if row["precision"] == "float64" else "psnr"])
 
-    by = {f: {r["seed"]: _number(r["psnr"]) for r in rows if (r["scene"], r["eval"], r["form"])
-              == (scene, ev, f)} for f in (form, "local")}
-    diff = [by[form][s] - by["local"][s] for s in by[form] if s in by["local"]]
-    if form == "local" or not diff:
+
+def _paired(rows: list[dict], key: tuple, other: tuple) -> str:
+    """Own PSNR (`_own`) of the runs of `key` − those of `other` (both (scene, eval, form,
+    precision)), paired by seed: mean ± standard error; "-" where none pair or key == other."""
+
+    by = {k: {r["seed"]: _own(r) for r in rows
+              if (r["scene"], r["eval"], r["form"], r["precision"]) == k} for k in (key, other)}
+    diff = [by[key][s] - by[other][s] for s in by[key] if s in by[other]]
+    if key == other or not diff:
         return "-"
     m, sd = _stats(diff)
     return f"{m:+.3f}" + ("" if sd is None else f" ± {sd / math.sqrt(len(diff)):.3f}")
 
 
 def summary_lines(rows: list[dict]) -> list[str]:
-    """Markdown: per scene, evaluation size and form, mean ± sd over seeds (module docstring)."""
-    rows = [r for r in rows if not r.get("error") and _number(r.get("psnr")) is not None]
-    out = ["| scene | eval | form | seeds | PSNR (dB) | SSIM | Δ PSNR vs local (paired) | "
-           "f64 PSNR | f64 SSIM | f32 vs f64 (dB) | max abs vs f64 | > 1/255 |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    """Markdown: per scene, evaluation size, form and training precision, mean ± sd over
+    seeds (module docstring); Δ columns of the own PSNR (`_own`), paired by seed."""
+    rows = [dict(r, precision=r.get("precision") or "float32") for r in rows
+            if not r.get("error") and _number(r.get("psnr")) is not None]
+    out = ["| scene | eval | form | trained in | seeds | PSNR (dB) | SSIM | Δ PSNR vs local "
+           "(paired) | Δ PSNR vs float32 training (paired) | f64 PSNR | f64 SSIM | "
+           "f32 vs f64 (dB) | max abs vs f64 | > 1/255 |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     col = lambda mine, k: [_number(r[k]) for r in mine if _number(r.get(k)) is not None]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         for ev in dict.fromkeys(r["eval"] for r in rows if r["scene"] == scene):
-            for form in FORMS:
-                mine = [r for r in rows if (r["scene"], r["eval"], r["form"]) ==
-                        (scene, ev, form)]
+            for form, precision in itertools.product(FORMS, ("float32", "float64")):
+                key = (scene, ev, form, precision)
+                mine = [r for r in rows if (r["scene"], r["eval"], r["form"], r["precision"])
+                        == key]
                 if not mine:
                     continue
-                worst = max(col(mine, "max_abs_vs_f64"))
-                out.append(f"| {scene} | {ev} | {form} | {len(mine)} | "
+                worst = max(col(mine, "max_abs_vs_f64"), default=math.nan)
+                out.append(f"| {scene} | {ev} | {form} | {precision} | {len(mine)} | "
                            f"{_cell(col(mine, 'psnr'), '.3f')} | "
                            f"{_cell(col(mine, 'ssim'), '.4f')} | "
-                           f"{_paired(rows, scene, ev, form)} | "
+                           f"{_paired(rows, key, (scene, ev, 'local', precision))} | "
+                           f"{_paired(rows, key, (scene, ev, form, 'float32'))} | "
                            f"{_cell(col(mine, 'psnr_f64'), '.3f')} | "
                            f"{_cell(col(mine, 'ssim_f64'), '.4f')} | "
                            f"{_cell(col(mine, 'psnr_vs_f64'), '.1f')} | {worst:.2g} | "
@@ -357,6 +374,8 @@ def main(argv=None) -> int:
 
     from benchmarks.common import device_line
 
+    if args.precision == "float64":  # before any JAX work, as `fit --precision float64`
+        jax.config.update("jax_enable_x64", True)
     use_compile_cache()
     print(device_line(), flush=True)
     device = jax.devices()[0].device_kind

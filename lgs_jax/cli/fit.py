@@ -12,8 +12,6 @@ import dataclasses
 import json
 import shlex
 
-import numpy as np
-
 from . import options, view as view_cmd
 from .args import UsageError, check_dataset, port
 
@@ -192,6 +190,10 @@ def run(args) -> int:
 
     config = config_of(args)
     check_dataset(config.data)
+    if config.precision == "float64":  # before any JAX work (`train.Setup` checks it)
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
     try:
         train.check_out(config, config.data)
     except train.RunDirError as e:

@@ -190,8 +190,9 @@ def streams(nbytes: int, setting: bool | None, device=None) -> bool:
 
 class TrainViews:
     """The training views of each step, as `step.train_step`'s (targets, idx) arguments: idx
-    the step's views (`views_for_step`), targets their images (B, H, W, 3) float32 on the
-    device (uint8 images converted there, `_float`), taken from the whole capture kept on the
+    the step's views (`views_for_step`), targets their images (B, H, W, 3) of `dtype` (float32
+    or float64, the training arithmetic's) on the device (uint8 images converted there,
+    `_float`), taken from the whole capture kept on the
     device, or streamed: each view copied from the host by a worker thread, the next step's
     copies started while a step runs (`prefetch`), so that device memory holds two batches
     instead of the capture and the host's copying (a staging copy of each image) runs beside
@@ -202,9 +203,9 @@ class TrainViews:
     `groups` their sizes, `RunData.groups`), kept whole on the device as one array per view."""
 
     def __init__(self, images, batch: int, seed: int, stream: bool,
-                 groups: np.ndarray | None = None):
+                 groups: np.ndarray | None = None, dtype: str = "float32"):
         self.images, self.batch, self.seed, self.stream = images, batch, seed, stream
-        self.groups = groups
+        self.groups, self.dtype = groups, str(np.dtype(dtype))
         self._whole = None
         if not stream:
             self._whole = (jnp.asarray(images) if isinstance(images, np.ndarray)
@@ -234,15 +235,16 @@ class TrainViews:
             return
         idx, done = jnp.asarray(views), Future()
         if isinstance(self._whole, list):
-            done.set_result((_stack(*(self._whole[v] for v in views)), idx))
+            done.set_result((_stack(self.dtype, *(self._whole[v] for v in views)), idx))
         else:
-            done.set_result((_take(self._whole, idx), idx))
+            done.set_result((_take(self._whole, idx, self.dtype), idx))
         self._copies[step] = done
 
     def _copy(self, views):
         """(targets, idx) of `views` from the host: each view's image as it lies in the capture
         (a view of the array, no gather on the host), stacked on the device."""
-        return _stack(*(jax.device_put(self.images[v]) for v in views)), jnp.asarray(views)
+        return (_stack(self.dtype, *(jax.device_put(self.images[v]) for v in views)),
+                jnp.asarray(views))
 
     def close(self) -> None:
         """End the streaming worker (the copies it made stay valid)."""
@@ -255,14 +257,16 @@ LEVELS = np.arange(256, dtype=np.float32) / np.float32(255)
 """x / 255 in float32 for every 8-bit value x, divided on the host (numpy's IEEE division, as
 `io.datasets.as_float` and the image reader divide): XLA rewrites a division by a constant
 into a multiplication by its reciprocal, which rounds some values differently."""
+LEVELS64 = np.arange(256, dtype=np.float64) / 255.0  # the same in float64
 
 
-def _float(images):
-    """`io.datasets.as_float` on the device (a lookup of `LEVELS`: the same bits)."""
+def _float(images, dtype: str = "float32"):
+    """`io.datasets.as_float` on the device (a lookup of `LEVELS`: the same bits), in `dtype`
+    (float64: 8-bit values from `LEVELS64`, float32 images widened)."""
     if images.dtype == jnp.uint8:
-        return jnp.asarray(LEVELS)[images]
-    return images
+        return jnp.asarray(LEVELS64 if dtype == "float64" else LEVELS)[images]
+    return images.astype(dtype)
 
 
-_take = jax.jit(lambda images, idx: _float(images[idx]))
-_stack = jax.jit(lambda *views: _float(jnp.stack(views)))
+_take = jax.jit(lambda images, idx, dtype: _float(images[idx], dtype), static_argnums=2)
+_stack = jax.jit(lambda dtype, *views: _float(jnp.stack(views), dtype), static_argnums=0)

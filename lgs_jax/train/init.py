@@ -39,9 +39,11 @@ def random_points(count: int, half_width: float, seed: int):
 
 
 def initial_gaussians(points: np.ndarray, colors: np.ndarray, init_opacity: float,
-                      init_scale: float, seed: int, sh_bases: int = 16) -> Gaussians:
-    """float32 Gaussians at `points` with `colors` (module docstring); neighbour distances are
-    floored at 1e-7 (coincident points would otherwise give log 0)."""
+                      init_scale: float, seed: int, sh_bases: int = 16,
+                      dtype=np.float32) -> Gaussians:
+    """Gaussians of `dtype` (float32 or float64: computed in float64, then rounded) at `points`
+    with `colors` (module docstring); neighbour distances are floored at 1e-7 (coincident points
+    would otherwise give log 0)."""
     points = np.asarray(points, np.float64)
     n = len(points)
     if n == 0:
@@ -50,10 +52,10 @@ def initial_gaussians(points: np.ndarray, colors: np.ndarray, init_opacity: floa
     rng = np.random.default_rng([seed, 2])
     sh = np.zeros((n, sh_bases, 3))
     sh[:, 0] = (np.asarray(colors, np.float64) - 0.5) / C0
-    f32 = lambda x: np.asarray(x, np.float32)
-    return Gaussians(f32(points), f32(rng.uniform(size=(n, 4))),
-                     f32(np.repeat(np.log(scale)[:, None], 3, 1)),
-                     f32(np.full(n, np.log(init_opacity / (1 - init_opacity)))), f32(sh))
+    cast = lambda x: np.asarray(x, dtype)
+    return Gaussians(cast(points), cast(rng.uniform(size=(n, 4))),
+                     cast(np.repeat(np.log(scale)[:, None], 3, 1)),
+                     cast(np.full(n, np.log(init_opacity / (1 - init_opacity)))), cast(sh))
 
 
 def start_gaussians(rd, config, log=print) -> Gaussians:
@@ -63,7 +65,7 @@ def start_gaussians(rd, config, log=print) -> Gaussians:
     `config.PIXELS_PER_POINT` pixels of the largest training image, so a small image starts
     with few points) in the cube of half-width init_extent · scene_scale (init_extent None:
     0.25 for NeRF-synthetic scenes, 3 otherwise), with the strategy's initial opacity and
-    scale, drawn from config.seed."""
+    scale, drawn from config.seed, in config.precision."""
     points, colors = rd.points, rd.colors
     cap, seed, strategy = config.max_gaussians, config.seed, config.strategy
     if len(points) == 0:
@@ -77,4 +79,4 @@ def start_gaussians(rd, config, log=print) -> Gaussians:
         log(f"{len(points)} SfM points, more than the cap: a random {cap} of them")
         points, colors = points[keep], colors[keep]
     return initial_gaussians(points, colors, strategy.init_opacity, strategy.init_scale, seed,
-                             (config.recipe.sh_degree + 1) ** 2)
+                             (config.recipe.sh_degree + 1) ** 2, np.dtype(config.precision))

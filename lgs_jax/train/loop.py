@@ -290,7 +290,7 @@ def _feed(run: _Run) -> LevelFeed:
     rd, config, recipe = run.rd, run.config, run.config.recipe
     size = nbytes(rd.train_images)
     feed = LevelFeed(rd, recipe.batch, config.seed, streams(size, config.stream_images),
-                     recipe.levels, config.steps, recipe.full_resolution_at)
+                     recipe.levels, config.steps, recipe.full_resolution_at, config.precision)
     if recipe.levels > 1:
         run.say(feed.describe())
     if feed.stream:
@@ -472,7 +472,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
     if config.overwrite:
         for name in rundir.run_files(out):
             os.remove(os.path.join(out, name))
-    setup = Setup.of(config, rd.scene_scale, config.backend or default_backend())
+    setup = Setup.of(config, rd.scene_scale, default_backend())
     run = None
     try:
         with StopRequest() as stop:

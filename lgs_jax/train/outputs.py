@@ -118,6 +118,7 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log,
                   gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
                   skipped_steps=st.skipped, **run,
                   strategy=type(setup.strategy).__name__, backend=setup.backend,
+                  precision=setup.precision,
                   device=jax.devices()[0].device_kind, devices=setup.devices,
                   gaussian_devices=setup.gaussian_devices)
     with written(os.path.join(out, "result.json")) as tmp, open(tmp, "w") as f:

@@ -51,10 +51,11 @@ class RunState:
 
 def templates(setup: Setup, size: int, rd: RunData, seed: int, g=None):
     """(pool, opt_state, strategy_state, views) at `size` slots: from Gaussians g, or
-    zeros; with app_opt the pool's features and the appearance head drawn from `seed`."""
+    zeros; with app_opt the pool's features and the appearance head drawn from `seed`; the
+    pool in setup.dtype."""
     recipe = setup.recipe
     bases = (recipe.sh_degree + 1) ** 2
-    z = lambda *shape: jnp.zeros((size,) + shape, jnp.float32)
+    z = lambda *shape: jnp.zeros((size,) + shape, setup.dtype)
     if g is None:
         params = dict(means=z(3), quats=z(4), log_scales=z(3), logit_opacities=z(),
                       sh_dc=z(1, 3), sh_rest=z(bases - 1, 3))

@@ -185,7 +185,8 @@ def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, ca
                  + view_params.regularizer(s.recipe, per_view))
         return total, (jnp.mean(mse), stats, visible)
 
-    offsets = jnp.zeros((targets.shape[0], pool.size, 2), jnp.float32) if need2d else None
+    offsets = (jnp.zeros((targets.shape[0], pool.size, 2), pool.params["means"].dtype)
+               if need2d else None)
     return jax.value_and_grad(loss_of, argnums=(0, 1, 2), has_aux=True)(pool.params, offsets,
                                                                          per_view)
 

@@ -158,8 +158,8 @@ class DefaultStrategy(Strategy):
     needs_screen_grads = True
 
     def init(self, pool: Pool, scene_scale: float):
-        z = jnp.zeros(pool.size, jnp.float32)
-        return dict(grad2d=z, count=z, scene_scale=jnp.float32(scene_scale))
+        z = jnp.zeros(pool.size, pool.params["means"].dtype)  # the training arithmetic's
+        return dict(grad2d=z, count=z, scene_scale=jnp.asarray(scene_scale, z.dtype))
 
     def step(self, state, pool: Pool, opt_state, info: StepInfo, step, key):
         g = info.screen_grads
@@ -168,7 +168,7 @@ class DefaultStrategy(Strategy):
         norm = jnp.sqrt(jnp.sum(g * g, -1))
         vis = info.visible & pool.active[None]
         new = dict(state, grad2d=state["grad2d"] + jnp.sum(jnp.where(vis, norm, 0.0), 0),
-                   count=state["count"] + jnp.sum(vis, 0, dtype=jnp.float32))
+                   count=state["count"] + jnp.sum(vis, 0, dtype=state["count"].dtype))
         return _select(step < self.refine_stop_iter, new, state), pool, opt_state
 
     def _grows(self, step):
