@@ -3,7 +3,7 @@
 
     python -m benchmarks.precision_vs_photos [--data-root DIR] [--scenes lego_train skull]
         [--forms local global difference] [--seeds 4] [--steps N] [--backend tiles|pallas]
-        [--precision float32|float64] [--out DIR] [--dry-run]
+        [--precision float32|float64] [--shrink F] [--out DIR] [--dry-run]
     python -m benchmarks.precision_vs_photos --summary [--out DIR] [--inputs CSV ...]
 
 Per scene, seed and form (forms innermost, so that a call cut short keeps whole seeds), in this
@@ -87,6 +87,9 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--steps", type=int, help="training steps (default: the scene's, SCENES)")
     ap.add_argument("--backend", choices=["tiles", "pallas"],
                     help="fit's backend (default: fit's: pallas on a GPU, tiles elsewhere)")
+    ap.add_argument("--shrink", type=int, default=1,
+                    help="every image size of the protocol divided by this (training and "
+                         "evaluation; a CPU-sized run); rows say the sizes")
     ap.add_argument("--precision", choices=["float32", "float64"], default="float32",
                     help="fit's training precision (default float32)")
     ap.add_argument("--f64-backend", choices=["tiles", "reference"], default="tiles",
@@ -105,13 +108,21 @@ def parse(argv=None) -> argparse.Namespace:
 
 # ------------------------------------------------------------------------------------ fit
 
+def evals(args, scene: str) -> list[tuple[str, int, int]]:
+    """`scene`'s evaluation sizes (label, photos' downscale, upscale) after --shrink (the
+    label then says it: "downscale2/4")."""
+    f = args.shrink
+    return [(label + (f"/{f}" if f > 1 else ""), downscale * f, up)
+            for label, downscale, up in SCENES[scene]["evals"]]
+
+
 def fit_words(args, scene: str, form: str, seed: int, out: str) -> list[str]:
     """The `fit` command line of `scene` in `form` at `seed` into `out` (module docstring)."""
     s = SCENES[scene]
     words = ["fit", "--data", os.path.join(args.data_root, s["folder"]), "--out", out,
              "--overwrite", "--alpha-form", form, "--seed", str(seed), "--downscale",
-             str(s["downscale"]), "--steps", str(args.steps or s["steps"]), "--eval-every",
-             str(BIG), "--checkpoint-every", str(BIG)]
+             str(s["downscale"] * args.shrink), "--steps", str(args.steps or s["steps"]),
+             "--eval-every", str(BIG), "--checkpoint-every", str(BIG)]
     if args.backend:
         words += ["--backend", args.backend]
     if args.precision != "float32":
@@ -203,7 +214,7 @@ def evaluate_run(args, scene: str, ply: str, form: str, backend: str) -> list[di
     g32 = lgs_jax.load_ply(ply, dtype=np.float32)
     g64 = lgs_jax.load_ply(ply, dtype=np.float64)
     rows = []
-    for label, downscale, up in SCENES[scene]["evals"]:
+    for label, downscale, up in evals(args, scene):
         t0 = time.time()
         cams, photos, bg = held_out(os.path.join(args.data_root, SCENES[scene]["folder"]),
                                     downscale)
@@ -237,7 +248,7 @@ def run_one(args, scene: str, form: str, seed: int, device: str) -> list[dict]:
     r = run_fit(args, scene, form, seed, out)
     if "error" in r:
         rows = [dict(base, eval=label, error=r["error"]) for label, _, _ in
-                SCENES[scene]["evals"]]
+                evals(args, scene)]
     else:
         fit = dict(fit_psnr=r["heldout_psnr"], steps=r["steps"], gaussians=r["gaussians"],
                    train_s=r["train_s"], backend=r["backend"])
@@ -247,7 +258,7 @@ def run_one(args, scene: str, form: str, seed: int, device: str) -> list[dict]:
                                  r["backend"])]
         except Exception as e:  # noqa: BLE001 - kept as the row's error, the next run goes on
             rows = [dict(base, **fit, eval=label, error=f"{type(e).__name__}: {e}")
-                    for label, _, _ in SCENES[scene]["evals"]]
+                    for label, _, _ in evals(args, scene)]
     if not args.run_dir:
         shutil.rmtree(base_dir, ignore_errors=True)
     keep(args.out, rows)
