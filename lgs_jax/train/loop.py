@@ -443,11 +443,11 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     result: held-out PSNR and SSIM, Gaussians, pool size, skipped steps, seconds (the whole
     call), ms_per_step (wall time of the steps and refinements, their compilation included,
     evaluations and checkpoints not; None when no step ran), compile_seconds (of that, the
-    time spent compiling or waiting for a compile ahead), the parts of `seconds`
-    (load_seconds: data and the start or resume; step_seconds: steps and refinements;
-    eval_seconds and checkpoint_seconds during the run; finish_seconds: the final evaluation
-    and the output files; logged in one line at the end) and stopped_early_at (the step the
-    early stop ended the run at, or None).
+    time spent compiling or waiting for a compile ahead) with its parts and programs
+    (`report.CompileClock.result`), the parts of `seconds` (load_seconds: data and the start
+    or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
+    the run; finish_seconds: the final evaluation and the output files; logged in one line at
+    the end) and stopped_early_at (the step the early stop ended the run at, or None).
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
@@ -491,7 +491,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
         ran = max(st.step - start, 0)
         times = dict(seconds=time.perf_counter() - t0,
                      ms_per_step=1e3 * busy / ran if ran else None,
-                     compile_seconds=clock.seconds, load_seconds=loaded, step_seconds=busy,
+                     **clock.result(), load_seconds=loaded, step_seconds=busy,
                      eval_seconds=run.eval_seconds, checkpoint_seconds=run.checkpoint_seconds,
                      stopped_early_at=st.step if run.stopped_early else None)
         return outputs.finish(out, setup, st, rd, times, log, run.evaluations)
