@@ -261,22 +261,28 @@ def test_readme_test_command_is_what_ci_runs():
 
 def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
     """The command line turns JAX's persistent compilation cache on (LGS_JAX_CACHE, "" for off)
-    and keeps a folder the caller configured (here: the test session's)."""
+    for every program, however quick its compile, and keeps a folder the caller configured
+    (here: the test session's) with the caller's settings."""
     import jax
 
     from lgs_jax.cli import use_compile_cache
 
     session = jax.config.jax_compilation_cache_dir
+    least = jax.config.jax_persistent_cache_min_compile_time_secs
     assert session and use_compile_cache() == session
     try:
         jax.config.update("jax_compilation_cache_dir", None)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)  # JAX's default
         monkeypatch.setenv("LGS_JAX_CACHE", "")
         assert use_compile_cache() is None and not jax.config.jax_compilation_cache_dir
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 1.0
         monkeypatch.setenv("LGS_JAX_CACHE", str(tmp_path / "cache"))
         assert use_compile_cache() == str(tmp_path / "cache")
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "cache")
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 0
     finally:
         jax.config.update("jax_compilation_cache_dir", session)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", least)
 
 
 @pytest.mark.parametrize("flags,want", [([], None), (["--no-compile-ahead"], "off"),

@@ -168,10 +168,12 @@ def _one_line(e: BaseException) -> str:
 
 def use_compile_cache() -> str | None:
     """Turn on JAX's persistent compilation cache for the command and return its folder: a
-    later run with the same shapes loads its programs instead of compiling them again. The
-    folder is $LGS_JAX_CACHE, else
-    ~/.cache/lgs_jax/jax; LGS_JAX_CACHE="" turns it off; a folder the caller already configured
-    (`jax_compilation_cache_dir`) is kept."""
+    later run with the same shapes loads its programs instead of compiling them again, every
+    program however short its compile (JAX's default keeps only those that took a second or
+    more; a run's dozens of small programs, the eager operations' included, each compile in a
+    fraction of a second). The folder is $LGS_JAX_CACHE, else ~/.cache/lgs_jax/jax;
+    LGS_JAX_CACHE="" turns it off; a folder the caller already configured
+    (`jax_compilation_cache_dir`) is kept, with the caller's settings."""
     import jax
 
     if jax.config.jax_compilation_cache_dir:
@@ -181,6 +183,7 @@ def use_compile_cache() -> str | None:
     if not path:
         return None
     jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
     return path
 
 

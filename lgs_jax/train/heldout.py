@@ -150,9 +150,9 @@ class Evaluations:
         return int(max(jax.device_get([self._counts.run(c, (0, None), s)
                                        for (c, _), (s, _) in zip(views, sigs)])))
 
-    def _rendered(self, pool: Pool) -> list[tuple]:
+    def _rendered(self, pool: Pool, then: bool = True) -> list[tuple]:
         """(PSNR, SSIM, overflow, image) per view, on the device, the pair buffer grown to
-        the views' need first."""
+        the views' need first; with `then`, the next growth's render compiled ahead."""
         views = self._views(pool, [jnp.asarray(t) for t in self.targets])
         sigs = [(signature(c), signature(r)) for c, r in views]
         need = self._need(views, sigs)
@@ -161,7 +161,8 @@ class Evaluations:
             size = self._renders.grow(size, (need, 0), sigs[0][1])[0]
             self.capacity = size[0]
         out = [self._renders.run(r, size, s) for (_, r), (_, s) in zip(views, sigs)]
-        self._renders.prepare(views[0][1], size, sigs[0][1])  # the next growth's, ahead
+        if then:
+            self._renders.prepare(views[0][1], size, sigs[0][1])  # the next growth's, ahead
         return out
 
     def score(self, pool: Pool) -> tuple[float, float]:
@@ -170,9 +171,11 @@ class Evaluations:
                 float(np.mean([s for _, s, _ in scores])))
 
     def images(self, pool: Pool) -> list[np.ndarray]:
-        """Each held-out view of `pool` rendered, (H, W, 3) float numpy clipped to [0, 1]."""
+        """Each held-out view of `pool` rendered, (H, W, 3) float numpy clipped to [0, 1]: the
+        run's final evaluation, after which nothing is compiled ahead (a compile under way
+        would hold the process's exit)."""
         return [np.clip(np.asarray(image), 0.0, 1.0)
-                for _, image in _read([o[2:] for o in self._rendered(pool)], flag=0)]
+                for _, image in _read([o[2:] for o in self._rendered(pool, False)], flag=0)]
 
     def close(self) -> None:
         """End the compiles ahead (a compile under way finishes unwaited)."""

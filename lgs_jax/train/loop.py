@@ -112,8 +112,7 @@ def _enter_level(run: _Run, feed: LevelFeed) -> None:
     st, level = run.st, feed.level(run.st.step)
     if len(feed.levels) == 1 or level == run.level:
         return
-    run.level = level
-    lv = feed.levels[level]
+    run.level, lv = level, feed.levels[level]
     st.capacity = _level_capacity(run, lv)
     ahead = run.next_level
     took = ahead is not None and ahead[0] == level and st.capacity <= ahead[1] <= 2 * st.capacity
@@ -136,15 +135,15 @@ def _level_ahead(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
     """Halfway through a level that has a next one, where the stepper compiles ahead: the
     next level's step compiled in the background (`Stepper.ahead`, for its first training
     view's image size) at the capacity `_enter_level` would give it with the pool as it is
-    now, so that the coarse steps hide the trace, lowering and compile of the finer one."""
+    now, so that the coarse steps hide the trace, lowering and compile of the finer one. Such
+    a level compiles no grown capacity ahead (`_dispatch`): its capacity is sized for a full
+    pool, and the stepper's one thread would compile that before the next level's step."""
     st = run.st
     level = feed.level(st.step)
     if not steps.compiles_ahead or level + 1 >= len(feed.levels):
         return
-    if run.next_level is not None and run.next_level[0] > level:
-        return
     start, end = feed.starts[level], feed.starts[level + 1]
-    if st.step < (start + end) // 2:
+    if st.step < (start + end) // 2 or run.next_level is not None and run.next_level[0] > level:
         return
     lv = feed.levels[level + 1]
     run.next_level = (level + 1, _level_capacity(run, lv))
@@ -174,7 +173,8 @@ def _dispatch(run: _Run, feed: LevelFeed, steps: Stepper, step: int, size: tuple
     sig = signature(args)
     new = steps.run(args, size, sig)
     feed.prefetch(step + 1)  # while the step runs
-    steps.prepare(args, size, sig)
+    if feed.level(step) + 1 == len(feed.levels):  # else the next level's step (`_level_ahead`)
+        steps.prepare(args, size, sig)
     st.pool, st.opt_state, st.strategy_state, st.views = new[:4]
     return new[4], sig
 
@@ -443,11 +443,11 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     result: held-out PSNR and SSIM, Gaussians, pool size, skipped steps, seconds (the whole
     call), ms_per_step (wall time of the steps and refinements, their compilation included,
     evaluations and checkpoints not; None when no step ran), compile_seconds (of that, the
-    time spent compiling or waiting for a compile ahead), the parts of `seconds`
-    (load_seconds: data and the start or resume; step_seconds: steps and refinements;
-    eval_seconds and checkpoint_seconds during the run; finish_seconds: the final evaluation
-    and the output files; logged in one line at the end) and stopped_early_at (the step the
-    early stop ended the run at, or None).
+    time spent compiling or waiting for a compile ahead) with its parts and programs
+    (`report.CompileClock.result`), the parts of `seconds` (load_seconds: data and the start
+    or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
+    the run; finish_seconds: the final evaluation and the output files; logged in one line at
+    the end) and stopped_early_at (the step the early stop ended the run at, or None).
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
@@ -491,7 +491,7 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
         ran = max(st.step - start, 0)
         times = dict(seconds=time.perf_counter() - t0,
                      ms_per_step=1e3 * busy / ran if ran else None,
-                     compile_seconds=clock.seconds, load_seconds=loaded, step_seconds=busy,
+                     **clock.result(), load_seconds=loaded, step_seconds=busy,
                      eval_seconds=run.eval_seconds, checkpoint_seconds=run.checkpoint_seconds,
                      stopped_early_at=st.step if run.stopped_early else None)
         return outputs.finish(out, setup, st, rd, times, log, run.evaluations)

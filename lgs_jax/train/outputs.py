@@ -77,14 +77,25 @@ def _views_files(out: str, st: RunState, rd: RunData) -> None:
             bilateral_grid.save(tmp, views["grid"][0], rd.train_names)
 
 
+def _compiling(run: dict) -> str:
+    """The steps' compile time in words, with its parts and programs where `run` has them."""
+    said = f"compiling {run['compile_seconds']:.1f} s"
+    if "compile_parts" in run:
+        names = dict(trace="tracing", lower="lowering", backend="XLA", waited="waiting")
+        said += ": " + ", ".join(f"{names[k]} {v:.1f}" for k, v in run["compile_parts"].items())
+        said += (f"; {run['programs_compiled']} programs compiled, {run['programs_loaded']} "
+                 f"loaded from the cache")
+    return said
+
+
 def time_parts(run: dict) -> str:
     """The run's wall time in parts, in words (`fit`'s result: load_seconds, step_seconds and
     the compile_seconds within them, eval_seconds, checkpoint_seconds, finish_seconds)."""
     parts = [("loading and starting", "load_seconds"), ("steps", "step_seconds"),
              ("held-out evaluations", "eval_seconds"), ("checkpoints", "checkpoint_seconds"),
              ("final evaluation and outputs", "finish_seconds")]
-    said = [f"{name} {run[key]:.1f} s" + (f" (compiling {run['compile_seconds']:.1f} s)"
-                                          if key == "step_seconds" else "")
+    said = [f"{name} {run[key]:.1f} s" + (f" ({_compiling(run)})" if key == "step_seconds"
+                                          else "")
             for name, key in parts if run.get(key) is not None]
     return f"{run['seconds']:.1f} s in all: " + ", ".join(said)
 

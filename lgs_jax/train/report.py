@@ -5,7 +5,6 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import json
-import math
 import os
 import threading
 import time
@@ -75,35 +74,81 @@ class Progress:
         self.bar.close()
 
 
+# JAX's monitoring events of a compile, by the part of it they time (`CompileClock`): the trace
+# to a jaxpr, its lowering to an MLIR module, and XLA's compile (or the persistent cache's load)
+COMPILE_EVENTS = {"/jax/core/compile/jaxpr_trace_duration": "trace",
+                  "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+                  "/jax/core/compile/backend_compile_duration": "backend"}
+CACHE_HIT = "/jax/compilation_cache/cache_hits"  # a program loaded from the persistent cache
+PARTS = ("trace", "lower", "backend", "waited")
+
+
+def _exclusive(spans: list[tuple]) -> dict:
+    """Seconds per kind of `spans` ((start, end, kind) each; spans nest or are disjoint, as one
+    thread's compile events do): each instant counted once, for the innermost span over it
+    (the one begun last)."""
+    parts = dict.fromkeys(PARTS, 0.0)
+    bounds = sorted({t for start, end, _ in spans for t in (start, end)})
+    ordered, active, i = sorted(spans), [], 0
+    for a, b in zip(bounds, bounds[1:]):
+        while i < len(ordered) and ordered[i][0] <= a:
+            active.append(ordered[i])
+            i += 1
+        active = [span for span in active if span[1] > a]
+        if active:
+            parts[max(active, key=lambda span: (span[0], -span[1]))[2]] += b - a
+    return parts
+
+
 class CompileClock:
-    """Seconds JAX spends compiling (tracing, lowering, compiling or loading compiled code: its
-    "/jax/core/compile/" monitoring events) inside `with clock:` blocks, in the thread that
-    entered them (compiles in other threads do not hold the run up), plus the waits for such
-    compiles (`waited`); overlaps counted once. Use it as a context manager around the whole run
-    too: `clock.listening()`."""
+    """Seconds JAX spends compiling (its "/jax/core/compile/" monitoring events: tracing,
+    lowering, XLA's compile or the persistent cache's load) inside `with clock:` blocks, in the
+    thread that entered them (compiles in other threads do not hold the run up), plus the
+    waits for such compiles (`waited`); overlaps counted once. Use it as a context manager
+    around the whole run too: `clock.listening()`.
+
+    `parts`: those seconds by what they were spent on (trace, lower, backend: XLA's compile or
+    the cache's load, waited), each instant counted once for the innermost event, so that the
+    parts sum to `seconds`; `programs`: the programs compiled (by XLA) and loaded (from the
+    persistent cache) in those blocks; `ahead_seconds`: the compiles of other threads while
+    listening (compiles ahead), overlaps counted once."""
 
     def __init__(self):
-        self._spans, self._on, self._thread = [], False, None
+        self._spans, self._ahead, self._on, self._thread = [], [], False, None
+        self._backend, self._loaded = 0, 0  # backend events, and cache hits among them
 
     def _listen(self, event, start, end, **_):
-        if (self._on and event.startswith("/jax/core/compile/")
-                and threading.get_ident() == self._thread):
-            self._spans.append((start, end))
+        kind = COMPILE_EVENTS.get(event)
+        if kind is None:
+            return
+        if threading.get_ident() != self._thread:
+            self._ahead.append((start, end, kind))
+        elif self._on:
+            self._spans.append((start, end, kind))
+            self._backend += kind == "backend"
+
+    def _hit(self, event, **_):
+        if event == CACHE_HIT and self._on and threading.get_ident() == self._thread:
+            self._loaded += 1
 
     def waited(self, seconds: float) -> None:
         """Count `seconds` just spent waiting for a compile in another thread."""
         if self._on and seconds > 0:
             end = time.time()
-            self._spans.append((end - seconds, end))
+            self._spans.append((end - seconds, end, "waited"))
 
     @contextlib.contextmanager
     def listening(self):
-        """Registers the clock's listener with JAX for the `with` block."""
+        """Registers the clock's listeners with JAX for the `with` block (entered in the
+        thread that will enter the clock)."""
+        self._thread = threading.get_ident()
         jax.monitoring.register_event_time_span_listener(self._listen)
+        jax.monitoring.register_event_listener(self._hit)
         try:
             yield self
         finally:
             jax.monitoring.unregister_event_time_span_listener(self._listen)
+            jax.monitoring.unregister_event_listener(self._hit)
 
     def __enter__(self):
         self._on, self._thread = True, threading.get_ident()
@@ -113,13 +158,28 @@ class CompileClock:
         self._on = False
 
     @property
+    def parts(self) -> dict:
+        return _exclusive(self._spans)
+
+    @property
     def seconds(self) -> float:
-        total, reach = 0.0, -math.inf
-        for start, end in sorted(self._spans):
-            if end > reach:
-                total += end - max(start, reach)
-                reach = end
-        return total
+        return sum(self.parts.values())
+
+    @property
+    def programs(self) -> dict:
+        return dict(compiled=self._backend - self._loaded, loaded=self._loaded)
+
+    @property
+    def ahead_seconds(self) -> float:
+        return _exclusive([(start, end, "backend") for start, end, _ in self._ahead])["backend"]
+
+    def result(self) -> dict:
+        """The clock's numbers as `fit`'s result holds them: compile_seconds, compile_parts,
+        programs_compiled, programs_loaded, ahead_compile_seconds."""
+        parts, programs = self.parts, self.programs
+        return dict(compile_seconds=sum(parts.values()), compile_parts=parts,
+                    programs_compiled=programs["compiled"], programs_loaded=programs["loaded"],
+                    ahead_compile_seconds=self.ahead_seconds)
 
 
 def _threads(fn, *lists) -> list:

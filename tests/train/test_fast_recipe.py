@@ -19,7 +19,7 @@ import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.cli import fit as fit_cmd
 from lgs_jax.synthetic import random_scene, synthetic_camera
-from lgs_jax.train import budget, checkpoint, early_stop, levels, optim, report
+from lgs_jax.train import ahead, budget, checkpoint, early_stop, levels, optim, report
 from lgs_jax.train import pool as P
 from lgs_jax.train.strategy import StepInfo
 
@@ -273,7 +273,8 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     assert result["stopped_early_at"] == result["steps"] == 20
     entered = [m.split(", pair capacity")[0] for m in lines if ", pair capacity" in m]
     assert entered == ["step 1: images at 8x8 (1/2)", "step 13: images at 16x16 (full size)"]
-    timing = {k for k in result if k.endswith("seconds")} | {"ms_per_step"}
+    timing = {k for k in result if k.endswith("seconds")
+              or k.startswith(("compile_", "programs_"))} | {"ms_per_step"}
     second = train.fit(_fast(data, tmp_path / "b"), log=lambda m: None)
     assert {k: v for k, v in second.items() if k not in timing} == {
         k: v for k, v in result.items() if k not in timing}
@@ -303,6 +304,21 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     refines = [r for r in rows if "refine_step" in r]
     assert [r["refine_step"] for r in refines] == [4, 8, 12, 16]
     assert result["gaussians"] == result["pool_size"] == STRATEGY.max_count(64, 24, 10**6)
+
+
+def test_a_coarse_level_compiles_the_next_levels_step_ahead_and_no_grown_capacity(
+        tmp_path, monkeypatch):
+    """With compiling ahead, the coarse level (steps 0 to 11) asks its stepper for the next
+    level's step (once) and for no grown capacity; the last level asks for the capacity after
+    its own at every step (here recorded, not compiled)."""
+    asked = []
+    monkeypatch.setattr(ahead.Stepper, "ahead",
+                        lambda self, args, size: asked.append(("level", int(args[8]))))
+    monkeypatch.setattr(ahead.Stepper, "prepare",
+                        lambda self, args, size, sig: asked.append(("grown", int(args[8]))))
+    data = tiny_capture(tmp_path / "d", views=5, size=16)
+    train.fit(_fast(data, tmp_path / "a", compile_ahead="thread"), log=lambda m: None)
+    assert asked == [("level", 12)] + [("grown", step) for step in range(12, 20)]
 
 
 @pytest.mark.slow  # CI time: three more compiles; ahead.Stepper.ahead has its unit test

@@ -2,12 +2,13 @@
 the first evaluation (`Evaluations.ahead`) are the ones it runs, with the scores of the
 programs `jax.jit` compiles at the evaluation, and `Evaluations.images` renders what
 `step.render_views` does; a growth of the pair buffer counted ahead (`Evaluations.prepare`)
-runs the program compiled ahead for it."""
+runs the program compiled ahead for it; after a score the next growth's render is compiled
+ahead, after the final images nothing."""
 
 import numpy as np
 
 import lgs_jax
-from lgs_jax.train import heldout
+from lgs_jax.train import ahead as ahead_module, heldout
 from lgs_jax.train.config import Setup
 from lgs_jax.train.pool import from_gaussians
 from lgs_jax.train.step import render_views
@@ -56,3 +57,16 @@ def test_a_growth_prepared_ahead_runs_the_program_compiled_for_it():
     plain = heldout.Evaluations(cams, targets, background, setup, 1, 2.5)
     assert plain.score(pool) == got and ahead.capacity == plain.capacity > 1
     ahead.close()
+
+
+def test_the_final_images_compile_nothing_ahead(monkeypatch):
+    cams, targets, background, setup, pool = _views()
+    prepared = []
+    monkeypatch.setattr(ahead_module.Stepper, "prepare",
+                        lambda self, args, size, sig: prepared.append(size))
+    evaluations = heldout.Evaluations(cams, targets, background, setup, CAPACITY, 2.0, "thread")
+    evaluations.images(pool)
+    assert prepared == []
+    evaluations.score(pool)
+    assert prepared == [(CAPACITY, None)]
+    evaluations.close()

@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import jax
@@ -254,6 +255,13 @@ def test_fit_densifies_and_the_loss_falls(skull, uninterrupted, tmp_path):
     assert os.path.getsize(run / "curves.png") > 0 and result["skipped_steps"] == 0
     busy = 1e-3 * result["ms_per_step"] * STEPS  # steps and refinements, compiling included
     assert 0 < result["compile_seconds"] < busy <= result["seconds"]
+    # the step's first trace, lowering and compile (or load) are the loop thread's
+    parts = result["compile_parts"]
+    assert list(parts) == ["trace", "lower", "backend", "waited"] and min(parts.values()) >= 0
+    assert parts["trace"] > 0 and parts["lower"] > 0 and parts["backend"] > 0
+    assert sum(parts.values()) == pytest.approx(result["compile_seconds"])
+    assert result["programs_compiled"] + result["programs_loaded"] >= 2  # step, refinement
+    assert result["ahead_compile_seconds"] >= 0
     parts = [result[k] for k in ("load_seconds", "step_seconds", "eval_seconds",
                                  "checkpoint_seconds", "finish_seconds")]
     assert min(parts) >= 0 and result["eval_seconds"] > 0 and result["checkpoint_seconds"] > 0
@@ -741,6 +749,47 @@ def test_metrics_cut_short_by_a_kill_read_without_their_last_line(tmp_path):
     path.write_text('{"step": 1}\n{"st\n{"step": 2}\n')
     with pytest.raises(ValueError, match="metrics.jsonl: line 2 is not JSON"):
         report.read_metrics(str(path))
+
+
+def _span(part: str, start: float, end: float) -> None:
+    """A compile event of JAX's (`report.COMPILE_EVENTS`) timing `part` from start to end."""
+    event = {v: k for k, v in report.COMPILE_EVENTS.items()}[part]
+    jax.monitoring.record_event_time_span(event, start, end, fun_name="f")
+
+
+def test_compile_clock_splits_the_loop_threads_compiles_by_part():
+    """Inside `with clock:` in its thread, each instant once, for the innermost event (a trace
+    within a trace, a compile within a trace: constants evaluated while tracing); outside the
+    blocks nothing; another thread's events are compiles ahead; a real jit's first call is a
+    program compiled or loaded, and its parts are the clock's."""
+    clock = report.CompileClock()
+    with clock.listening():
+        with clock:
+            _span("trace", 11.0, 12.0)  # nested in the next: events end inner first
+            _span("backend", 12.5, 13.0)
+            _span("trace", 10.0, 14.0)
+            _span("lower", 14.0, 15.5)
+            _span("backend", 15.5, 18.0)
+        _span("trace", 20.0, 30.0)  # between steps: not the steps' compile
+        worker = threading.Thread(target=lambda: (_span("trace", 40.0, 42.0),
+                                                  _span("backend", 41.0, 45.0)))
+        worker.start()
+        worker.join()
+        assert clock.parts == dict(trace=3.5, lower=1.5, backend=3.0, waited=0.0)
+        assert clock.seconds == 8.0 and clock.ahead_seconds == 5.0
+        assert clock.programs == dict(compiled=2, loaded=0)
+        x = jnp.arange(5.0)
+        with clock:
+            clock.waited(0.25)
+            jax.jit(lambda x: x * 3 + 1)(x)  # a new function: traced
+    assert sum(clock.programs.values()) == 3  # by XLA or from the persistent cache
+    parts = clock.parts
+    assert parts["waited"] == pytest.approx(0.25) and parts["trace"] > 3.5
+    assert parts["lower"] > 1.5 and parts["backend"] > 3.0
+    result = clock.result()
+    assert result["compile_parts"] == parts and result["compile_seconds"] == clock.seconds
+    assert result["programs_compiled"] + result["programs_loaded"] == 3
+    assert result["ahead_compile_seconds"] == 5.0
 
 
 def test_progress_rate_and_eta_leave_out_the_compile():
