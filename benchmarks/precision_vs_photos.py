@@ -268,7 +268,9 @@ def run_one(args, scene: str, form: str, seed: int, device: str) -> list[dict]:
 # ----------------------------------------------------------------------------------- files
 
 def keep(out: str, rows: list[dict]) -> None:
-    """Merge `rows` into OUT/results.csv (replacing rows of the same KEY) and print them."""
+    """Merge `rows` into OUT/results.csv (replacing rows of the same KEY; a row without a
+    precision is float32's) and print them."""
+    rows = [dict(r, precision=r.get("precision") or "float32") for r in rows]
     merge(os.path.join(out, "results.csv"), rows, FIELDS, KEY)
     for r in rows:
         print(f"{r['scene']:10} {r['form']:10} {r['precision']} seed {r['seed']:>2} {r['eval']:10} "

@@ -1,5 +1,6 @@
 """benchmarks/precision_vs_photos.py without training: its fit command lines are `fit`'s (the
-form reaches the configuration), and its summary pairs the forms by seed."""
+form, the precision and --shrink reach the configuration), and its summary pairs the forms, and
+float64 training with float32's, by seed."""
 
 import pytest
 
@@ -19,6 +20,11 @@ def test_each_run_is_a_fit_command_line_of_its_form(scene, downscale, steps):
     assert config.eval_every == config.checkpoint_every == pvp.BIG and config.overwrite
     assert pvp.fit_words(pvp.parse(["--steps", "50"]), scene, "local", 0, "o")[
         words.index("--steps") + 1] == "50"
+    small = fit_cmd.config_of(cli.parser().parse_args(pvp.fit_words(
+        pvp.parse(["--precision", "float64", "--shrink", "4"]), scene, "local", 0, "o")))
+    assert (small.precision, small.downscale) == ("float64", 4 * downscale)
+    assert [label for label, _, _ in pvp.evals(pvp.parse(["--shrink", "4"]), scene)] == [
+        label + "/4" for label, _, _ in pvp.SCENES[scene]["evals"]]
 
 
 def _row(form, seed, psnr, ev="200x200"):
@@ -53,5 +59,11 @@ def test_rows_are_kept_as_runs_end_and_summarised_paired_by_seed(tmp_path, capsy
     assert pvp.summary(pvp.parse(["--out", str(other), "--summary", "--inputs",
                                   str(tmp_path / "results.csv"),
                                   str(other / "results.csv")])) == 0
-    assert "| lego_train | 200x200 | local | 3 | 31.000 ± 1.000 |" in (
+    assert "| lego_train | 200x200 | local | float32 | 3 | 31.000 ± 1.000 |" in (
         other / "summary.md").read_text()
+    # float64 training: its own image is the f64 render (psnr_f64), paired with float32's
+    pvp.keep(out, [dict(_row("local", s, 0.0), precision="float64", psnr_f64=p)
+                   for s, p in ((0, 30.5), (1, 31.25))])
+    assert pvp.summary(pvp.parse(["--out", out])) == 0
+    assert "| local | float64 | 2 | 0.000 ± 0.000 | 0.9000 ± 0.0000 | - | +0.375 ± 0.125 |" in (
+        tmp_path / "summary.md").read_text()
