@@ -192,11 +192,11 @@ class TrainViews:
     """The training views of each step, as `step.train_step`'s (targets, idx) arguments: idx
     the step's views (`views_for_step`), targets their images (B, H, W, 3) of `dtype` (float32
     or float64, the training arithmetic's) on the device (uint8 images converted there,
-    `_float`), taken from the whole capture kept on the
-    device, or streamed: each view copied from the host by a worker thread, the next step's
-    copies started while a step runs (`prefetch`), so that device memory holds two batches
-    instead of the capture and the host's copying (a staging copy of each image) runs beside
-    the loop's dispatch instead of before it. The same values, and the same compiled step,
+    `_float`), taken from the whole capture kept on the device, or streamed: each view copied
+    from the host by a worker thread, the next step's copies started while a step runs
+    (`prefetch`), so that device memory holds two batches instead of the capture and the
+    host's copying (a staging copy of each image) runs beside the loop's dispatch instead of
+    before it. The same values, and the same compiled step,
     either way: the same results to the bit. `close` ends the worker.
 
     `images` is (T, H, W, 3), or a list of views of several sizes (`RunData.train_images`;
