@@ -20,7 +20,6 @@ from .options import check, option
 from .strategy import DefaultStrategy, Strategy
 
 TRAIN_BACKENDS = ("reference", "tiles", "pallas", "pallas_vanilla")  # differentiable ones
-FLOAT64_BACKENDS = ("reference", "tiles")  # those that compute in the Gaussians' dtype
 FORM_BACKENDS = ("tiles", "pallas")  # those that honour Recipe.alpha_form; the others compute
 # the difference form
 ALPHA_FORMS = {  # Recipe.alpha_form -> the RasterConfig switches it sets
@@ -188,12 +187,12 @@ class FitConfig:
                "evaluated)")
     seed: int = option(0, "seed of the start, the view order and the strategies' draws", low=0)
     backend: str | None = option(None, "differentiable backend (default: pallas on GPUs, tiles "
-                                       "elsewhere; tiles in float64)", choices=TRAIN_BACKENDS)
+                                       "elsewhere)", choices=TRAIN_BACKENDS)
     precision: Literal["float32", "float64"] = option(
         "float32", "the arithmetic of training: the Gaussians, their optimizer state, the "
                    "images, the renders and their gradients, the loss (float64 needs "
-                   "jax_enable_x64, which the command line turns on, and a backend of "
-                   "FLOAT64_BACKENDS: tiles or reference)")
+                   "jax_enable_x64, which the command line turns on; every backend "
+                   "computes in it, pallas with its Triton kernels on a GPU)")
     devices: int = option(1, "split each step's views across this many devices (data "
                              "parallel; --batch a multiple of it)", low=1)
     gaussian_devices: int = option(
@@ -291,9 +290,6 @@ class Setup:
         if self.recipe.alpha_form == "global" and self.backend not in FORM_BACKENDS:
             raise ValueError(f"recipe.alpha_form: 'global' needs a backend of {FORM_BACKENDS}; "
                              f"{self.backend!r} computes the difference form")
-        if self.precision == "float64" and self.backend not in FLOAT64_BACKENDS:
-            raise ValueError(f"precision: float64 needs a backend of {FLOAT64_BACKENDS}; "
-                             f"{self.backend!r} computes in float32")
         if self.precision == "float64" and not jax.config.jax_enable_x64:
             raise ValueError("precision: float64 needs jax_enable_x64 (jax.config.update("
                              "'jax_enable_x64', True) before any JAX work; `fit "
@@ -308,8 +304,7 @@ class Setup:
     @classmethod
     def of(cls, config: FitConfig, scene_scale: float, default_backend: str) -> "Setup":
         """The setup of a run of `config` on data of `scene_scale`; its backend config.backend,
-        or else tiles in float64 and `default_backend` in float32."""
-        backend = config.backend or ("tiles" if config.precision == "float64"
-                                     else default_backend)
+        or else `default_backend`."""
+        backend = config.backend or default_backend
         return cls(config.recipe, config.strategy, config.steps, scene_scale, backend,
                    config.devices, config.gaussian_devices, config.precision)
