@@ -23,8 +23,9 @@ Per scene, `lgs_jax.train.fit` and then a small gsplat trainer, each in a subpro
 Each renders with its own rasterizer (ours: --backend, `pallas` on a GPU by default, with the
 3DGS compositing rule, alpha cap 0.99, or gsplat's with --convention gsplat; gsplat's: 0.999).
 Time per step: the loop's wall time (gsplat's: a host sync per step, as simple_trainer's bar
-does; ours: `fit`'s, a step dispatched before the last one's read) without evaluations; ours also without compilation (compiling ahead in a thread counts
-only its waits: --compile-ahead off for the steps alone); gsplat's after one warm-up render.
+does; ours: `fit`'s, a step dispatched before the last one's read) without evaluations;
+ours also without compilation (compiling ahead in a thread counts only its waits:
+--compile-ahead off for the steps alone); gsplat's after one warm-up render.
 Wall time (`process_s`): each worker from its start to its last output, imports, data and
 compiles included. Peak memory: torch's max_memory_allocated, JAX's peak_bytes_in_use.
 Outputs in OUT: curves.csv (scene, trainer, step, held-out PSNR, SSIM, Gaussians), summary.csv
@@ -90,7 +91,7 @@ def parse(argv=None) -> argparse.Namespace:
                     help="default: thread on a GPU, off elsewhere")
     ap.add_argument("--pair-headroom", type=float, default=FitConfig.pair_headroom)
     ap.add_argument("--row-headroom", type=float, help="default: a row per pair slot")
-    ap.add_argument("--stream-images", action="store_true")
+    ap.add_argument("--stream-images", action=argparse.BooleanOptionalAction)  # default: fit's
     ap.add_argument("--inline", action="store_true", help="run the trainers in this process")
     ap.add_argument("--worker", choices=["ours", "gsplat"], help=argparse.SUPPRESS)
     ap.add_argument("--scene", help=argparse.SUPPRESS)
@@ -119,7 +120,7 @@ def scene_setup(args, scene: str, out: str = ""):
         init_points=100_000, seed=args.seed, backend=args.backend,
         pair_headroom=args.pair_headroom, row_headroom=args.row_headroom,
         compile_ahead=args.compile_ahead, eval_every=args.eval_every,
-        stream_images=args.stream_images or None, checkpoint_every=max(args.steps, 1),
+        stream_images=args.stream_images, checkpoint_every=max(args.steps, 1),
         overwrite=True)
     return d, config
 

@@ -209,8 +209,8 @@ class FitConfig:
               "the same results (default: a row per pair slot)", low=1)
     stream_images: bool | None = option(
         None, "keep only each step's views on the device (copied while the step before runs) "
-              "instead of the whole capture; the same results (default: when the images "
-              "would take more than 1/8 of the device's memory)")
+              "instead of the whole capture; the same results (default: on a GPU, and on "
+              "a CPU for captures over 2 GiB)")
     compile_ahead: Literal["thread", "process", "off"] | None = option(
         None, "compile the step for a grown pair buffer ahead: in a background thread, in a "
               "child process through the persistent compilation cache (no contention for "

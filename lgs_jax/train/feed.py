@@ -178,14 +178,13 @@ HOST_STREAM_BYTES = 2 << 30
 
 def streams(nbytes: int, setting: bool | None, device=None) -> bool:
     """Whether `fit` streams training images of `nbytes` (`FitConfig.stream_images`): the
-    setting where it is a bool; None: when they would take more than an eighth of the device's
-    memory (`memory_stats()["bytes_limit"]`), or more than `HOST_STREAM_BYTES` where the device
-    reports no limit."""
+    setting where it is a bool; None: on a device that reports a memory limit
+    (`memory_stats()["bytes_limit"]`: a GPU, whose memory a run competes for), and elsewhere
+    (a CPU, whose memory is the host's) when they take more than `HOST_STREAM_BYTES`."""
     if setting is not None:
         return bool(setting)
     stats = (device or jax.devices()[0]).memory_stats() or {}
-    limit = stats.get("bytes_limit")
-    return nbytes > (limit // 8 if limit else HOST_STREAM_BYTES)
+    return bool(stats.get("bytes_limit")) or nbytes > HOST_STREAM_BYTES
 
 
 class TrainViews:
