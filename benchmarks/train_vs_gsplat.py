@@ -85,8 +85,7 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--out", default="train_vs_gsplat_out", help="CSVs, JSON and figures")
     ap.add_argument("--run-dir", help="our runs' folders (large; default: a temporary one)")
     ap.add_argument("--no-gsplat", action="store_true")
-    ap.add_argument("--no-ours", action="store_true")
-    # our trainer's FitConfig fields of the same names
+    ap.add_argument("--no-ours", action="store_true")  # then our FitConfig's fields:
     ap.add_argument("--compile-ahead", choices=["thread", "process", "off"],
                     help="default: thread on a GPU, off elsewhere")
     ap.add_argument("--pair-headroom", type=float, default=FitConfig.pair_headroom)
