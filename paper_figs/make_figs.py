@@ -15,6 +15,9 @@ a figure whose file is missing is skipped with a message naming the file and tha
 - ablation_mosaic.png: the same for the Mosaic GPU kernels (`MOSAIC_ABLATION`).
 - precision_tradeoff.png (Table V analog): forward time against PSNR vs float64 per exponent
   form, H100 Pallas kernel (`numerics.render_study --backend pallas`).
+- table_v_photos.png (Table V against the photos): held-out PSNR of each training run per
+  exponent form and training precision, one point per seed, skull and lego_train
+  (`benchmarks.precision_vs_photos`, H100).
 - cancellation_vs_resolution.png: the worst float32 error of ln α against image width, per
   form (`numerics.study`: the paper's Eq. 11 cancellation); from float32 world parameters
   (`numerics.centre`), the centre floor with and without the split centre, and needles with
@@ -44,6 +47,8 @@ FWD_SCENES = ("lego_800", "guitar_720p", "guitar_4k", "lego_x16_1080p", "guitar_
 FULL_FWD = [f"{FWD}/fwd_{s}.csv" for s in FWD_SCENES]
 CPU_ABLATION = "bench_results/cpu_backends/bench.csv"
 MOSAIC_ABLATION = "bench_results/ablation/gpu.csv"
+PHOTOS = [f"bench_results/precision_vs_photos/results_{k}.csv"
+          for k in ("local", "global", "difference", "float64")]
 ABLATION_STEPS = ("baseline", "+hoisting", "+warp_culling", "+coherent_blending",
                   "global_coords")
 
@@ -147,6 +152,37 @@ def precision_tradeoff(path="numerics/results/render/render_summary_pallas.csv")
     save(fig, "precision_tradeoff.png")
 
 
+def table_v_photos(paths=PHOTOS, evals=(("skull", "downscale2"), ("lego_train", "200x200"))):
+    """One panel per scene: PSNR against the photos per (form, precision), seeds as points
+    (a line joins each seed's float32 and float64 runs), the mean as a bar."""
+    data = [dict(r, precision=r.get("precision") or "float32") for p in paths for r in rows(p)]
+    forms, colours = ("local", "global", "difference"), {"float32": "C0", "float64": "C3"}
+    fig, axs = plt.subplots(1, len(evals), figsize=(4.2 * len(evals), 3.6), squeeze=False)
+    for ax, (scene, ev) in zip(axs[0], evals):
+        for i, form in enumerate(forms):
+            by = {prec: {r["seed"]: float(r["psnr"]) for r in data if (r["scene"], r["eval"],
+                  r["form"], r["precision"]) == (scene, ev, form, prec) and r["psnr"]}
+                  for prec in colours}
+            for j, (prec, seeds) in enumerate(by.items()):
+                x = i + (j - 0.5) * 0.35
+                ax.bar(x, np.mean(list(seeds.values())) if seeds else 0, width=0.3,
+                       color=colours[prec], alpha=0.25, label=prec if i == 0 else None)
+                ax.scatter([x] * len(seeds), list(seeds.values()), s=10, color=colours[prec])
+            for s in set(by["float32"]) & set(by["float64"]):
+                ax.plot([i - 0.175, i + 0.175], [by["float32"][s], by["float64"][s]],
+                        color="grey", lw=0.6)
+        ys = [float(r["psnr"]) for r in data if (r["scene"], r["eval"]) == (scene, ev)]
+        ax.set_ylim(min(ys) - 0.3, max(ys) + 0.3)
+        ax.set_xticks(range(len(forms)), forms)
+        ax.set_title(f"{scene}, held-out at {ev}", fontsize=9)
+        ax.set_ylabel("PSNR against the photos (dB)")
+        ax.grid(alpha=0.3, axis="y")
+    axs[0][0].legend(fontsize=8, title="trained in", title_fontsize=8)
+    fig.suptitle("Table V against the photos: 2,000 steps, 4 seeds (lines pair a seed)",
+                 fontsize=9)
+    save(fig, "table_v_photos.png")
+
+
 def _worst_by_width(ax, data, forms=None):
     """One line per form: the worst ln α error of `data`'s rows at each image width."""
     for form in forms or dict.fromkeys(r["form"] for r in data):
@@ -222,6 +258,8 @@ FIGURES = {
     "precision_tradeoff.png": (precision_tradeoff,
                                ["numerics/results/render/render_summary_pallas.csv"],
                                "python -m numerics.render_study --backend pallas (GPU)"),
+    "table_v_photos.png": (table_v_photos, PHOTOS,
+                           "python -m benchmarks.precision_vs_photos [--precision float64] (GPU)"),
     "cancellation_vs_resolution.png": (cancellation_vs_resolution,
                                        ["numerics/results/summary.csv",
                                         "numerics/results/centre.csv"],
