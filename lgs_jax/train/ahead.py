@@ -127,14 +127,19 @@ class Stepper:
     Compiles ahead and their executables are kept per argument signature: a capture of
     several image sizes runs a step per size, each with its own compile ahead. Those of the
     `KEPT_SIGNATURES` signatures run latest are kept; older ones (a pool since grown) are
-    dropped.
+    dropped. `lowering` (an `exports.Lowering`; not with mode "process", whose child compiles
+    `fn` itself): every program, the steps' own as those compiled ahead, is compiled by its
+    `compiled`, rather than by calling `fn`.
     """
 
     def __init__(self, fn, static: Callable[[tuple], dict], sizes: Sizes,
-                 mode: str | None = "thread"):
+                 mode: str | None = "thread", lowering=None):
         if mode not in (None, *MODES):
             raise ValueError(f"mode: expected one of {MODES} or None, got {mode!r}")
+        if lowering is not None and mode == "process":
+            raise ValueError("lowering: not with mode 'process' (its child lowers fn itself)")
         self._fn, self._static, self._sizes, self._mode = fn, static, sizes, mode
+        self._lowering = lowering
         self._threads = concurrent.futures.ThreadPoolExecutor(1) if mode else None
         # per signature (a capture of several image sizes has one per size):
         self._jobs = {}  # signature -> (size, future) of the background compile
@@ -153,7 +158,11 @@ class Stepper:
         ready = self._ready.get(sig)
         if ready is not None and ready[0] == size:
             return ready[1](*args)
-        return self._fn(*args, **self._static(size))
+        if self._lowering is None:
+            return self._fn(*args, **self._static(size))
+        executable = self._lowering.compiled(self._fn, _abstract(args), self._static(size))
+        self._ready[sig] = (size, executable)
+        return executable(*args)
 
     @property
     def compiles_ahead(self) -> bool:
@@ -228,7 +237,9 @@ class Stepper:
         if self._mode == "process":
             compile_ = lambda: _compile_in_child(self._fn, abstract, static)
         else:
-            compile_ = lambda: _compile_switching_often(self._fn, abstract, static)
+            compile_ = lambda: _compile_switching_often(
+                lambda: self._lowering.compiled(self._fn, abstract, static) if self._lowering
+                else self._fn.lower(*abstract, **static).compile())
         self._jobs[sig] = (size, self._threads.submit(compile_))
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
@@ -262,17 +273,16 @@ _switching = dict(compiles=0, before=None)  # compiles under way in threads (any
 _switching_lock = threading.Lock()
 
 
-def _compile_switching_often(fn, abstract, static: dict):
-    """`fn.lower(*abstract, **static).compile()` with Python's switch interval at
-    `SWITCH_INTERVAL` while any such compile is under way (module docstring), the interval
-    before the first restored after the last."""
+def _compile_switching_often(compile_: Callable):
+    """`compile_()` with Python's switch interval at `SWITCH_INTERVAL` while any such compile
+    is under way (module docstring), the interval before the first restored after the last."""
     with _switching_lock:
         if _switching["compiles"] == 0:
             _switching["before"] = sys.getswitchinterval()
             sys.setswitchinterval(SWITCH_INTERVAL)
         _switching["compiles"] += 1
     try:
-        return fn.lower(*abstract, **static).compile()
+        return compile_()
     finally:
         with _switching_lock:
             _switching["compiles"] -= 1

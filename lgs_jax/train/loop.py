@@ -47,7 +47,7 @@ from .feed import RunData, nbytes, prepare, streams
 from .interrupt import Interrupted, StopRequest
 from .levels import LevelFeed, check as check_levels
 from .state import RunState
-from .step import distinct, refine, replicated, train_step
+from .step import distinct, lowering, refine, replicated, train_step
 
 
 # A step's second buffer beside the pairs (`ahead.Sizes`' second size): the RunState field
@@ -59,16 +59,16 @@ SECOND = {False: ("rows", "row_overflow", "walked", "backward rows"),
 
 def stepper(config: FitConfig, setup: Setup) -> Stepper:
     """`train_step` of this run (its `setup`) behind an `ahead.Stepper` of the configured
-    mode on one device; with Gaussian parallel, the exchange capacity grown with the pair
-    headroom. No compile ahead on several devices (an executable compiled ahead is for
-    arguments on one device: the devices' shardings are not in the shapes it is given)."""
+    mode, lowered through export entries (`step.lowering`), on one device; with Gaussian
+    parallel, the exchange capacity grown with the pair headroom. Neither on several devices
+    (an executable is for arguments on one device: their shardings are not in the shapes)."""
     if setup.gaussian_devices > 1:
         static = lambda size: dict(setup=setup, capacity=size[0], exchange=size[1])
-        return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom),
-                       None)
+        return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom), None)
     static = lambda size: dict(setup=setup, capacity=size[0], rows=size[1])
-    return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom),
-                   mode_of(config.compile_ahead) if setup.devices == 1 else None)
+    mode = mode_of(config.compile_ahead) if setup.devices == 1 else None
+    return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom), mode,
+                   lowering() if setup.devices == 1 and mode != "process" else None)
 
 
 @dataclasses.dataclass

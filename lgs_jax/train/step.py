@@ -41,7 +41,7 @@ import optax
 
 from ..config import RasterConfig
 from ..render import next_pow2, render, render_growing
-from . import appearance, camera_opt, sharded, view_params
+from . import appearance, camera_opt, exports, sharded, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
@@ -50,6 +50,16 @@ from .strategy import StepInfo
 
 # module docstring; no effect on a CPU; read-only (jit keeps a reference)
 COMPILER_OPTIONS = types.MappingProxyType({"xla_gpu_autotune_level": 0})
+
+
+def lowering() -> exports.Lowering | None:
+    """How `train_step`'s programs are lowered on one device: through export entries in the
+    persistent cache's directory (`exports`), with the step's donated state (its first four
+    arguments) and compiler options; None (`train_step` called) where no cache is set."""
+    if exports.directory() is None:
+        return None
+    return exports.Lowering(exports.directory(), donate=(0, 1, 2, 3),
+                            compiler_options=dict(COMPILER_OPTIONS))
 
 
 def _finite(tree, active) -> jax.Array:
@@ -221,10 +231,11 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, views,
     metrics): loss, psnr (training views), ok (finite), overflow, pairs (largest
     per-view pair count), row_overflow, walked (largest per-view count of walked pairs), fits
-    (no buffer overflowed), count (active Gaussians). With `setup.gaussian_devices` > 1 (`sharded`): the state's rows split
-    over that many devices, `slots` the slot each row holds, `exchange` the records each device
-    can send another; pairs are per device, and row_overflow and walked give way to
-    exchange_overflow and exchange_required (`sharded.buffer_metrics`). The step applies
+    (no buffer overflowed), count (active Gaussians). With `setup.gaussian_devices` > 1
+    (`sharded`): the state's rows split over that many devices, `slots` the slot each row
+    holds, `exchange` the records each device can send another; pairs are per device, and
+    row_overflow and walked give way to exchange_overflow and exchange_required
+    (`sharded.buffer_metrics`). The step applies
     where ok, nothing overflowed and `go` (a bool scalar: `fit` passes the previous step's
     fits, so that a step dispatched before the previous one's metrics were read changes
     nothing where that one must be redone); else it returns its state unchanged. The state

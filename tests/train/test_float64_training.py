@@ -57,13 +57,12 @@ def _worst(a: dict, b: dict) -> float:
 
 
 def test_float64_gradients_agree_across_backends(skull, tmp_path):
-    """tiles, reference and pallas (three algorithms; pallas compiled on a GPU, interpreted
-    elsewhere) in float64: gradients within 1e-9 of each other, every one
-    float64. Any in float32 differs from them by 1e-6 of the largest and more, so the bound
-    tells float32 arithmetic anywhere in any path."""
-    f64 = {b: _grads(skull, tmp_path, b, "float64") for b in ("tiles", "reference", "pallas")}
+    """tiles and pallas (two algorithms; pallas compiled on a GPU, interpreted elsewhere) in
+    float64: gradients within 1e-9 of each other, every one float64. Either in float32 differs
+    from them by 1e-6 of the largest and more, so the bound tells float32 arithmetic anywhere
+    in either path (`reference` against `tiles` in float64: tests/backends/test_gradients.py)."""
+    f64 = {b: _grads(skull, tmp_path, b, "float64") for b in ("tiles", "pallas")}
     assert all(v.dtype == np.float64 for g in f64.values() for v in g.values())
-    assert _worst(f64["tiles"], f64["reference"]) < 1e-9
     assert _worst(f64["pallas"], f64["tiles"]) < 1e-9
 
 
