@@ -261,8 +261,9 @@ def test_readme_test_command_is_what_ci_runs():
 
 def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
     """The command line turns JAX's persistent compilation cache on (LGS_JAX_CACHE, "" for off)
-    for every program, however quick its compile, and keeps a folder the caller configured
-    (here: the test session's) with the caller's settings."""
+    for every program, however quick its compile, capped and so locked (shared safely), and
+    keeps a folder the caller configured (here: the test session's) with the caller's
+    settings."""
     import jax
 
     from lgs_jax.cli import use_compile_cache
@@ -280,6 +281,7 @@ def test_commands_use_the_persistent_compile_cache(tmp_path, monkeypatch):
         assert use_compile_cache() == str(tmp_path / "cache")
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "cache")
         assert jax.config.jax_persistent_cache_min_compile_time_secs == 0
+        assert jax.config.jax_compilation_cache_max_size == cli.commands.CACHE_MAX_BYTES
     finally:
         jax.config.update("jax_compilation_cache_dir", session)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", least)

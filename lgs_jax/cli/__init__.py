@@ -2,6 +2,6 @@
 video, view, eval; `fit` is generated from `lgs_jax.train.FitConfig` by `options`); `args` holds
 the pieces they share."""
 
-from .commands import main, parser, use_compile_cache
+from .commands import cache_into, main, parser, use_compile_cache
 
-__all__ = ["main", "parser", "use_compile_cache"]
+__all__ = ["cache_into", "main", "parser", "use_compile_cache"]

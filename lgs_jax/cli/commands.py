@@ -166,6 +166,24 @@ def _one_line(e: BaseException) -> str:
     return " ".join(text.split())
 
 
+CACHE_MAX_BYTES = 16 << 30
+"""The persistent cache's size cap. With a cap JAX evicts the least recently used entries and
+locks the folder around each read and write (the filelock package); without one it writes an
+entry in place, unlocked, and a process sharing the folder (a second run, a test worker) can
+read an entry still being written and crash loading it."""
+
+
+def cache_into(path: str, least_seconds: float = 0.0) -> None:
+    """JAX's persistent compilation cache in `path`: programs that took `least_seconds` or
+    more to compile, the folder capped at `CACHE_MAX_BYTES` and locked around each access, so
+    that processes may share it."""
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", least_seconds)
+    jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
+
+
 def use_compile_cache() -> str | None:
     """Turn on JAX's persistent compilation cache for the command and return its folder: a
     later run with the same shapes loads its programs instead of compiling them again, every
@@ -173,7 +191,7 @@ def use_compile_cache() -> str | None:
     more; a run's dozens of small programs, the eager operations' included, each compile in a
     fraction of a second). The folder is $LGS_JAX_CACHE, else ~/.cache/lgs_jax/jax;
     LGS_JAX_CACHE="" turns it off; a folder the caller already configured
-    (`jax_compilation_cache_dir`) is kept, with the caller's settings."""
+    (`jax_compilation_cache_dir`) is kept, with the caller's settings. `cache_into` sets it."""
     import jax
 
     if jax.config.jax_compilation_cache_dir:
@@ -182,8 +200,7 @@ def use_compile_cache() -> str | None:
                           os.path.join(os.path.expanduser("~"), ".cache", "lgs_jax", "jax"))
     if not path:
         return None
-    jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+    cache_into(path)
     return path
 
 

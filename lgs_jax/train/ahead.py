@@ -48,7 +48,7 @@ SWITCH_INTERVAL = 1e-4  # seconds: Python's thread switch interval while a threa
 # JAX settings a child compile must share with this process for its cache entry to be the one
 # this process looks up (the cache's key covers the program, the devices and the options).
 SHARED_CONFIG = ("jax_enable_x64", "jax_compilation_cache_dir", "jax_platforms",
-                 "jax_persistent_cache_min_compile_time_secs",
+                 "jax_persistent_cache_min_compile_time_secs", "jax_compilation_cache_max_size",
                  "jax_persistent_cache_min_entry_size_bytes", "jax_default_matmul_precision")
 
 

@@ -26,8 +26,9 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 if os.environ.get("LGS_JAX_CACHE"):
-    jax.config.update("jax_compilation_cache_dir", os.environ["LGS_JAX_CACHE"])
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    from lgs_jax.cli import cache_into  # the parent's lock (its test workers share the folder)
+
+    cache_into(os.environ["LGS_JAX_CACHE"], least_seconds=0.5)
 
 import jax.numpy as jnp  # noqa: E402
 import lgs_jax  # noqa: E402
