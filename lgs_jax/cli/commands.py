@@ -169,8 +169,9 @@ def _one_line(e: BaseException) -> str:
 CACHE_MAX_BYTES = 16 << 30
 """The persistent cache's size cap. With a cap JAX evicts the least recently used entries and
 locks the folder around each read and write (the filelock package); without one it writes an
-entry in place, unlocked, and a process sharing the folder (a second run, a test worker) can
-read an entry still being written and crash loading it."""
+entry in place, unlocked, and a process sharing the folder (a second run) can read an entry
+still being written and crash loading it. The cost: each write scans the folder (a
+fraction of a second for thousands of entries)."""
 
 
 def cache_into(path: str, least_seconds: float = 0.0) -> None:
