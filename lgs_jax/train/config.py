@@ -192,7 +192,7 @@ class FitConfig:
         "float32", "the arithmetic of training: the Gaussians, their optimizer state, the "
                    "images, the renders and their gradients, the loss (float64 needs "
                    "jax_enable_x64, which the command line turns on; every backend "
-                   "computes in it, pallas with its Triton kernels on a GPU)")
+                   "computes in it)")
     devices: int = option(1, "split each step's views across this many devices (data "
                              "parallel; --batch a multiple of it)", low=1)
     gaussian_devices: int = option(

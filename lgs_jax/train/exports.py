@@ -83,8 +83,12 @@ class Lowering:
     def __call__(self, fn, abstract, static: dict):
         if self.directory is None:
             return fn.lower(*abstract, **static)
+        return self._lowered(fn, abstract, static, key(_name(fn), abstract, static))
+
+    def _lowered(self, fn, abstract, static: dict, entry: str):
+        """`self(...)` with a directory, for the program whose key is `entry`."""
         try:
-            exported, out_tree = self._exported(fn, abstract, static)
+            exported, out_tree = self._exported(fn, abstract, static, entry)
 
             def call(*args):
                 return jax.tree.unflatten(out_tree, exported.call(*jax.tree.leaves(args)))
@@ -104,25 +108,27 @@ class Lowering:
     def compiled(self, fn, abstract, static: dict):
         """`self(fn, abstract, static).compile()`, or the executable this process compiled
         for the same program before (the `KEPT` latest kept)."""
-        memo = (key(_name(fn), abstract, static), self.directory, self.donate,
-                repr(self.compiler_options))
+        entry = key(_name(fn), abstract, static)
+        memo = (entry, self.directory, self.donate, repr(self.compiler_options))
         with _lock:
             if memo in _executables:
                 _executables.move_to_end(memo)
                 return _executables[memo]
-        executable = self(fn, abstract, static).compile()
+        lowered = (fn.lower(*abstract, **static) if self.directory is None
+                   else self._lowered(fn, abstract, static, entry))
+        executable = lowered.compile()
         with _lock:
             _executables[memo] = executable
             while len(_executables) > KEPT:
                 _executables.popitem(last=False)
         return executable
 
-    def _exported(self, fn, abstract, static: dict):
+    def _exported(self, fn, abstract, static: dict, entry: str):
         """(`Exported` of `fn` on the arguments' leaves, the tree of its outputs): read from
         the entry, or exported and written (atomically: a concurrent run reads a whole entry
         or none). The program is exported over flat leaves, so that the entry holds no
         pytree types (their tree is pickled beside it)."""
-        path = os.path.join(self.directory, key(_name(fn), abstract, static) + ".export")
+        path = os.path.join(self.directory, entry + ".export")
         if os.path.exists(path):
             with open(path, "rb") as f:
                 out_tree, blob = pickle.load(f)
