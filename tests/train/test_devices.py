@@ -104,7 +104,8 @@ def test_a_run_on_several_devices_compares_its_checkpoint():
     # counted as the default recipe's (batch 1): which a run's devices need not split
     from lgs_jax.train import checkpoint
 
-    config = train.FitConfig(data="unused", out="o", recipe=train.Recipe(batch=2), devices=2)
+    config = train.FitConfig(data="unused", out="o", recipe=train.Recipe(batch=2), devices=2,
+                             gaussian_devices=2)
     defaults = checkpoint.default_config(config)
     assert defaults["settings"]["batch"] == 1
     assert checkpoint.config_mismatch(checkpoint.config_of(config),
