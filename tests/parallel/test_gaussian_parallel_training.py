@@ -12,8 +12,8 @@ one checkpoint and one scene.ply; trained on every view, with an evaluation due 
 step, the runs evaluate nothing (the default set's check of a fit without held-out views:
 test_train.py's own such fit is in the slow set). The slow set runs the whole run (one view
 per step) on 2 and on 4 devices (the first step's loss, held-out views rendered sharded), and
-MCMC with the views' own parameters on 2. A mesh needing more devices than there are, or a
-batch its rows split unevenly, is refused by field name.
+MCMC with the views' own parameters on 2 devices and on a 2 x 2 mesh. A mesh needing more
+devices than there are, or a batch its rows split unevenly, is refused by field name.
 
 The runs happen in one child process (tests/parallel/training_child.py: JAX simulates 4
 devices only when told before it starts); the test here checks their folders."""
@@ -175,13 +175,17 @@ def test_gaussian_parallel_training(tmp_path):
 def test_gaussian_parallel_training_on_two_and_four_devices(tmp_path):
     logs = _run_child(tmp_path, "slow")
     _same_scene(tmp_path, logs, ["d2", "d4"], BATCH["slow"])
-    _balanced(tmp_path, ["d2", "d4", "mcmc_views_d2"], 6)
-    # MCMC with the views' poses, colours and bilateral grids on 2 devices: n + n // 20 at
-    # each refinement, every step applied
-    rows = [r for r in _rows(tmp_path / "mcmc_views_d2") if "loss" in r]
-    assert [r["gaussians"] for r in rows] == [301] * 3 + [316] * 3 + [331] * 2
-    assert all(np.isfinite(r["loss"]) for r in rows)
-    assert json.load(open(tmp_path / "mcmc_views_d2" / "result.json"))["skipped_steps"] == 0
+    mcmc = ["mcmc_views_d2", "mcmc_views_2x2"]
+    _balanced(tmp_path, ["d2", "d4", *mcmc], 8)
+    # MCMC with the views' poses, colours and bilateral grids on 2 devices and on a 2 x 2 mesh
+    # (two views per step): n + n // 20 at each refinement, every step applied
+    for run in mcmc:
+        rows = [r for r in _rows(tmp_path / run) if "loss" in r]
+        assert [r["gaussians"] for r in rows] == [301] * 3 + [316] * 3 + [331] * 2, run
+        assert all(np.isfinite(r["loss"]) for r in rows), run
+        result = json.load(open(tmp_path / run / "result.json"))
+        assert result["skipped_steps"] == 0 and np.isfinite(result["heldout_psnr"]), run
+    assert (tmp_path / "mcmc_views_2x2" / "heldout_v0.png").exists()
     # the held-out view rendered sharded (`sharded_state.Evaluations`) and saved
     psnr = [json.load(open(tmp_path / run / "result.json"))["heldout_psnr"]
             for run in ("d1", "d2", "d4")]

@@ -10,7 +10,8 @@ per row), the latter with buffers sized at the first view's needs exactly (they 
 grow), all on every view (nothing held out, an evaluation due at every step), then each
 strategy's refinement of one state on 1 and 4 devices (`refinements`); "slow", one view per
 step, the same run on 1, 2 and 4 devices, view 0 held out and evaluated, and an MCMC run on 2
-devices optimizing the views' poses, colours and bilateral grids. Few compiles (each costs
+devices optimizing the views' poses, colours and bilateral grids, and on a 2 x 2 mesh (two
+views per step). Few compiles (each costs
 seconds on a CPU): the runs share one configuration (`RECIPE`, the part's `BATCH`) but for
 their devices and buffers."""
 
@@ -52,7 +53,7 @@ STRATEGY = train.DefaultStrategy(refine_start_iter=2, refine_every=3, grow_grad2
 REFINED = dict(  # `STRATEGY` (its one-device program compiled by the runs) and MCMC's
     default=STRATEGY, mcmc=train.MCMCStrategy(refine_start_iter=0, refine_every=1, cap_max=400))
 PARTS = dict(fast=("d1", "d1_resumed_on_2x2"),
-             slow=("d1", "d2", "d4", "mcmc_views_d2"))
+             slow=("d1", "d2", "d4", "mcmc_views_d2", "mcmc_views_2x2"))
 # SH degree 0: within the runs' steps the higher bands are masked anyway (`Recipe.sh_every`),
 # and their evaluation costs each step's compile a third more; the fast part's two views per
 # step split over the 2 rows of its 2 x 2 mesh
@@ -154,8 +155,11 @@ def main(out: str, part: str):
         fit("d1", 1)
         fit("d2", 2)
         fit("d4", 4)
-        fit("mcmc_views_d2", 2, strategy=MCMC, recipe=dataclasses.replace(
-            RECIPE, pose_opt=True, color_opt=True, bilateral_grid=True))
+        views = dataclasses.replace(RECIPE, pose_opt=True, color_opt=True, bilateral_grid=True)
+        fit("mcmc_views_d2", 2, strategy=MCMC, recipe=views)
+        # and on a 2 x 2 mesh, a view per row (the held-out view rendered on both rows)
+        fit("mcmc_views_2x2", 2, devices=2, strategy=MCMC,
+            recipe=dataclasses.replace(views, batch=2))
     else:
         stop = lambda step, *_: step == HALF and os.kill(os.getpid(), signal.SIGINT)
         try:
