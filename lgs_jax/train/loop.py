@@ -220,18 +220,18 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
 
 
 def _place(setup: Setup, st: RunState) -> None:
-    """A data-parallel run's state whole on each of its devices (`step.replicated`), a
+    """No array in two places of the run's state (`step.distinct`: the step donates the state;
+    a state built outside the step, at the start or by a refinement, may share one; copied
+    first, as `jax.device_put` of one array twice gives two arrays of one buffer), then a
+    data-parallel run's state whole on each of its devices (`step.replicated`), a
     Gaussian-parallel run's in blocks over its mesh (`sharded`); a no-op where it is already,
-    and for one device. Then no array in two places of it (`step.distinct`: the step donates
-    the state; a state built outside the step, at the start or by a refinement, may share
-    one)."""
+    and for one device."""
+    st.pool, st.opt_state, st.strategy_state, st.views = distinct(st.saved)
     if setup.gaussian_devices > 1:
         (st.pool, st.opt_state, st.strategy_state), st.views = sharded_state.place(
             mesh_of(setup), (st.pool, st.opt_state, st.strategy_state), st.views)
     elif (where := replicated(setup)) is not None:
         st.pool, st.opt_state, st.strategy_state, st.views = jax.device_put(st.saved, where)
-    st.pool, st.opt_state, st.strategy_state, st.views = distinct(
-        (st.pool, st.opt_state, st.strategy_state, st.views))
 
 
 def _refine(run: _Run) -> int:
