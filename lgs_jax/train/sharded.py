@@ -85,10 +85,11 @@ def shardings(m: jax.sharding.Mesh, parts: tuple, size: int, views=None):
     """The shardings on mesh `m` of a run's (pool, opt_state, strategy_state) with `size` rows
     and of its views' parameters `views`: per-Gaussian leaves (leading axis `size`, as
     `pool.per_gaussian` finds them) in blocks over "gaussians" (whole along "views"), the rest
-    (counts, the scene scale, the views' parameters) whole on every device. Returns
-    (parts', views')."""
+    (counts, the scene scale, the views' parameters, and empty leaves, as the higher SH bands
+    of degree 0, whose blocks XLA gives back whole: one sharding, one compile) whole on every
+    device. Returns (parts', views')."""
     rows = jax.tree.map(lambda x: x if isinstance(x, NamedSharding) else whole(m),
-                        per_gaussian(parts, size, lambda _: blocks(m)))
+                        per_gaussian(parts, size, lambda x: blocks(m) if x.size else whole(m)))
     return rows, jax.tree.map(lambda _: whole(m), views)
 
 
