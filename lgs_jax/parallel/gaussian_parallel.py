@@ -192,7 +192,7 @@ def _render_sharded(g, cam, background, offsets, *, num: int, mesh, batched: boo
                             capacity=capacity, exchange_capacity=exchange_capacity)
     if batched:
         one = _over_views(one)
-    lead = (VIEWS,) if VIEWS in mesh.axis_names else (None,) if batched else ()
+    lead = ((VIEWS,) if VIEWS in mesh.axis_names else (None,)) if batched else ()
     split = P(*lead, GAUSSIANS)
     off_spec = None if offsets is None else split
     body = jax.shard_map(one, mesh=mesh, in_specs=(P(GAUSSIANS), P(*lead), P(), off_spec),
@@ -258,14 +258,13 @@ def count_sharded(shards: GaussianShards, camera: Camera, mesh, *, antialiased: 
 
 def _batch(camera: Camera, mesh) -> int | None:
     """Views in a batched camera (leaves with a leading axis), None for one camera; checked
-    against the mesh's "views" axis (which needs a batch it splits evenly)."""
+    against the mesh's "views" axis (which splits a batch evenly, or renders one camera on
+    every row)."""
     batch = None if np.ndim(camera.fx) == 0 else int(np.shape(camera.fx)[0])
     validate_camera(camera if batch is None else jax.tree.map(lambda x: x[0], camera))
-    if VIEWS in mesh.axis_names:
-        views = int(mesh.shape[VIEWS])
-        if batch is None or batch % views:
-            raise ValueError(f"camera: a mesh with {views} {VIEWS!r} splits a batch of cameras "
-                             f"evenly; got {'one camera' if batch is None else batch}")
+    if VIEWS in mesh.axis_names and batch is not None and batch % mesh.shape[VIEWS]:
+        raise ValueError(f"camera: a mesh with {mesh.shape[VIEWS]} {VIEWS!r} splits a batch of "
+                         f"cameras evenly; got {batch}")
     return batch
 
 
@@ -286,7 +285,8 @@ def render_sharded(shards: GaussianShards, camera: Camera, mesh, *, capacity: in
       shards: the scene (`shard_gaussians(g, mesh)`).
       camera: a `Camera`, or a batch of them (leaves with a leading view axis: then every
         output has one). A mesh with a "views" axis (`gaussian_mesh(d, views=v)`) splits the
-        batch over its rows (data parallelism over views), each row a replica of the scene.
+        batch over its rows (data parallelism over views), each row a replica of the scene;
+        one camera is rendered on every row (the outputs whole along "views").
       mesh: the device mesh the shards live on.
       capacity: the pair buffer of each device. None (eager only, one camera): counted first
         (`count_sharded`), then rounded up with `render.pair_capacity`. Under jit/grad pass an

@@ -47,11 +47,13 @@ def config_of(config) -> dict:
 
 def default_config(config) -> dict:
     """`config_of` the default recipe and strategy (of config's strategy type): what a field
-    that a checkpoint predates counts as (`config_mismatch`)."""
+    that a checkpoint predates counts as (`config_mismatch`). On one device: the default
+    recipe's batch need not split over config's devices."""
     from .config import Recipe
 
     return config_of(dataclasses.replace(config, recipe=Recipe(),
-                                         strategy=type(config.strategy)()))
+                                         strategy=type(config.strategy)(), devices=1,
+                                         gaussian_devices=1))
 
 
 def data_of(config, data_path: str) -> dict:

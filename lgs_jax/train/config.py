@@ -194,12 +194,13 @@ class FitConfig:
                    "jax_enable_x64, which the command line turns on; every backend "
                    "computes in it)")
     devices: int = option(1, "split each step's views across this many devices (data "
-                             "parallel; --batch a multiple of it)", low=1)
+                             "parallel; --batch a multiple of it); with --gaussian-devices D, "
+                             "across this many rows of D devices each", low=1)
     gaussian_devices: int = option(
         1, "split the Gaussians and their optimizer state across this many devices (Gaussian "
            "parallel, for scenes larger than one device: one model, one checkpoint; "
            "docs/multi-gpu.md); the same results as one device up to the rounding of the "
-           "gradients' sums", low=1)
+           "gradients' sums; with --devices V, a mesh of V x D devices", low=1)
     pair_headroom: float = option(
         3.0, "pair buffer size as a multiple of a view's pairs, at the start and at each "
              "growth (a recompile); larger: fewer recompiles, larger buffers", low=1)
@@ -253,9 +254,7 @@ def gaussian_parallel_problem(config: FitConfig) -> None:
     (`gaussian_devices` > 1, `lgs_jax.train.sharded`) does not combine with."""
     if config.gaussian_devices == 1:
         return
-    refused = [("devices", config.devices > 1, "a mesh of views x Gaussians is not built for "
-                                               "training"),
-               ("recipe.app_opt", config.recipe.app_opt, "each view's colours of every "
+    refused = [("recipe.app_opt", config.recipe.app_opt, "each view's colours of every "
                                                          "Gaussian are not built sharded"),
                ("row_headroom", config.row_headroom is not None, "the sharded render keeps a "
                                                                  "backward row per pair slot"),
@@ -269,12 +268,29 @@ def gaussian_parallel_problem(config: FitConfig) -> None:
                              f"({why})")
 
 
+def devices_problem(config: FitConfig) -> None:
+    """Raise `ValueError` naming the field where the run's mesh, `devices` x
+    `gaussian_devices`, needs more devices than `jax.devices()` has."""
+    have, kind = len(jax.devices()), jax.default_backend()
+    for name, count in (("devices", config.devices), ("gaussian_devices",
+                                                      config.gaussian_devices)):
+        if count > have:
+            raise ValueError(f"{name}: expected an int from 1 to {have} (the {kind} devices "
+                             f"here), got {count!r}")
+    need = config.devices * config.gaussian_devices
+    if need > have:
+        raise ValueError(f"devices, gaussian_devices: a mesh of {config.devices} x "
+                         f"{config.gaussian_devices} needs {need} devices; there are {have} "
+                         f"{kind} devices here")
+
+
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """What the jitted functions of one run depend on statically (hashable): the recipe, the
     strategy, the run length (the means' schedule), the scene scale, the backend, the
     devices a step's views are split across (data parallel: `step.over_views`) and those its
-    Gaussians are split across (Gaussian parallel: `sharded`). Raises `ValueError` for a
+    Gaussians are split across (Gaussian parallel: `sharded`; both: the views split over the
+    rows of a `devices` x `gaussian_devices` mesh, `sharded.mesh_of`). Raises `ValueError` for a
     `recipe.alpha_form` that `backend` does not compute."""
 
     recipe: Recipe = Recipe()

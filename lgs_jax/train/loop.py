@@ -41,11 +41,12 @@ from . import heldout, outputs, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
 from .rundir import claimed
-from .config import FitConfig, Setup
+from .config import FitConfig, Setup, devices_problem
 from .early_stop import EarlyStop
 from .feed import RunData, nbytes, prepare, streams
 from .interrupt import Interrupted, StopRequest
 from .levels import LevelFeed, check as check_levels
+from .sharded import mesh_of
 from .state import RunState
 from .step import distinct, lowering, refine, replicated, train_step
 
@@ -96,7 +97,7 @@ class _Run:
         self.key = jax.random.key(self.config.seed)
         self.background = jnp.asarray(self.rd.background)
         self.go = jnp.ones((), bool)  # `train_step`'s go where the previous step was read
-        if (where := replicated(self.setup.devices)) is not None:
+        if (where := replicated(self.setup)) is not None:
             self.go = jax.device_put(self.go, where)
 
 
@@ -219,17 +220,18 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
 
 
 def _place(setup: Setup, st: RunState) -> None:
-    """A data-parallel run's state whole on each of its devices (`step.replicated`), a
-    Gaussian-parallel run's in blocks (`sharded`); a no-op where it is already, and for one
-    device. Then no array in two places of it (`step.distinct`: the step donates the state;
-    a state built outside the step, at the start or by a refinement, may share one)."""
+    """No array in two places of the run's state (`step.distinct`: the step donates the state;
+    a state built outside the step, at the start or by a refinement, may share one; copied
+    first, as `jax.device_put` of one array twice gives two arrays of one buffer), then a
+    data-parallel run's state whole on each of its devices (`step.replicated`), a
+    Gaussian-parallel run's in blocks over its mesh (`sharded`); a no-op where it is already,
+    and for one device."""
+    st.pool, st.opt_state, st.strategy_state, st.views = distinct(st.saved)
     if setup.gaussian_devices > 1:
         (st.pool, st.opt_state, st.strategy_state), st.views = sharded_state.place(
-            setup.gaussian_devices, (st.pool, st.opt_state, st.strategy_state), st.views)
-    elif (where := replicated(setup.devices)) is not None:
+            mesh_of(setup), (st.pool, st.opt_state, st.strategy_state), st.views)
+    elif (where := replicated(setup)) is not None:
         st.pool, st.opt_state, st.strategy_state, st.views = jax.device_put(st.saved, where)
-    st.pool, st.opt_state, st.strategy_state, st.views = distinct(
-        (st.pool, st.opt_state, st.strategy_state, st.views))
 
 
 def _refine(run: _Run) -> int:
@@ -239,7 +241,7 @@ def _refine(run: _Run) -> int:
     if setup.gaussian_devices > 1:
         st.strategy_state, st.pool, st.opt_state, rep, st.order = sharded_state.refine(
             setup.strategy, st.strategy_state, st.pool, st.opt_state, st.order, st.step,
-            run.key, run.config.max_gaussians, setup.gaussian_devices,
+            run.key, run.config.max_gaussians, mesh_of(setup),
             state.balance_cameras(run.rd), setup.recipe.antialiased)
     else:
         st.strategy_state, st.pool, st.opt_state, rep = refine(
@@ -276,10 +278,10 @@ class _Watch:
         pool = state.scene(st)
         # copies: the next step donates the pool, whose arrays `shown` may pass through
         g = jax.tree.map(jnp.copy, state.shown(pool.params, pool.active))
-        if self.devices > 1:  # replicated: one device's copy, no transfer
-            g = jax.tree.map(lambda x: x.addressable_data(0), g)
         if self.gathered:  # split over devices: the rows whole on the host
             g = jax.device_get(g)
+        elif self.devices > 1:  # replicated: one device's copy, no transfer
+            g = jax.tree.map(lambda x: x.addressable_data(0), g)
         self.fn(st.step, g, metrics)
         self.last = now
 
@@ -407,19 +409,13 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
     return busy
 
 
-def _check_hooks(watch, watch_every, devices: int, gaussian_devices: int = 1) -> None:
-    """Raise `ValueError` for a watch that is not callable, a bad watch_every, or more devices
-    than `jax.devices()` has."""
+def _check_hooks(watch, watch_every) -> None:
+    """Raise `ValueError` for a watch that is not callable or a bad watch_every."""
     if watch is not None and not callable(watch):
         raise ValueError(f"watch: expected None or a callable, got {type(watch).__name__}")
     if not (isinstance(watch_every, (int, float, np.integer, np.floating))
             and not isinstance(watch_every, bool) and watch_every >= 0):
         raise ValueError(f"watch_every: expected seconds >= 0, got {watch_every!r}")
-    have = len(jax.devices())
-    for name, count in (("devices", devices), ("gaussian_devices", gaussian_devices)):
-        if count > have:
-            raise ValueError(f"{name}: expected an int from 1 to {have} (the "
-                             f"{jax.default_backend()} devices here), got {count!r}")
 
 
 def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0,
@@ -451,7 +447,8 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
-    _check_hooks(watch, watch_every, config.devices, config.gaussian_devices)
+    _check_hooks(watch, watch_every)
+    devices_problem(config)
     mode_of(config.compile_ahead)  # checks "process" has its cache
     data_path = dataset.path if dataset is not None else config.data
     with claimed(config, data_path):

@@ -21,7 +21,8 @@ import numpy as np
 
 from ..io.cameras import save_cameras
 from ..io.ply import save_ply
-from . import appearance, bilateral_grid, camera_opt, color_opt, heldout, report, sharded_state
+from . import (appearance, bilateral_grid, camera_opt, color_opt, heldout, report, sharded,
+               sharded_state)
 from .config import Setup
 from .feed import RunData
 from ..files import written
@@ -43,7 +44,7 @@ def evaluate(st: RunState, rd: RunData, setup: Setup, out: str | None = None,
     else:
         render = render_views
         if setup.gaussian_devices > 1:
-            render = functools.partial(sharded_state.render_views, setup.gaussian_devices)
+            render = functools.partial(sharded_state.render_views, sharded.mesh_of(setup))
         images, st.eval_capacity = render(scene(st), rd.test_cams, jnp.asarray(rd.background),
                                           setup.backend, st.eval_capacity, setup.recipe.raster)
     if out:

@@ -2,10 +2,16 @@
 moments and its strategy's accumulators split over D devices, rendered through
 `lgs_jax.parallel` (docs/multi-gpu.md).
 
+The mesh (`mesh`, `mesh_of`). D devices along "gaussians"; with `FitConfig.devices` = V > 1
+too, V x D devices, V rows ("views") of D: every row holds the whole state split in the same D
+blocks (whole along "views"), and renders its share of each step's batch of views (B/V of
+them, B a multiple of V). Every sharding of the run is built from the mesh (`whole`, `blocks`,
+`shardings`).
+
 Slots and rows. A run's slots are those of the one-device run: where a refinement puts each new
 Gaussian (`ops.allocate`), which random numbers each slot draws. On D devices the slots are
 stored permuted: row j of every per-Gaussian array holds slot order[j], and the rows are split
-in D contiguous blocks over the mesh axis "gaussians" (`parallel.gaussian_mesh(D)`).
+in D contiguous blocks over the mesh axis "gaussians".
 `parallel.balance.balanced_order(active, D)` picks the order: every block holds an equal share
 of the active Gaussians (within one: each device sends about as many records to each band, so
 the exchange's buffers stay small), and the active Gaussians keep their relative order (the
@@ -13,22 +19,30 @@ render's tie-break, and scene.ply's order). The run state carries `order`
 (`lgs_jax.train.sharded_state` places, refines and saves it).
 
 The step (`step.train_step` with `Setup.gaussian_devices` = D): the views are rendered by
-`parallel.render_sharded` (`render_views`), each device compositing its band of image rows from
-the projected records the others send it; the images are then gathered whole on every device
-(`with_sharding_constraint`) and the loss is the one-device function of the whole image
-(compiled in another program: its sums may round differently). The gradient flows back through the exchange to
-the rows that sent the records; Adam and the strategies' per-step updates are elementwise, so
-each device updates its own block in place. Random numbers drawn per slot (MCMC's noise on the
-means) are taken in slot order (`StepInfo.slots`), so every slot draws what it draws on one
+`parallel.render_sharded` (`render_views`; each row of the mesh its share of the views), each
+device compositing its band of image rows from the projected records the others of its row
+send it; the images are then gathered whole on every device (`with_sharding_constraint`) and
+the loss is the one-device function of the whole images (compiled in another program: its sums
+may round differently), their mean over the batch. The gradient flows back through the
+exchange to the rows that sent the records; JAX's transpose of the `shard_map` sums each
+block's gradient over the rows of the mesh (a psum over "views", the only communication the
+views add). Adam and the strategies' per-step updates are elementwise over the Gaussians, so
+each device updates its own block in place, every row the same (a strategy's sum over the
+batch's views, as the default strategy's screen gradients, is summed per row, then across
+rows). Random numbers drawn per slot (MCMC's noise on
+the means) are taken in slot order (`StepInfo.slots`), so every slot draws what it draws on one
 device.
 
-Determinism. The forward is the one-device bits. Each Gaussian's gradient with respect to its
-projected fields is the same K tile rows summed in another order (one per band, then across
-bands), within 2·γ_(K−1)·Σ_t |r_t| of the one-device sum (lgs_jax.parallel.gaussian_parallel);
-Adam's scale-free update turns such a difference, where a gradient is within rounding of zero,
-into up to a learning rate, so runs on different device counts whose refinements decide the
-same stay within `drift_bound` of each other (docs/multi-gpu.md), not to the bit. Everything else (the strategies' updates,
-refinements, the layout) is elementwise or exact.
+Determinism. The forward is the one-device bits, on any mesh. Each Gaussian's gradient with
+respect to its projected fields is the same K tile rows summed in another order (one per band,
+then across bands), within 2·γ_(K−1)·Σ_t |r_t| of the one-device sum
+(lgs_jax.parallel.gaussian_parallel); on V rows, the views' gradients (and the strategies'
+sums over views) are summed per row, then across rows: one more re-association of the batch's
+sum. Adam's scale-free update turns such a
+difference, where a gradient is within rounding of zero, into up to a learning rate, so runs on
+different meshes whose refinements decide the same stay within `drift_bound` of each other
+(docs/multi-gpu.md), not to the bit. Everything else (the strategies' updates, refinements, the
+layout) is elementwise or exact.
 """
 
 from __future__ import annotations
@@ -44,48 +58,60 @@ from .pool import per_gaussian
 
 
 @functools.cache
-def mesh(devices: int) -> jax.sharding.Mesh:
-    """The 1-D mesh "gaussians" over the first `devices` devices (`parallel.gaussian_mesh`)."""
-    return parallel.gaussian_mesh(devices)
+def mesh(gaussians: int, views: int = 1) -> jax.sharding.Mesh:
+    """The mesh of a run over `views` x `gaussians` devices, the first ones of `jax.devices()`
+    (`parallel.gaussian_mesh`): 1-D ("gaussians",) for one view row, else 2-D ("views",
+    "gaussians"), each row of the mesh a replica of the pool split `gaussians` ways."""
+    return parallel.gaussian_mesh(gaussians, views)
 
 
-def whole(devices: int) -> NamedSharding:
-    """Whole on every device of `mesh(devices)`."""
-    return NamedSharding(mesh(devices), PartitionSpec())
+def mesh_of(config) -> jax.sharding.Mesh:
+    """`mesh(config.gaussian_devices, config.devices)`: the mesh of a run of `config` (a
+    `FitConfig` or a `Setup`)."""
+    return mesh(config.gaussian_devices, config.devices)
 
 
-def blocks(devices: int) -> NamedSharding:
-    """Rows in contiguous blocks over `mesh(devices)`."""
-    return NamedSharding(mesh(devices), PartitionSpec(parallel.GAUSSIANS))
+def whole(m: jax.sharding.Mesh) -> NamedSharding:
+    """Whole on every device of mesh `m`."""
+    return NamedSharding(m, PartitionSpec())
 
 
-def shardings(devices: int, parts: tuple, size: int, views=None):
-    """The shardings of a run's (pool, opt_state, strategy_state) with `size` rows and of its
-    views' parameters `views`: per-Gaussian leaves (leading axis `size`, as
-    `pool.per_gaussian` finds them) in blocks over "gaussians", the rest (counts, the scene
-    scale, the views' parameters) whole on every device. Returns (parts', views')."""
-    rows = jax.tree.map(lambda x: x if isinstance(x, NamedSharding) else whole(devices),
-                        per_gaussian(parts, size, lambda _: blocks(devices)))
-    return rows, jax.tree.map(lambda _: whole(devices), views)
+def blocks(m: jax.sharding.Mesh) -> NamedSharding:
+    """Rows in contiguous blocks over `m`'s "gaussians", whole along "views"."""
+    return parallel.gaussian_sharding(m)
 
 
-def constrained(devices: int, parts: tuple, size: int, views=None):
-    """(parts, views) constrained (inside jit) to their `shardings`."""
-    rows, whole = shardings(devices, parts, size, views)
+def shardings(m: jax.sharding.Mesh, parts: tuple, size: int, views=None):
+    """The shardings on mesh `m` of a run's (pool, opt_state, strategy_state) with `size` rows
+    and of its views' parameters `views`: per-Gaussian leaves (leading axis `size`, as
+    `pool.per_gaussian` finds them) in blocks over "gaussians" (whole along "views"), the rest
+    (counts, the scene scale, the views' parameters, and empty leaves, as the higher SH bands
+    of degree 0, whose blocks XLA gives back whole: one sharding, one compile) whole on every
+    device. Returns (parts', views')."""
+    rows = jax.tree.map(lambda x: x if isinstance(x, NamedSharding) else whole(m),
+                        per_gaussian(parts, size, lambda x: blocks(m) if x.size else whole(m)))
+    return rows, jax.tree.map(lambda _: whole(m), views)
+
+
+def constrained(m: jax.sharding.Mesh, parts: tuple, size: int, views=None):
+    """(parts, views) constrained (inside jit) to their `shardings` on `m`."""
+    rows, everywhere = shardings(m, parts, size, views)
     return (jax.lax.with_sharding_constraint(parts, rows),
-            jax.lax.with_sharding_constraint(views, whole))
+            jax.lax.with_sharding_constraint(views, everywhere))
 
 
 def render_views(setup, capacity: int, exchange: int, g, cams, background, offsets):
     """The training render of a batch of views `cams` (stacked) of the rows `g` (split over
-    `mesh(setup.gaussian_devices)`), with screen `offsets` (B, rows, 2) or None: (images
-    (B, H, W, 3) whole on every device, `parallel.ShardedStats`, visible (B, rows))."""
-    d = setup.gaussian_devices
-    out = parallel.render_sharded(parallel.GaussianShards(g, g.num), cams, mesh(d),
+    `mesh_of(setup)`'s "gaussians"), with screen `offsets` (B, rows, 2) or None: (images
+    (B, H, W, 3) whole on every device, `parallel.ShardedStats`, visible (B, rows)). On a
+    mesh with "views" the batch is split over its rows, each row rendering its share
+    Gaussian-parallel (`parallel.render_sharded`)."""
+    m = mesh_of(setup)
+    out = parallel.render_sharded(parallel.GaussianShards(g, g.num), cams, m,
                                   capacity=capacity, exchange_capacity=exchange,
                                   background=background, backend=setup.backend,
                                   config=setup.recipe.raster, screen_offsets=offsets)
-    images = jax.lax.with_sharding_constraint(out.image, whole(d))
+    images = jax.lax.with_sharding_constraint(out.image, whole(m))
     return images, out.stats, out.visible
 
 

@@ -1,8 +1,9 @@
 """A Gaussian-parallel run's state (`sharded`: slots stored in rows permuted by `order`, split
-over D devices): placed balanced, refined in slot order, saved as the one-device run saves it,
-its buffers sized, its held-out views rendered sharded.
+over the D devices of a mesh's "gaussians" axis, whole along its "views" axis, if any): placed
+balanced, refined in slot order, saved as the one-device run saves it, its buffers sized, its
+held-out views rendered sharded. The functions take the run's mesh (`sharded.mesh`).
 
-- `balanced(devices, parts, weights)`: the rows of (pool, opt_state, strategy_state), given
+- `balanced(mesh, parts, weights)`: the rows of (pool, opt_state, strategy_state), given
   in slot order, permuted by `balance.balanced_order(active, D, weights)` and placed in blocks
   over the mesh; returns them and `order` (row j holds slot order[j]). The weights are `work`
   (per slot: Σ over a few training views, `balance_views`, of 1 + the Gaussian's tile pairs
@@ -33,7 +34,7 @@ from .. import parallel
 from ..config import RasterConfig
 from ..parallel.balance import balanced_order
 from ..binning import tile_rects
-from ..parallel.shards import padded_rows
+from ..parallel.shards import padded_rows, shard_count
 from ..projection import project
 from ..render import pair_capacity
 from . import heldout, sharded
@@ -44,11 +45,11 @@ shown = jax.jit(render_gaussians)
 _order = jax.jit(balanced_order, static_argnums=1)
 
 
-@functools.partial(jax.jit, static_argnames=("devices",))
-def _permuted(parts, order, *, devices: int):
+@functools.partial(jax.jit, static_argnames=("mesh",))
+def _permuted(parts, order, *, mesh):
     size = order.shape[0]
     out = per_gaussian(parts, size, lambda x: jnp.take(x, order, axis=0))
-    return sharded.constrained(devices, out, size)[0]
+    return sharded.constrained(mesh, out, size)[0]
 
 
 BALANCE_VIEWS = 8  # the most training views `balance_views` picks
@@ -78,12 +79,13 @@ def work(pool: Pool, cams: list, antialiased: bool) -> jax.Array:
     return total
 
 
-def balanced(devices: int, parts: tuple, weights=None):
-    """((pool, opt_state, strategy_state) with rows permuted by order and placed, order), from
-    `parts` in slot order (module docstring): the blocks balanced by `weights` (per slot, in
-    slot order: `work`), or by count without them."""
-    order = jax.device_put(_order(parts[0].active, devices, weights), sharded.blocks(devices))
-    return _permuted(parts, order, devices=devices), order
+def balanced(m, parts: tuple, weights=None):
+    """((pool, opt_state, strategy_state) with rows permuted by order and placed on mesh `m`
+    (`sharded.mesh`), order), from `parts` in slot order (module docstring): the blocks over
+    `m`'s "gaussians" balanced by `weights` (per slot, in slot order: `work`), or by count
+    without them."""
+    order = jax.device_put(_order(parts[0].active, shard_count(m), weights), sharded.blocks(m))
+    return _permuted(parts, order, mesh=m), order
 
 
 @jax.jit
@@ -93,31 +95,31 @@ def inverse(order):
                                                unique_indices=True)
 
 
-def in_slot_order(devices: int, parts: tuple, order) -> tuple:
-    """`parts` (rows permuted by `order`) in slot order, still in blocks over the mesh."""
-    return _permuted(parts, inverse(order), devices=devices)
+def in_slot_order(m, parts: tuple, order) -> tuple:
+    """`parts` (rows permuted by `order`) in slot order, still in blocks over mesh `m`."""
+    return _permuted(parts, inverse(order), mesh=m)
 
 
-def place(devices: int, parts: tuple, views):
-    """(parts, views) on the mesh as `sharded.shardings` says (no copy where they are)."""
-    rows, whole = sharded.shardings(devices, parts, parts[0].size, views)
+def place(m, parts: tuple, views):
+    """(parts, views) on mesh `m` as `sharded.shardings` says (no copy where they are)."""
+    rows, whole = sharded.shardings(m, parts, parts[0].size, views)
     return jax.device_put(parts, rows), jax.device_put(views, whole)
 
 
 def refine(strategy, strategy_state, pool: Pool, opt_state, order, step: int, key, cap: int,
-           devices: int, cams: list = (), antialiased: bool = False):
-    """`step.refine` of the state in slot order (module docstring), then balanced again by
-    `work` over `cams` (by count without them). Returns (strategy_state, pool, opt_state,
+           m, cams: list = (), antialiased: bool = False):
+    """`step.refine` of the state in slot order (module docstring) on mesh `m`, then balanced
+    again by `work` over `cams` (by count without them). Returns (strategy_state, pool, opt_state,
     report, order); the report's `per_device` lists the active Gaussians of each device's
     block, with cams `per_device_work` each block's work and `heaviest` the largest one
     Gaussian's (a block's work is within it of an equal share unless the block is full)."""
-    pool, opt_state, strategy_state = in_slot_order(devices, (pool, opt_state, strategy_state),
-                                                    order)
+    devices = shard_count(m)
+    pool, opt_state, strategy_state = in_slot_order(m, (pool, opt_state, strategy_state), order)
     strategy_state, pool, opt_state, report = step_mod.refine(
         strategy, strategy_state, pool, opt_state, step, key, cap, devices)
     weights = work(pool, cams, antialiased) if cams else None
-    (pool, opt_state, strategy_state), order = balanced(devices, (pool, opt_state,
-                                                                  strategy_state), weights)
+    (pool, opt_state, strategy_state), order = balanced(m, (pool, opt_state, strategy_state),
+                                                        weights)
     report["per_device"] = per_device(devices, pool)
     if cams:
         w = jnp.where(pool.active, jnp.take(weights, order), 0.0)  # in row order
@@ -146,34 +148,33 @@ def _shards(pool: Pool) -> parallel.GaussianShards:
     return parallel.GaussianShards(shown(pool.params, pool.active), pool.size)
 
 
-def counts(devices: int, pool: Pool, cams, antialiased: bool) -> tuple[int, int]:
-    """(pairs, records): the most pairs a device's render of any of `cams` needs and the most
-    records a device sends another (`parallel.count_sharded`)."""
-    shards, m = _shards(pool), sharded.mesh(devices)
+def counts(m, pool: Pool, cams, antialiased: bool) -> tuple[int, int]:
+    """(pairs, records): the most pairs a device of mesh `m` needs to render any of `cams` and
+    the most records a device sends another (`parallel.count_sharded`)."""
+    shards = _shards(pool)
     need = [parallel.count_sharded(shards, cam, m, antialiased=antialiased) for cam in cams]
     return max(p for _, p in need), max(x for x, _ in need)
 
 
-def first_sizes(devices: int, pool: Pool, cam, antialiased: bool,
-                headroom: float) -> tuple[int, int]:
-    """(pair capacity, exchange capacity) of a run's step: its first view's needs times
-    `headroom` (`render.pair_capacity`)."""
-    pairs, records = counts(devices, pool, [cam], antialiased)
+def first_sizes(m, pool: Pool, cam, antialiased: bool, headroom: float) -> tuple[int, int]:
+    """(pair capacity, exchange capacity) of a run's step on mesh `m`: its first view's needs
+    times `headroom` (`render.pair_capacity`)."""
+    pairs, records = counts(m, pool, [cam], antialiased)
     return pair_capacity(pairs, headroom), pair_capacity(records, headroom)
 
 
-@functools.partial(jax.jit, static_argnames=("devices", "backend", "capacity", "exchange",
+@functools.partial(jax.jit, static_argnames=("mesh", "backend", "capacity", "exchange",
                                              "config", "score"),
                    compiler_options=step_mod.COMPILER_OPTIONS)
-def _render(pool: Pool, cam, target, background, *, devices: int, backend: str, capacity: int,
+def _render(pool: Pool, cam, target, background, *, mesh, backend: str, capacity: int,
             exchange: int, config: RasterConfig, score: bool):
     """One held-out view of the pool: (PSNR, SSIM) against `target` with `score`, else the
-    image (H, W, 3) whole on every device; and whether a buffer overflowed."""
-    m = sharded.mesh(devices)
-    out = parallel.render_sharded(_shards(pool), cam, m, capacity=capacity,
+    image (H, W, 3) whole on every device; and whether a buffer overflowed. On a mesh with
+    "views" every row renders the view."""
+    out = parallel.render_sharded(_shards(pool), cam, mesh, capacity=capacity,
                                   exchange_capacity=exchange, background=background,
                                   backend=backend, config=config)
-    image = jax.lax.with_sharding_constraint(out.image, sharded.whole(devices))
+    image = jax.lax.with_sharding_constraint(out.image, sharded.whole(mesh))
     overflow = out.stats.overflow | out.stats.exchange_overflow
     if score:
         return (*heldout.view_scores(image, target), overflow)
@@ -181,7 +182,7 @@ def _render(pool: Pool, cam, target, background, *, devices: int, backend: str, 
 
 
 class Evaluations(heldout.Evaluations):
-    """`heldout.Evaluations` of a pool split over `devices` devices: the held-out renders
+    """`heldout.Evaluations` of a pool split over the run's mesh: the held-out renders
     through `parallel.render_sharded`, both buffers counted first and sized with the run's
     headroom."""
 
@@ -192,13 +193,13 @@ class Evaluations(heldout.Evaluations):
 
     def score(self, pool: Pool) -> tuple[float, float]:
         s = self.setup
-        pairs, records = counts(s.gaussian_devices, pool, self.cams, s.recipe.antialiased)
+        pairs, records = counts(sharded.mesh_of(s), pool, self.cams, s.recipe.antialiased)
         if pairs > self.capacity:
             self.capacity = pair_capacity(pairs, self.headroom)
         if records > self.exchange:
             self.exchange = pair_capacity(records, self.headroom)
         scores = jax.device_get([
-            _render(pool, cam, jnp.asarray(target), self.background, devices=s.gaussian_devices,
+            _render(pool, cam, jnp.asarray(target), self.background, mesh=sharded.mesh_of(s),
                     backend=s.backend, capacity=self.capacity, exchange=self.exchange,
                     config=s.recipe.raster, score=True)
             for cam, target in zip(self.cams, self.targets)])
@@ -208,21 +209,21 @@ class Evaluations(heldout.Evaluations):
                 float(np.mean([s for _, s, _ in scores])))
 
     def images(self, pool: Pool) -> list[np.ndarray]:
-        images, self.capacity = render_views(self.setup.gaussian_devices, pool, self.cams,
+        images, self.capacity = render_views(sharded.mesh_of(self.setup), pool, self.cams,
                                              self.background, self.setup.backend,
                                              self.capacity, self.setup.recipe.raster)
         return images
 
 
-def render_views(devices: int, pool: Pool, cams, background, backend: str, capacity: int,
+def render_views(m, pool: Pool, cams, background, backend: str, capacity: int,
                  config: RasterConfig = RasterConfig()):
-    """`step.render_views` of a pool split over `devices` devices: ([image (H, W, 3) numpy,
-    clipped to [0, 1]] per camera, capacity), the buffers counted first."""
-    pairs, records = counts(devices, pool, cams, config.antialiased)
+    """`step.render_views` of a pool split over mesh `m`: ([image (H, W, 3) numpy, clipped to
+    [0, 1]] per camera, capacity), the buffers counted first."""
+    pairs, records = counts(m, pool, cams, config.antialiased)
     capacity, exchange = max(capacity, pair_capacity(pairs)), pair_capacity(records)
     images = []
     for cam in cams:
-        image, overflow = _render(pool, cam, None, background, devices=devices, backend=backend,
+        image, overflow = _render(pool, cam, None, background, mesh=m, backend=backend,
                                   capacity=capacity, exchange=exchange, config=config,
                                   score=False)
         if bool(overflow):  # counted just before: cannot happen

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from ..io.ply import save_ply
 from ..backends import REGISTRY
 from ..render import count_pairs, next_pow2, pair_capacity, render
-from . import appearance, checkpoint, report, sharded_state, view_params
+from . import appearance, checkpoint, report, sharded, sharded_state, view_params
 from .config import FitConfig, Setup
 from ..files import written
 from .feed import RunData
@@ -123,16 +123,16 @@ def balance_cameras(rd: RunData) -> list:
 
 def _sharded(config: FitConfig, setup: Setup, rd: RunData, parts: tuple, step: int,
              eval_capacity: int | None, skipped: int = 0) -> RunState:
-    """The state of a run split over setup.gaussian_devices devices (`sharded_state`) from
-    `parts` (pool, opt_state, strategy_state, views) in slot order: the pool padded to equal
-    blocks, balanced (`sharded_state.work` over `balance_cameras`) and placed; both buffers
-    sized from the first training view."""
-    d = setup.gaussian_devices
-    padded = sharded_state.padded(parts[:3], d)
+    """The state of a run split over setup.gaussian_devices devices (`sharded_state`, on the
+    run's mesh `sharded.mesh_of(setup)`) from `parts` (pool, opt_state, strategy_state, views)
+    in slot order: the pool padded to equal blocks, balanced (`sharded_state.work` over
+    `balance_cameras`) and placed; both buffers sized from the first training view."""
+    m = sharded.mesh_of(setup)
+    padded = sharded_state.padded(parts[:3], setup.gaussian_devices)
     weights = sharded_state.work(padded[0], balance_cameras(rd), setup.recipe.antialiased)
-    (pool, opt_state, sstate), order = sharded_state.balanced(d, padded, weights)
-    views = sharded_state.place(d, (pool, opt_state, sstate), parts[3])[1]
-    capacity, exchange = sharded_state.first_sizes(d, pool, rd.train_camera(0),
+    (pool, opt_state, sstate), order = sharded_state.balanced(m, padded, weights)
+    views = sharded_state.place(m, (pool, opt_state, sstate), parts[3])[1]
+    capacity, exchange = sharded_state.first_sizes(m, pool, rd.train_camera(0),
                                                    setup.recipe.antialiased,
                                                    config.pair_headroom)
     return RunState(pool, opt_state, sstate, step, capacity,
@@ -174,7 +174,7 @@ def save(out: str, config: FitConfig, st: RunState, data: dict) -> None:
                 data=data)
     parts = st.saved
     if st.order is not None:
-        parts = (*sharded_state.in_slot_order(config.gaussian_devices, parts[:3], st.order),
+        parts = (*sharded_state.in_slot_order(sharded.mesh_of(config), parts[:3], st.order),
                  parts[3])
     checkpoint.save(out, parts, meta)
     with written(os.path.join(out, "scene.ply")) as tmp:

@@ -97,13 +97,17 @@ def mesh(devices: int):
                          axis_types=(jax.sharding.AxisType.Auto,))  # XLA moves the inputs
 
 
-def replicated(devices: int):
-    """Where a data-parallel run keeps its state: whole on every device of `mesh` (None for
-    one device). The steps' outputs are constrained to it and `fit` places its state there,
-    so that every step sees the shardings it was compiled for (no second compile)."""
-    if devices == 1:
+def replicated(setup: Setup):
+    """Where a run of `setup` keeps what every device holds whole (None on one device): on
+    every device of `mesh(setup.devices)` (data parallel: the whole state; the steps' outputs
+    are constrained to it and `fit` places its state there, so that every step sees the
+    shardings it was compiled for, no second compile), or of `sharded.mesh_of(setup)`
+    (Gaussian parallel: what is not split in blocks)."""
+    if setup.gaussian_devices > 1:
+        return sharded.whole(sharded.mesh_of(setup))
+    if setup.devices == 1:
         return None
-    return jax.sharding.NamedSharding(mesh(devices), jax.sharding.PartitionSpec())
+    return jax.sharding.NamedSharding(mesh(setup.devices), jax.sharding.PartitionSpec())
 
 
 def over_batch(fn):
@@ -159,8 +163,9 @@ def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, ca
     and correct their renders (`view_params.corrected`: colour maps, bilateral grids), or
     None; their regularizer (the grids' total variation) adds to the loss. With
     `setup.gaussian_devices` > 1 the pool's rows are split over that many devices and the views
-    are rendered by `sharded.render_views` with `exchange` records per device pair, the loss
-    taken on the whole images."""
+    are rendered by `sharded.render_views` with `exchange` records per device pair (with
+    `setup.devices` > 1 too, the views split over the rows of a mesh of `setup.devices` x
+    `setup.gaussian_devices`), the loss taken on the whole images."""
     s = setup
     num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
     bands = sh_mask(step, num_bases, s.recipe.sh_every)
@@ -271,12 +276,12 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     pool, opt_state, strategy_state, views = _select(
         ok & fits & go, (new_pool, new_opt, new_state, new_views),
         (pool, opt_state, strategy_state, views))
-    if setup.devices > 1:
-        pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
-            (pool, opt_state, strategy_state, views), replicated(setup.devices))
     if setup.gaussian_devices > 1:
         (pool, opt_state, strategy_state), views = sharded.constrained(
-            setup.gaussian_devices, (pool, opt_state, strategy_state), pool.size, views)
+            sharded.mesh_of(setup), (pool, opt_state, strategy_state), pool.size, views)
+    elif setup.devices > 1:
+        pool, opt_state, strategy_state, views = jax.lax.with_sharding_constraint(
+            (pool, opt_state, strategy_state, views), replicated(setup))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, **buffers, fits=fits,
                    count=jnp.sum(pool.active, dtype=jnp.int32))
     return pool, opt_state, strategy_state, views, metrics

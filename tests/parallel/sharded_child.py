@@ -177,7 +177,8 @@ def save_projected_bound(res: dict, tag: str, dtype, devices: int):
 def save_views_mesh(res: dict):
     """A 2 x 2 mesh ("views" x "gaussians"): a batch of 2 views of the float32 scene, from an
     exchange capacity of 2, which overflows (reported), then `render_sharded_growing` grows it;
-    and the one-device render of each view alone."""
+    one camera (the first view), rendered on both rows of the mesh; and the one-device render
+    of each view alone."""
     dtype = np.float32
     g, bg = scene(dtype), np.asarray(scenes.BACKGROUND, dtype)
     views = [scenes.camera(W, H, dtype=dtype, yaw=y) for y in (0.0, 0.15)]
@@ -207,9 +208,13 @@ def save_views_mesh(res: dict):
     one = jax.jit(lambda g, c, bg: outputs(lgs_jax.render(g, c, background=bg, backend="tiles",
                                                           capacity=CAPACITY)))
     alone = [one(g, c, bg) for c in views]
+    single, _ = sharded(shards.gaussians, views[0], bg, capacity=settled[0],
+                        exchange_capacity=settled[1])
     for k in out:
         res[f"views/sharded/{k}"] = np.asarray(out[k])
         res[f"views/one/{k}"] = np.stack([np.asarray(a[k]) for a in alone])
+        res[f"single/sharded/{k}"] = np.asarray(single[k])
+        res[f"single/one/{k}"] = np.asarray(alone[0][k])
 
 
 def save_eager(res: dict, devices: int = 4):

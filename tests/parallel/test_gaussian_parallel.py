@@ -2,7 +2,7 @@
 renders the bits of the one-device `render`, its gradients stay within the stated bound of the
 one-device gradients, uneven shards and bands change nothing, an exchange overflow is reported
 and grown out of, runs repeat their bits, and a 2 x 2 mesh (views x Gaussians) renders each view
-as `render` does.
+of a batch, and one camera on every row, as `render` does.
 
 The renders run in child processes (tests/parallel/sharded_child.py: JAX simulates 4 devices
 only when told before it starts); the cases here check their results."""
@@ -93,6 +93,10 @@ def test_gaussian_parallel_matches_one_device(tmp_path):
     assert res["growth/settled"].tolist() == [512, 16]
     _same_bits(res, "views/one", "views/sharded")
     assert np.array_equal(res["views/sharded/visible"][:, :N], res["views/one/visible"])
+    # one camera on the 2 x 2 mesh: every row renders it (a Gaussian-parallel run's held-out
+    # views), the bits of `render`
+    _same_bits(res, "single/one", "single/sharded")
+    assert np.array_equal(res["single/sharded/visible"][:N], res["single/one/visible"])
 
 
 def test_gaussian_parallel_gradients_within_the_bound(tmp_path):

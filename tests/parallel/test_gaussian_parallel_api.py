@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from jax.sharding import AbstractMesh
 
+import lgs_jax
 from lgs_jax import parallel
 from lgs_jax.parallel import ShardedStats
 from tests import scenes
@@ -17,16 +18,18 @@ def _shards(rows=8, num=7):
     return parallel.GaussianShards(g, num)
 
 
-@pytest.mark.parametrize("mesh,camera,match", [
-    (AbstractMesh((2,), ("x",)), None, "mesh: expected an axis named 'gaussians'"),
-    (AbstractMesh((3,), ("gaussians",)), None, "shards: 8 rows do not split into 3 equal"),
-    (AbstractMesh((2, 2), ("views", "gaussians")), None,
-     "camera: a mesh with 2 'views' splits a batch of cameras evenly; got one camera"),
-    (AbstractMesh((2,), ("gaussians",)), "brute", "backend: expected a tile backend"),
+@pytest.mark.parametrize("mesh,backend,views,match", [
+    (AbstractMesh((2,), ("x",)), None, None, "mesh: expected an axis named 'gaussians'"),
+    (AbstractMesh((3,), ("gaussians",)), None, None, "shards: 8 rows do not split into 3 equal"),
+    (AbstractMesh((2, 2), ("views", "gaussians")), None, 3,
+     "camera: a mesh with 2 'views' splits a batch of cameras evenly; got 3"),
+    (AbstractMesh((2,), ("gaussians",)), "brute", None, "backend: expected a tile backend"),
 ])
-def test_gaussian_parallel_refuses_bad_arguments(mesh, camera, match):
+def test_gaussian_parallel_refuses_bad_arguments(mesh, backend, views, match):
     cam = scenes.camera(dtype=np.float32)
-    kwargs = dict(backend=camera) if camera else {}
+    if views is not None:
+        cam = lgs_jax.stack_cameras([cam] * views)
+    kwargs = dict(backend=backend) if backend else {}
     with pytest.raises(ValueError, match=match):
         parallel.render_sharded(_shards(), cam, mesh, capacity=8, exchange_capacity=8, **kwargs)
 

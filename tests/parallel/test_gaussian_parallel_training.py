@@ -1,15 +1,19 @@
-"""Gaussian-parallel training (`fit` with gaussian_devices, lgs_jax.train.sharded): a run
-stopped on one device and resumed on 2 simulated CPU devices, with buffers that overflow and
-grow, gives the scene of the same run on one device within the stated bound (the forward is the
-same bits; the gradients' sums are re-associated and Adam carries the difference at most a
-learning rate per step); its refinements decide the same and keep the blocks balanced by work
+"""Gaussian-parallel training (`fit` with gaussian_devices, lgs_jax.train.sharded): a run of
+two views per step stopped on one device and resumed on a 2 x 2 mesh of simulated CPU devices
+(devices=2 rows, each splitting the Gaussians over gaussian_devices=2 and rendering one of the
+step's views), with buffers that overflow and grow, gives the scene of the same run on one
+device within the stated bound (the forward is the same bits, so the first resumed step's
+loss is within the rounding of its sums; the gradients' sums, over tiles and over the rows'
+views, are re-associated and Adam carries the difference at most a learning rate per step); its
+refinements decide the same (the same counts at every step) and keep the blocks balanced by work
 (their Gaussians' projections and tile pairs in a few training views: `sharded_state.work`; a
 refinement on 4 devices is the one-device refinement's bits, both strategies); each run writes
 one checkpoint and one scene.ply; trained on every view, with an evaluation due after every
 step, the runs evaluate nothing (the default set's check of a fit without held-out views:
-test_train.py's own such fit is in the slow set). The slow set runs the whole run on 2 and on 4
-devices (the first step's loss, held-out views rendered sharded), and MCMC with the views' own
-parameters on 2.
+test_train.py's own such fit is in the slow set). The slow set runs the whole run (one view
+per step) on 2 and on 4 devices (the first step's loss, held-out views rendered sharded), and
+MCMC with the views' own parameters on 2 devices and on a 2 x 2 mesh. A mesh needing more
+devices than there are, or a batch its rows split unevenly, is refused by field name.
 
 The runs happen in one child process (tests/parallel/training_child.py: JAX simulates 4
 devices only when told before it starts); the test here checks their folders."""
@@ -29,7 +33,8 @@ from lgs_jax.train import DefaultStrategy, FitConfig, Pool, Recipe, fit, ops, sh
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # the child's (importing it would start its JAX with 4 devices)
-STEPS, HALF, BATCH, PIXELS = 8, 4, 1, 32 * 64 * 3
+STEPS, HALF, PIXELS = 8, 4, 32 * 64 * 3
+BATCH = dict(fast=2, slow=1)  # views per step
 
 
 def _run_child(tmp_path, part: str) -> dict:
@@ -65,26 +70,28 @@ def _beyond(one: dict, got: dict, bound: dict, u: float, pairs: bool = False):
     return far
 
 
-def _same_scene(tmp_path, logs, runs):
+def _same_scene(tmp_path, logs, runs, batch: int):
     """Every sharded run's scene.ply against the one-device run's: the same Gaussians (the
     refinements decided the same at every step), each parameter within `sharded.drift_bound`
     plus the rounding of the updates. Clones fill free slots in the order of their gradients
     (`ops.allocate`), so two whose gradients are within rounding of each other may trade slots:
-    the Gaussians beyond the bound in place must pair off within it. The first step's loss
-    within the rounding of its sums (the images are the same bits: γ_n·(ℓ + 1), n the values
-    summed, the SSIM map's values at most 1)."""
+    the Gaussians beyond the bound in place must pair off within it. The run's first step (from
+    the start, or from the one-device run's checkpoint) has the one-device run's loss at that
+    step within the rounding of its sums (the images are the same bits: γ_n·(ℓ + 1), n the
+    values summed over the `batch` views, the SSIM map's values at most 1)."""
     scale = float(logs["d1"][0].split("scene scale ")[1]) + 5e-4  # logged to 3 decimals
-    bound = sharded.drift_bound(Recipe(batch=BATCH), STEPS, scale)
+    bound = sharded.drift_bound(Recipe(batch=batch), STEPS, scale)
     u = np.finfo(np.float32).eps / 2
     one, one_rows = _fields(tmp_path / "d1" / "scene.ply"), _rows(tmp_path / "d1")
     counts = lambda rows: [(r["step"], r["gaussians"]) for r in rows if "loss" in r]
-    n = BATCH * PIXELS
+    n = batch * PIXELS
+    loss = lambda rows, step: [r["loss"] for r in rows if "loss" in r and r["step"] == step][-1]
     for run in runs:
-        rows = _rows(tmp_path / run)
+        rows = _rows(tmp_path / run)  # a resumed run's: the checkpoint's rows first
         assert counts(rows) == counts(one_rows)[-len(counts(rows)):], run
-        if rows[0]["step"] == 1:
-            a, b = one_rows[0]["loss"], rows[0]["loss"]
-            assert abs(a - b) <= n * u / (1 - n * u) * (a + 1), (run, a, b)
+        first = HALF + 1 if logs[run][0].startswith(f"resumed at step {HALF} ") else 1
+        a, b = loss(one_rows, first), loss(rows, first)
+        assert abs(a - b) <= n * u / (1 - n * u) * (a + 1), (run, first, a, b)
         got = _fields(tmp_path / run / "scene.ply")
         assert all(x.shape == got[k].shape for k, x in one.items()), run
         moved = np.flatnonzero(_beyond(one, got, bound, u))
@@ -127,17 +134,17 @@ def _refined_alike(logs):
 
 
 def _resumed(tmp_path, logs):
-    """The one-device run stopped after step HALF (its checkpoint) resumes on 2 devices with
+    """The one-device run stopped after step HALF (its checkpoint) resumes on a 2 x 2 mesh with
     buffers sized at its first view's needs exactly: the exchange overflows, is reported and
     grown (a recompile; the result is checked in `_same_scene`). One scene.ply per run."""
     before = [r["gaussians"] for r in _rows(tmp_path / "d1") if r.get("step") == HALF][0]
     assert f"resumed at step {HALF} ({before} Gaussians)" in logs["d1"], logs["d1"]
-    resumed = logs["d1_resumed_on_d2"]
+    resumed = logs["d1_resumed_on_2x2"]
     assert resumed[0] == f"resumed at step {HALF} ({before} Gaussians)", resumed
     assert any("exchange capacity grown to" in line for line in resumed), resumed
-    for run, devices in (("d1", 1), ("d1_resumed_on_d2", 2)):
+    for run, devices in (("d1", (1, 1)), ("d1_resumed_on_2x2", (2, 2))):
         result = json.load(open(tmp_path / run / "result.json"))
-        assert result["gaussian_devices"] == devices
+        assert (result["devices"], result["gaussian_devices"]) == devices
         assert [f for f in os.listdir(tmp_path / run) if f.endswith(".ply")] == ["scene.ply"]
         assert load_ply(str(tmp_path / run / "scene.ply")).num == result["gaussians"]
 
@@ -157,24 +164,28 @@ def _evaluated_nothing(tmp_path, logs, runs):
 
 def test_gaussian_parallel_training(tmp_path):
     logs = _run_child(tmp_path, "fast")
-    _same_scene(tmp_path, logs, ["d1_resumed_on_d2"])
-    _balanced(tmp_path, ["d1_resumed_on_d2"], 1)  # the refinement at step 6
+    _same_scene(tmp_path, logs, ["d1_resumed_on_2x2"], BATCH["fast"])
+    _balanced(tmp_path, ["d1_resumed_on_2x2"], 1)  # the refinement at step 6
     _refined_alike(logs)
     _resumed(tmp_path, logs)
-    _evaluated_nothing(tmp_path, logs, ["d1", "d1_resumed_on_d2"])
+    _evaluated_nothing(tmp_path, logs, ["d1", "d1_resumed_on_2x2"])
 
 
 @pytest.mark.slow
 def test_gaussian_parallel_training_on_two_and_four_devices(tmp_path):
     logs = _run_child(tmp_path, "slow")
-    _same_scene(tmp_path, logs, ["d2", "d4"])
-    _balanced(tmp_path, ["d2", "d4", "mcmc_views_d2"], 6)
-    # MCMC with the views' poses, colours and bilateral grids on 2 devices: n + n // 20 at
-    # each refinement, every step applied
-    rows = [r for r in _rows(tmp_path / "mcmc_views_d2") if "loss" in r]
-    assert [r["gaussians"] for r in rows] == [301] * 3 + [316] * 3 + [331] * 2
-    assert all(np.isfinite(r["loss"]) for r in rows)
-    assert json.load(open(tmp_path / "mcmc_views_d2" / "result.json"))["skipped_steps"] == 0
+    _same_scene(tmp_path, logs, ["d2", "d4"], BATCH["slow"])
+    mcmc = ["mcmc_views_d2", "mcmc_views_2x2"]
+    _balanced(tmp_path, ["d2", "d4", *mcmc], 8)
+    # MCMC with the views' poses, colours and bilateral grids on 2 devices and on a 2 x 2 mesh
+    # (two views per step): n + n // 20 at each refinement, every step applied
+    for run in mcmc:
+        rows = [r for r in _rows(tmp_path / run) if "loss" in r]
+        assert [r["gaussians"] for r in rows] == [301] * 3 + [316] * 3 + [331] * 2, run
+        assert all(np.isfinite(r["loss"]) for r in rows), run
+        result = json.load(open(tmp_path / run / "result.json"))
+        assert result["skipped_steps"] == 0 and np.isfinite(result["heldout_psnr"]), run
+    assert (tmp_path / "mcmc_views_2x2" / "heldout_v0.png").exists()
     # the held-out view rendered sharded (`sharded_state.Evaluations`) and saved
     psnr = [json.load(open(tmp_path / run / "result.json"))["heldout_psnr"]
             for run in ("d1", "d2", "d4")]
@@ -182,16 +193,24 @@ def test_gaussian_parallel_training_on_two_and_four_devices(tmp_path):
     assert all((tmp_path / run / "heldout_v0.png").exists() for run in ("d2", "d4"))
 
 
-def test_gaussian_parallel_refused_combinations(tmp_path):
+def test_gaussian_parallel_refused_combinations(tmp_path, monkeypatch):
     base = dict(data=str(tmp_path), out=str(tmp_path / "run"), gaussian_devices=2)
-    for extra, field in ((dict(devices=2, recipe=Recipe(batch=2)), "devices"),
-                         (dict(recipe=Recipe(app_opt=True)), "recipe.app_opt"),
+    for extra, field in ((dict(recipe=Recipe(app_opt=True)), "recipe.app_opt"),
                          (dict(row_headroom=2.0), "row_headroom"),
                          (dict(compile_ahead="thread"), "compile_ahead")):
         with pytest.raises(ValueError, match=f"^{field}: not with gaussian_devices = 2"):
             FitConfig(**base, **extra)
     with pytest.raises(ValueError, match="^gaussian_devices: expected an int from 1 to 1"):
         fit(FitConfig(**base, strategy=DefaultStrategy()))  # one CPU device here
+    # a mesh of views x Gaussians: its rows split the batch evenly, its devices are there
+    FitConfig(**base, devices=2, recipe=Recipe(batch=4))
+    with pytest.raises(ValueError, match="^devices: 2 devices split recipe.batch = 3 views "
+                                         "unevenly"):
+        FitConfig(**base, devices=2, recipe=Recipe(batch=3))
+    monkeypatch.setattr(jax, "devices", lambda *_: [None] * 3)  # 3 of them, each <= 3
+    with pytest.raises(ValueError, match=r"^devices, gaussian_devices: a mesh of 2 x 2 needs 4 "
+                                         r"devices; there are 3 cpu devices here"):
+        fit(FitConfig(**base, devices=2, recipe=Recipe(batch=2), strategy=DefaultStrategy()))
 
 
 def test_gaussian_parallel_noise_drawn_per_slot():

@@ -97,3 +97,16 @@ def test_the_batch_must_split_evenly():
     with pytest.raises(ValueError, match="devices: 2 devices split recipe.batch = 3 views "
                                          "unevenly"):
         train.FitConfig(data="unused", out="o", recipe=train.Recipe(batch=3), devices=2)
+
+
+def test_a_run_on_several_devices_compares_its_checkpoint():
+    # `--resume` compares the checkpoint's settings with this run's, the fields it predates
+    # counted as the default recipe's (batch 1): which a run's devices need not split
+    from lgs_jax.train import checkpoint
+
+    config = train.FitConfig(data="unused", out="o", recipe=train.Recipe(batch=2), devices=2,
+                             gaussian_devices=2)
+    defaults = checkpoint.default_config(config)
+    assert defaults["settings"]["batch"] == 1
+    assert checkpoint.config_mismatch(checkpoint.config_of(config),
+                                      checkpoint.config_of(config), defaults) is None
