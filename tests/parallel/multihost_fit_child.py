@@ -3,8 +3,11 @@ the tiny capture (`tiny_run`) with its Gaussians split over 4 simulated CPU devi
 two processes of 2 devices each joined by `jax.distributed.initialize` (gloo collectives), or
 one process of 4 (the reference).
 
-    python -m tests.parallel.multihost_fit_child PROCESS PORT OUT   # PROCESS 0 or 1 of two
-    python -m tests.parallel.multihost_fit_child one 0 OUT          # one process, 4 devices
+    python -m tests.parallel.multihost_fit_child PROCESS PORT OUT PART  # PROCESS 0 or 1 of two
+    python -m tests.parallel.multihost_fit_child one 0 OUT PART         # one process, 4 devices
+
+PART "fast": trained on every view (nothing held out, no evaluation to compile); "slow": view
+0 held out and evaluated at the end.
 
 Process i trains into OUT/p<i> (the reference into OUT/one), its log lines in OUT/log<i>.json:
 every process makes the same call but for its folder, so that the parent sees what each
@@ -35,14 +38,15 @@ from tests.parallel.tiny_run import capture, config  # noqa: E402
 STEPS = 4  # a refinement at step 3
 
 
-def main(process: str, port: int, out: str):
+def main(process: str, port: int, out: str, part: str):
     if not ONE:
         jax.distributed.initialize(coordinator_address=f"localhost:{port}", num_processes=2,
                                    process_id=int(process))
         assert jax.device_count() == 4 and jax.local_device_count() == 2
     name = "one" if ONE else f"p{process}"
     logs = []
-    run = dataclasses.replace(config(os.path.join(out, name), jax.device_count()), steps=STEPS)
+    run = dataclasses.replace(config(os.path.join(out, name), jax.device_count(),
+                                     train_on_all=part == "fast"), steps=STEPS)
     train.fit(run, capture(os.path.join(out, "data")), log=logs.append)
     with open(os.path.join(out, f"log{process}.json"), "w") as f:
         json.dump(logs, f)
@@ -51,4 +55,4 @@ def main(process: str, port: int, out: str):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], int(sys.argv[2]), sys.argv[3])
+    main(sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4])
