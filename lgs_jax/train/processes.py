@@ -15,6 +15,8 @@ devices, and together they train one model; process 0 alone touches the run fold
   alike.
 - `synced(name)`: every process waits here for the others (after process 0 has changed a file
   that all of them read next).
+- `together(fn)`: fn() on every process, an error on one raised on all (a process that failed
+  to read the checkpoint stops the others, which would wait for it at the next collective).
 
 On several processes every decision of the loop (when to refine, evaluate, checkpoint, grow a
 buffer, stop early) follows from values every process reads alike, so all of them run the
@@ -97,3 +99,22 @@ def synced(name: str) -> None:
     no-op on one process."""
     if several():
         multihost_utils.sync_global_devices(name)
+
+
+def together(fn):
+    """fn() on every process; where it raises on some process, it raises there and every other
+    process raises `RuntimeError` naming the processes that failed, rather than wait for them
+    at a collective. On one process, fn()."""
+    if not several():
+        return fn()
+    error, result = None, None
+    try:
+        result = fn()
+    except Exception as e:  # told to the others, then raised
+        error = e
+    failed = np.flatnonzero(multihost_utils.process_allgather(np.int32(error is not None)))
+    if error is not None:
+        raise error
+    if len(failed):
+        raise RuntimeError(f"processes {failed.tolist()} failed (their errors say why)")
+    return result

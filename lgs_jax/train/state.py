@@ -147,13 +147,17 @@ def _sharded(config: FitConfig, setup: Setup, rd: RunData, parts: tuple, step: i
 
 
 def resumed(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
-    """The state of the checkpoint in config.out (checked by `rundir.resume_problem` first);
-    metrics.jsonl's rows after its step dropped (a run that stopped after its last checkpoint
-    redoes them, and the resumed log reads as one run)."""
+    """The state of the checkpoint in config.out (checked by `rundir.resume_problem` first),
+    read by every process; metrics.jsonl's rows after its step dropped (a run that stopped
+    after its last checkpoint redoes them, and the resumed log reads as one run) by the one
+    that writes the run folder (`processes.writer`)."""
     out = config.out
-    meta = checkpoint.read_meta(out)
-    pool, opt_state, sstate, views = checkpoint.restore(
-        out, templates(setup, meta["pool_size"], rd, config.seed), meta["step"])
+
+    def read():  # on every process (`processes.together`): OUT on a file system all of them see
+        meta = checkpoint.read_meta(out)
+        return meta, checkpoint.restore(out, templates(setup, meta["pool_size"], rd, config.seed),
+                                        meta["step"])
+    meta, (pool, opt_state, sstate, views) = processes.together(read)
     if processes.writer():
         _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
     processes.synced("resumed")  # the others read metrics.jsonl next (`loop._early_stop`)
