@@ -415,6 +415,13 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
     the run; finish_seconds: the final evaluation and the output files; logged in one line at
     the end) and stopped_early_at (the step the early stop ended the run at, or None).
+
+    Several processes (`jax.distributed.initialize`, docs/multi-gpu.md "Several hosts"): every
+    process makes the same call, with gaussian_devices = `jax.device_count()` and the same
+    data, and they train one model; process 0 alone checks, locks and writes config.out (the
+    others write nothing, not even the folder); every process returns the result. A resume
+    reads the checkpoint on every process. Refused there (`ValueError` naming the field):
+    other gaussian_devices, devices > 1, a watch (`processes.problem`).
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")

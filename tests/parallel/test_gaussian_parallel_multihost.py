@@ -52,7 +52,7 @@ def test_gaussian_parallel_two_processes(tmp_path):
         assert np.array_equal(res[k], res[f"one/{k}"]), k
 
 
-FIT_STEPS = 4  # the child's: a refinement at step 3
+FIT_STEPS, RESUMED = 4, 7  # the child's: refinements at steps 3 and 6
 PIXELS = 32 * 64 * 3  # a training view's values (`tiny_run`)
 
 
@@ -101,14 +101,33 @@ def _rows(run) -> list[dict]:
     return [json.loads(line) for line in open(run / "metrics.jsonl")]
 
 
+def _one(tmp_path, part: str) -> None:
+    """tests.parallel.multihost_fit_child's one process of 4 devices, `part`."""
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    one = subprocess.run([sys.executable, "-m", "tests.parallel.multihost_fit_child", "one",
+                          "0", str(tmp_path), part], env=env, cwd=ROOT, capture_output=True,
+                         text=True, timeout=600)
+    assert one.returncode == 0, one.stderr[-3000:]
+
+
+def _counts(rows) -> list:
+    return [(r.get("step"), r.get("refine_step"), r["gaussians"]) for r in rows
+            if "gaussians" in r]
+
+
+def _within_drift(run, ref, steps: int, scene_scale: float) -> None:
+    """run's scene.ply within `sharded.drift_bound` of ref's after `steps` steps."""
+    u = np.finfo(np.float32).eps / 2
+    bound = sharded.drift_bound(RECIPE, steps, scene_scale)
+    got, want = ply_fields(run / "scene.ply"), ply_fields(ref / "scene.ply")
+    assert all(x.shape == got[k].shape for k, x in want.items())
+    assert not beyond(want, got, bound, u, steps=steps).any()
+
+
 @pytest.mark.slow
 def test_gaussian_parallel_fit_two_processes(tmp_path):
     _children(tmp_path, "fit")
-    env = dict(os.environ, PYTHONPATH=ROOT)
-    one = subprocess.run([sys.executable, "-m", "tests.parallel.multihost_fit_child", "one",
-                          "0", str(tmp_path), "fit"], env=env, cwd=ROOT, capture_output=True,
-                         text=True, timeout=600)
-    assert one.returncode == 0, one.stderr[-3000:]
+    _one(tmp_path, "fit")
     # process 0 alone wrote a run folder; process 1 made none
     run, ref = tmp_path / "p0", tmp_path / "one"
     assert not (tmp_path / "p1").exists()
@@ -128,13 +147,25 @@ def test_gaussian_parallel_fit_two_processes(tmp_path):
     # step's loss within the rounding of its sums, the scene within `sharded.drift_bound`
     # (measured: the same bits, every step's loss and the held-out scores too)
     ref_rows = _rows(ref)
-    counts = lambda rows: [(r.get("step"), r.get("refine_step"), r["gaussians"])
-                           for r in rows if "gaussians" in r]
-    assert counts(rows) == counts(ref_rows)
+    assert _counts(rows) == _counts(ref_rows)
     u = np.finfo(np.float32).eps / 2
     a, b = rows[0]["loss"], ref_rows[0]["loss"]
     assert abs(a - b) <= PIXELS * u / (1 - PIXELS * u) * (a + 1), (a, b)
     scale = float(logs[0][0].split("scene scale ")[1]) + 5e-4  # logged to 3 decimals
-    bound = sharded.drift_bound(RECIPE, FIT_STEPS, scale)
-    got, want = ply_fields(run / "scene.ply"), ply_fields(ref / "scene.ply")
-    assert not beyond(want, got, bound, u, steps=FIT_STEPS).any()
+    _within_drift(run, ref, FIT_STEPS, scale)
+    # resumed to RESUMED steps on both processes from process 0's checkpoint (every process
+    # reads it), and the reference from its own: process 1 still writes nothing
+    _children(tmp_path, "resume")
+    _one(tmp_path, "resume")
+    assert not (tmp_path / "p1").exists()
+    resumed = [json.load(open(tmp_path / f"resumed{i}.json")) for i in range(2)]
+    assert resumed[0][0] == resumed[1][0] == (f"resumed at step {FIT_STEPS} "
+                                              f"({result['gaussians']} Gaussians)"), resumed
+    rows, ref_rows = _rows(run), _rows(ref)
+    assert [r["step"] for r in rows if "loss" in r] == list(range(1, RESUMED + 1))
+    assert _counts(rows) == _counts(ref_rows)
+    assert len([r for r in rows if "refine_step" in r]) == 2
+    result = json.load(open(run / "result.json"))
+    assert load_ply(str(run / "scene.ply")).num == result["gaussians"]
+    assert result["steps"] == RESUMED
+    _within_drift(run, ref, RESUMED, scale)
