@@ -5,8 +5,8 @@ devices, and together they train one model; process 0 alone touches the run fold
 - `writer()`: whether this process writes the run folder (checked and locked, the checkpoints,
   metrics.jsonl, scene.ply, result.json, every output file): process 0, or the one process.
   The others write nothing and do not even create the folder; what they read from the device
-  they read as process 0 does (`parallel.to_host`: every host read of the run's arrays is a
-  collective, made by every process in the same order).
+  they read as process 0 does (`parallel.to_host`: a read of an array split over the processes
+  is a collective, made by every process in the same order).
 - `problem(config, watch)`: `ValueError` naming the field of what is not built across
   processes.
 - `claimed(config, data_path)`: the folder checked and locked by process 0
