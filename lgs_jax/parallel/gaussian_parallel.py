@@ -58,7 +58,7 @@ from ..render import (BACKENDS, CapacityError, composite_projected, default_back
                       pair_capacity)
 from ..scene import Camera, validate_background, validate_camera, validate_gaussians
 from . import exchange
-from .shards import GAUSSIANS, VIEWS, GaussianShards, shard_count
+from .shards import GAUSSIANS, VIEWS, GaussianShards, shard_count, to_host
 
 
 @jax.tree_util.register_dataclass
@@ -251,8 +251,8 @@ def count_sharded(shards: GaussianShards, camera: Camera, mesh, *, antialiased: 
     """(exchange_required, pairs_required) of `render_sharded` of one view, counted without
     exchanging: the most records a source sends a destination, and the most pairs a device's
     render needs (saturating at 2^31 − 1). Eager (host ints)."""
-    plan = np.asarray(_count_sharded(shards.gaussians, camera, screen_offsets, mesh=mesh,
-                                     antialiased=bool(antialiased)), np.int64)
+    plan = to_host(_count_sharded(shards.gaussians, camera, screen_offsets, mesh=mesh,
+                                  antialiased=bool(antialiased))).astype(np.int64)
     return int(plan[:, 0].max()), int(min(plan[:, 1].sum(axis=0).max(), binning.MAX_PAIRS))
 
 
@@ -338,11 +338,12 @@ def render_sharded(shards: GaussianShards, camera: Camera, mesh, *, capacity: in
 
 
 def _raise_overflow(stats: ShardedStats) -> None:
-    if np.any(np.asarray(stats.exchange_overflow)):
-        raise ExchangeCapacityError(int(np.max(stats.exchange_required)),
-                                    int(stats.exchange_capacity))
-    if np.any(np.asarray(stats.overflow)):
-        raise CapacityError(int(np.max(stats.pairs_required)), int(stats.capacity))
+    if np.any(to_host(stats.exchange_overflow)):
+        raise ExchangeCapacityError(int(np.max(to_host(stats.exchange_required))),
+                                    int(to_host(stats.exchange_capacity)))
+    if np.any(to_host(stats.overflow)):
+        raise CapacityError(int(np.max(to_host(stats.pairs_required))),
+                            int(to_host(stats.capacity)))
 
 
 def grown_capacities(stats, capacity: int, exchange_capacity: int) -> tuple[int, int] | None:
@@ -355,8 +356,8 @@ def grown_capacities(stats, capacity: int, exchange_capacity: int) -> tuple[int,
              if isinstance(s, ShardedStats)]
     if not found:
         raise ValueError("stats: holds no ShardedStats to check for overflow")
-    big = lambda name: max(int(np.max(np.asarray(getattr(s, name)))) for s in found)
-    over = lambda name: any(bool(np.any(np.asarray(getattr(s, name)))) for s in found)
+    big = lambda name: max(int(np.max(to_host(getattr(s, name)))) for s in found)
+    over = lambda name: any(bool(np.any(to_host(getattr(s, name)))) for s in found)
     if not over("overflow") and not over("exchange_overflow"):
         return None
     if big("pairs_required") >= binning.MAX_PAIRS:

@@ -92,12 +92,23 @@ def shard_gaussians(g: Gaussians, mesh: jax.sharding.Mesh) -> GaussianShards:
     return GaussianShards(jax.tree.map(place, g), g.num)
 
 
-def to_host(x) -> np.ndarray:
-    """A (possibly sharded) array whole on the host: with several processes every process gets
-    it all (`multihost_utils.process_allgather`)."""
-    if jax.process_count() > 1:
-        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
-    return np.asarray(x)
+def to_host(x):
+    """`x` (an array, or a pytree of them) whole on the host, as numpy arrays: the one read of
+    device values to the host that works with several processes (`jax.distributed`), where
+    every process gets it all. An array that this process holds whole (one process, or all its
+    blocks on this process's devices) is `np.asarray`; one whole on every device (replicated)
+    is read from a device of this process; one split over devices of several processes is
+    gathered (`multihost_utils.process_allgather`: a collective, so every process must make
+    the same reads in the same order)."""
+    return jax.tree.map(_to_host, x)
+
+
+def _to_host(x) -> np.ndarray:
+    if not isinstance(x, jax.Array) or x.is_fully_addressable:
+        return np.asarray(x)
+    if x.is_fully_replicated:
+        return np.asarray(x.addressable_data(0))
+    return np.asarray(multihost_utils.process_allgather(x, tiled=True))
 
 
 def gather_gaussians(shards: GaussianShards) -> Gaussians:

@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..parallel import to_host
 from .optim import torch_adam
 
 X, Y, L = 16, 16, 8  # cells along the image's width, its height, and the brightness
@@ -119,7 +120,7 @@ def optimizer(recipe, steps: int) -> optax.GradientTransformation:
 def save(path: str, p, names) -> None:
     """bilateral_grids.npz: `grids` (views, 12, L, Y, X), each view's maps I + P in gsplat's
     layout (its BilateralGrid.grids), and `names`, the views' names."""
-    grids = np.array(jax.device_get(p), np.float32).reshape(-1, COEFFS, L, Y, X)
+    grids = np.array(to_host(p), np.float32).reshape(-1, COEFFS, L, Y, X)
     grids[:, [0, 5, 10]] += 1  # (M | t) = I + P: the diagonal of M
     np.savez(path, grids=grids, names=np.asarray(names))
 

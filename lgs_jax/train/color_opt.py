@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from ..parallel import to_host
 from .optim import torch_adam
 
 SIZE = 12  # (A row-major, b) per view (`view_params`)
@@ -60,7 +61,7 @@ def save(path: str, corrections, names) -> None:
     """colors.json: each training view's colour correction (`names`, the same order) as the
     affine map of render colours to its photo's, C' = matrix · C + offset (matrix = I + A,
     offset = b)."""
-    p = np.asarray(jax.device_get(corrections), np.float64)
+    p = to_host(corrections).astype(np.float64)
     rows = [dict(img_name=n, matrix=(np.eye(3) + q[:9].reshape(3, 3)).tolist(),
                  offset=q[9:].tolist()) for n, q in zip(names, p)]
     with open(path, "w") as f:

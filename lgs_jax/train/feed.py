@@ -180,10 +180,11 @@ def streams(nbytes: int, setting: bool | None, device=None) -> bool:
     """Whether `fit` streams training images of `nbytes` (`FitConfig.stream_images`): the
     setting where it is a bool; None: on a device that reports a memory limit
     (`memory_stats()["bytes_limit"]`: a GPU, whose memory a run competes for), and elsewhere
-    (a CPU, whose memory is the host's) when they take more than `HOST_STREAM_BYTES`."""
+    (a CPU, whose memory is the host's) when they take more than `HOST_STREAM_BYTES`. The
+    device: `device`, or this process's first."""
     if setting is not None:
         return bool(setting)
-    stats = (device or jax.devices()[0]).memory_stats() or {}
+    stats = (device or jax.local_devices()[0]).memory_stats() or {}
     return bool(stats.get("bytes_limit")) or nbytes > HOST_STREAM_BYTES
 
 

@@ -27,6 +27,7 @@ come before config.steps (`early_stop`: when the training loss stops falling).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -34,19 +35,19 @@ import time
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
+from ..parallel import to_host
 from ..render import default_backend, pair_capacity
-from . import heldout, outputs, report, rundir, sharded_state, state
+from . import heldout, outputs, processes, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
-from .rundir import claimed
 from .config import FitConfig, Setup, devices_problem
 from .early_stop import EarlyStop
 from .feed import RunData, nbytes, prepare, streams
 from .interrupt import Interrupted, StopRequest
 from .levels import LevelFeed, check as check_levels
 from .sharded import mesh_of
+from .watch import Watch, check_hooks
 from .state import RunState
 from .step import distinct, lowering, refine, replicated, train_step
 
@@ -128,7 +129,7 @@ def _level_capacity(run: _Run, lv) -> int:
     """The pair capacity of level `lv` for the pool as it is (`_enter_level`)."""
     st = run.st
     pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
-    filled = st.pool.size / max(int(jnp.sum(st.pool.active)), 1)
+    filled = st.pool.size / max(state.active_count(st.pool), 1)
     return pair_capacity(int(pairs * filled), run.config.pair_headroom)
 
 
@@ -199,7 +200,7 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
         if then_next:
             run.pending = _dispatch(run, feed, steps, st.step + 1, size, metrics["fits"])
         clock.waited(steps.take_waited())
-        m = {k: v.item() for k, v in jax.device_get(metrics).items()}
+        m = {k: v.item() for k, v in to_host(metrics).items()}
         if not (m["overflow"] or m[flag]):
             return m
         run.pending = None  # it changed nothing: the state is this step's inputs again
@@ -252,38 +253,9 @@ def _refine(run: _Run) -> int:
         run.say(f"step {st.step}: pool grown to {rep['grown_to']} slots (one recompile)")
     if not rep["ok"]:
         run.say(f"step {st.step}: refinement skipped: it would make parameters non-finite")
-    count = int(jnp.sum(st.pool.active))
+    count = state.active_count(st.pool)
     run.record(refine_step=st.step, **rep, gaussians=count)
     return count
-
-
-class _Watch:
-    """Calls `fn(step, gaussians, metrics)` with the pool as `render` sees it (inactive slots
-    as culled placeholders, every SH band; on one device, or on the host where the pool is
-    split over devices: `gathered`) when `every` seconds have passed since the last call, or
-    when forced."""
-
-    def __init__(self, fn, every: float, devices: int, gathered: bool = False):
-        self.fn, self.every, self.devices, self.last = fn, every, devices, -float("inf")
-        self.gathered = gathered
-
-    def due(self) -> bool:
-        """Whether a call now, unforced, would call `fn`."""
-        return self.fn is not None and time.perf_counter() - self.last >= self.every
-
-    def __call__(self, st: RunState, metrics: dict, force: bool = False) -> None:
-        now = time.perf_counter()
-        if self.fn is None or not (force or now - self.last >= self.every):
-            return
-        pool = state.scene(st)
-        # copies: the next step donates the pool, whose arrays `shown` may pass through
-        g = jax.tree.map(jnp.copy, state.shown(pool.params, pool.active))
-        if self.gathered:  # split over devices: the rows whole on the host
-            g = jax.device_get(g)
-        elif self.devices > 1:  # replicated: one device's copy, no transfer
-            g = jax.tree.map(lambda x: x.addressable_data(0), g)
-        self.fn(st.step, g, metrics)
-        self.last = now
 
 
 def _feed(run: _Run) -> LevelFeed:
@@ -304,7 +276,7 @@ def _feed(run: _Run) -> LevelFeed:
     return feed
 
 
-def _after_step(run: _Run, m: dict, watch: _Watch, data: dict, last: bool) -> None:
+def _after_step(run: _Run, m: dict, watch: Watch, data: dict, last: bool) -> None:
     """A step's watch, evaluation and checkpoint; `last`: the run's last step."""
     st, config = run.st, run.config
     if run.pending is None:  # else the state is the next step's (`_ahead`: not due then)
@@ -347,7 +319,7 @@ def _stops_early(run: _Run, early: EarlyStop) -> bool:
     return True
 
 
-def _ahead(run: _Run, feed: LevelFeed, early: EarlyStop, watch: _Watch, stop: StopRequest,
+def _ahead(run: _Run, feed: LevelFeed, early: EarlyStop, watch: Watch, stop: StopRequest,
            step: int) -> bool:
     """Whether step `step` + 1 may be dispatched before step `step`'s metrics are read:
     it is a step of the run and nothing between the two reads or replaces the state (a
@@ -361,7 +333,15 @@ def _ahead(run: _Run, feed: LevelFeed, early: EarlyStop, watch: _Watch, stop: St
             and not watch.due() and not stop.requested)
 
 
-def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> float:
+def _metrics(out: str):
+    """OUT/metrics.jsonl open to append lines, line-buffered; None (a null context) on a process
+    that does not write the run folder (`processes.writer`)."""
+    if processes.writer():
+        return open(os.path.join(out, "metrics.jsonl"), "a", buffering=1)
+    return contextlib.nullcontext()
+
+
+def _loop(run: _Run, clock, watch: Watch, stop: StopRequest, data: dict) -> float:
     """Steps st.step .. config.steps (module docstring), until `stop` is requested or the early
     stop ends the run; returns the seconds spent in steps (their compilation, timed by `clock`,
     included; `watch`'s calls not). `data`: the run's data as checkpoints record it."""
@@ -377,10 +357,10 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
                                run.setup, st.eval_capacity, config.pair_headroom,
                                mode_of(config.compile_ahead) if run.setup.devices == 1 else None)
     _place(run.setup, st)
-    watch(st, dict(gaussians=int(jnp.sum(st.pool.active))), force=True)
+    watch(st, dict(gaussians=state.active_count(st.pool)), force=True)
     try:
-        with open(os.path.join(config.out, "metrics.jsonl"), "a", buffering=1) as f:
-            run.record = lambda **row: f.write(json.dumps(row) + "\n")
+        with _metrics(config.out) as f:
+            run.record = lambda **row: f and f.write(json.dumps(row) + "\n")
             # a stop requested while a step was dispatched ahead ends after that step
             while st.step < config.steps and (not stop.requested or run.pending is not None):
                 if _stops_early(run, early):
@@ -409,15 +389,6 @@ def _loop(run: _Run, clock, watch: _Watch, stop: StopRequest, data: dict) -> flo
     return busy
 
 
-def _check_hooks(watch, watch_every) -> None:
-    """Raise `ValueError` for a watch that is not callable or a bad watch_every."""
-    if watch is not None and not callable(watch):
-        raise ValueError(f"watch: expected None or a callable, got {type(watch).__name__}")
-    if not (isinstance(watch_every, (int, float, np.integer, np.floating))
-            and not isinstance(watch_every, bool) and watch_every >= 0):
-        raise ValueError(f"watch_every: expected seconds >= 0, got {watch_every!r}")
-
-
 def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0,
         log=print) -> dict:
     """Train as `config` says (`FitConfig`: data, run folder, steps, recipe, strategy, ...) into
@@ -444,21 +415,28 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
     the run; finish_seconds: the final evaluation and the output files; logged in one line at
     the end) and stopped_early_at (the step the early stop ended the run at, or None).
+
+    Several processes (`jax.distributed.initialize`, docs/multi-gpu.md "Several hosts"): every
+    process makes the same call, with gaussian_devices = `jax.device_count()` and the same
+    data, and they train one model; process 0 alone checks, locks and writes config.out (the
+    others write nothing, not even the folder); every process returns the result. A resume
+    reads the checkpoint on every process. Refused there (`ValueError` naming the field):
+    other gaussian_devices, devices > 1, a watch (`processes.problem`).
     """
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
-    _check_hooks(watch, watch_every)
+    check_hooks(watch, watch_every)
     devices_problem(config)
+    processes.problem(config, watch)
     mode_of(config.compile_ahead)  # checks "process" has its cache
     data_path = dataset.path if dataset is not None else config.data
-    with claimed(config, data_path):
-        return _run(config, dataset, data_path, _Watch(watch, float(watch_every),
-                                                       config.devices,
-                                                       config.gaussian_devices > 1), log)
+    with processes.claimed(config, data_path) as resuming:
+        return _run(config, dataset, data_path, Watch(watch, float(watch_every), config.devices,
+                                                      config.gaussian_devices > 1), log, resuming)
 
 
-def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict:
-    """`fit` in its claimed folder: load, start or resume, loop, finish."""
+def _run(config: FitConfig, dataset, data_path: str, watch: Watch, log, resuming: bool) -> dict:
+    """`fit` in its claimed folder: load, start or resume (`resuming`), loop, finish."""
     t0, out = time.perf_counter(), config.out
     rd = prepare(dataset if dataset is not None else config.data, config.downscale, config.crop,
                  config.train_on_all, config.image_dtype)
@@ -466,14 +444,14 @@ def _run(config: FitConfig, dataset, data_path: str, watch: _Watch, log) -> dict
         raise ValueError(f"recipe.batch: {config.recipe.batch} views per step, but the data "
                          f"has {len(rd.train_names)} training views")
     check_levels(rd.train_sizes, config.recipe.levels)
-    if config.overwrite:
+    if config.overwrite and processes.writer():
         for name in rundir.run_files(out):
             os.remove(os.path.join(out, name))
     setup = Setup.of(config, rd.scene_scale, default_backend())
     run = None
     try:
         with StopRequest() as stop:
-            if config.resume and os.path.exists(os.path.join(out, "checkpoint.json")):
+            if resuming:
                 st = state.resumed(config, setup, rd, log)
             else:
                 st = state.fresh(config, setup, rd, log)

@@ -6,7 +6,8 @@ training view's colour correction), bilateral_grids.npz (with bilateral_grid: ea
 view's grid), appearance.npz (with app_opt: the features, embeddings and head,
 `appearance.save`; scene.ply and the held-out renders are the scene at the views' average
 appearance, `appearance.baked`), heldout_<name>.png (render beside ground truth), curves.png,
-result.json; and the held-out evaluations (`evaluate`)."""
+result.json; and the held-out evaluations (`evaluate`). On several processes every process
+computes them and process 0 alone writes them (`processes.writer`)."""
 
 from __future__ import annotations
 
@@ -21,13 +22,14 @@ import numpy as np
 
 from ..io.cameras import save_cameras
 from ..io.ply import save_ply
-from . import (appearance, bilateral_grid, camera_opt, color_opt, heldout, report, sharded,
-               sharded_state)
+from ..parallel import to_host
+from . import (appearance, bilateral_grid, camera_opt, color_opt, heldout, processes, report,
+               sharded, sharded_state)
 from .config import Setup
 from .feed import RunData
 from ..files import written
 from .pool import active_gaussians
-from .state import RunState, scene
+from .state import RunState, active_count, scene
 from .step import render_views
 
 
@@ -57,14 +59,17 @@ def _cameras(st: RunState, rd: RunData) -> list:
     held-out ones."""
     cams = rd.train_cams
     if st.views is not None and "pose" in st.views:
-        cams = camera_opt.adjusted(cams, jax.device_get(st.views["pose"][0]))
+        cams = camera_opt.adjusted(cams, to_host(st.views["pose"][0]))
     train = [rd.train_camera(i, cams) for i in range(len(rd.train_names))]
     return train + list(rd.test_cams)
 
 
 def _views_files(out: str, st: RunState, rd: RunData) -> None:
-    """appearance.npz, colors.json and bilateral_grids.npz of the views' own parameters."""
-    views = st.views or {}
+    """appearance.npz, colors.json and bilateral_grids.npz of the views' own parameters (read
+    on every process, written by `processes.writer`)."""
+    views = to_host(st.views or {})
+    if not processes.writer():
+        return
     if "head" in views:
         keep = np.asarray(st.pool.active)
         with written(os.path.join(out, "appearance.npz")) as tmp:
@@ -108,31 +113,37 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log,
     (fewer than the run's where the early stop ended it), held-out PSNR and SSIM, Gaussians,
     pool size, skipped steps, and `run` (the loop's times), with finish_seconds (this call's)
     added to its seconds; the time's parts are logged in a line."""
-    t0 = time.perf_counter()
-    psnr, ssim = evaluate(st, rd, setup, out, evaluations)
+    t0, writes = time.perf_counter(), processes.writer()
+    psnr, ssim = evaluate(st, rd, setup, out if writes else None, evaluations)
     if psnr is None:
         log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
     else:
-        with open(os.path.join(out, "metrics.jsonl"), "a") as f:
-            f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)) + "\n")
+        if writes:
+            with open(os.path.join(out, "metrics.jsonl"), "a") as f:
+                f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim))
+                        + "\n")
         log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
-    with written(os.path.join(out, "scene.ply")) as tmp:
-        save_ply(tmp, active_gaussians(scene(st)))
-    with written(os.path.join(out, "cameras.json")) as tmp:
-        save_cameras(tmp, _cameras(st, rd), rd.train_names + rd.test_names)
+    g, cams = active_gaussians(scene(st)), _cameras(st, rd)
+    if writes:
+        with written(os.path.join(out, "scene.ply")) as tmp:
+            save_ply(tmp, g)
+        with written(os.path.join(out, "cameras.json")) as tmp:
+            save_cameras(tmp, cams, rd.train_names + rd.test_names)
     _views_files(out, st, rd)
-    with written(os.path.join(out, "curves.png")) as tmp:
-        report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")), tmp)
+    if writes:
+        with written(os.path.join(out, "curves.png")) as tmp:
+            report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")), tmp)
     run = dict(run, finish_seconds=time.perf_counter() - t0)
     run["seconds"] += run["finish_seconds"]
     log(time_parts(run))
     result = dict(steps=st.step, heldout_psnr=psnr, heldout_ssim=ssim,
-                  gaussians=int(jnp.sum(st.pool.active)), pool_size=st.pool.size,
+                  gaussians=active_count(st.pool), pool_size=st.pool.size,
                   skipped_steps=st.skipped, **run,
                   strategy=type(setup.strategy).__name__, backend=setup.backend,
                   precision=setup.precision,
                   device=jax.devices()[0].device_kind, devices=setup.devices,
                   gaussian_devices=setup.gaussian_devices)
-    with written(os.path.join(out, "result.json")) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    if writes:
+        with written(os.path.join(out, "result.json")) as tmp, open(tmp, "w") as f:
+            json.dump(result, f, indent=1)
     return result

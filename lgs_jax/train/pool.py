@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..parallel.shards import to_host
 from ..scene import Gaussians
 
 GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")
@@ -94,8 +95,8 @@ def render_gaussians(params: dict, active, bands=None) -> Gaussians:
 
 def active_gaussians(pool: Pool) -> Gaussians:
     """The active Gaussians (host numpy arrays, in slot order): what a PLY file holds."""
-    keep = np.asarray(pool.active)
-    p = {k: np.asarray(v)[keep] for k, v in pool.params.items()}
+    active, params = to_host((pool.active, pool.params))  # `parallel.to_host`: any process
+    p = {k: v[active] for k, v in params.items()}
     return Gaussians(p["means"], p["quats"], p["log_scales"], p["logit_opacities"],
                      np.concatenate([p["sh_dc"], p["sh_rest"]], 1))
 

@@ -123,15 +123,15 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, order, step: int, ke
     report["per_device"] = per_device(devices, pool)
     if cams:
         w = jnp.where(pool.active, jnp.take(weights, order), 0.0)  # in row order
-        report["per_device_work"] = [float(x) for x in jax.device_get(
+        report["per_device_work"] = [float(x) for x in parallel.to_host(
             jnp.sum(jnp.reshape(w, (devices, -1)), axis=1))]
-        report["heaviest"] = float(jnp.max(w))
+        report["heaviest"] = float(parallel.to_host(jnp.max(w)))
     return strategy_state, pool, opt_state, report, order
 
 
 def per_device(devices: int, pool: Pool) -> list[int]:
     """The active Gaussians of each device's block (host ints)."""
-    return [int(c) for c in jax.device_get(
+    return [int(c) for c in parallel.to_host(
         jnp.sum(jnp.reshape(pool.active, (devices, -1)), axis=1, dtype=jnp.int32))]
 
 
@@ -198,7 +198,7 @@ class Evaluations(heldout.Evaluations):
             self.capacity = pair_capacity(pairs, self.headroom)
         if records > self.exchange:
             self.exchange = pair_capacity(records, self.headroom)
-        scores = jax.device_get([
+        scores = parallel.to_host([
             _render(pool, cam, jnp.asarray(target), self.background, mesh=sharded.mesh_of(s),
                     backend=s.backend, capacity=self.capacity, exchange=self.exchange,
                     config=s.recipe.raster, score=True)
@@ -226,7 +226,8 @@ def render_views(m, pool: Pool, cams, background, backend: str, capacity: int,
         image, overflow = _render(pool, cam, None, background, mesh=m, backend=backend,
                                   capacity=capacity, exchange=exchange, config=config,
                                   score=False)
-        if bool(overflow):  # counted just before: cannot happen
+        image, overflow = parallel.to_host((image, overflow))
+        if overflow:  # counted just before: cannot happen
             raise RuntimeError("a view overflowed its buffers")
-        images.append(np.clip(np.asarray(image), 0.0, 1.0))
+        images.append(np.clip(image, 0.0, 1.0))
     return images, capacity

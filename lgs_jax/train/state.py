@@ -13,11 +13,11 @@ import jax.numpy as jnp
 from ..io.ply import save_ply
 from ..backends import REGISTRY
 from ..render import count_pairs, next_pow2, pair_capacity, render
-from . import appearance, checkpoint, report, sharded, sharded_state, view_params
+from . import appearance, checkpoint, processes, report, sharded, sharded_state, view_params
 from .config import FitConfig, Setup
 from ..files import written
 from .feed import RunData
-from ..parallel.shards import padded_rows
+from ..parallel.shards import padded_rows, to_host
 from .init import start_gaussians
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
@@ -77,7 +77,13 @@ shown = jax.jit(render_gaussians)  # the pool as `render` sees it (`pool.render_
 
 def pairs(pool: Pool, cam, antialiased: bool = False) -> int:
     """Tile–Gaussian pairs of the pool's active Gaussians in one view (`lgs_jax.count_pairs`)."""
-    return int(count_pairs(shown(pool.params, pool.active), cam, antialiased=antialiased))
+    return int(to_host(count_pairs(shown(pool.params, pool.active), cam,
+                                   antialiased=antialiased)))
+
+
+def active_count(pool: Pool) -> int:
+    """The pool's active Gaussians (a host int, read as `parallel.to_host` reads)."""
+    return int(to_host(jnp.sum(pool.active)))
 
 
 def walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
@@ -85,7 +91,7 @@ def walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
     backends that store no pair rows: `step.row_stats`): a forward render."""
     out = render(render_gaussians(pool.params, pool.active), cam, background=background,
                  backend=setup.backend, capacity=capacity, config=setup.recipe.raster)
-    return int(row_stats(out.stats)[1])
+    return int(to_host(row_stats(out.stats)[1]))
 
 
 def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
@@ -141,15 +147,21 @@ def _sharded(config: FitConfig, setup: Setup, rd: RunData, parts: tuple, step: i
 
 
 def resumed(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
-    """The state of the checkpoint in config.out (checked by `rundir.resume_problem` first);
-    metrics.jsonl's rows after its step dropped (a run that stopped after its last checkpoint
-    redoes them, and the resumed log reads as one run)."""
+    """The state of the checkpoint in config.out (checked by `rundir.resume_problem` first),
+    read by every process; metrics.jsonl's rows after its step dropped (a run that stopped
+    after its last checkpoint redoes them, and the resumed log reads as one run) by the one
+    that writes the run folder (`processes.writer`)."""
     out = config.out
-    meta = checkpoint.read_meta(out)
-    pool, opt_state, sstate, views = checkpoint.restore(
-        out, templates(setup, meta["pool_size"], rd, config.seed), meta["step"])
-    _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
-    log(f"resumed at step {meta['step']} ({int(jnp.sum(pool.active))} Gaussians)")
+
+    def read():  # on every process (`processes.together`): OUT on a file system all of them see
+        meta = checkpoint.read_meta(out)
+        return meta, checkpoint.restore(out, templates(setup, meta["pool_size"], rd, config.seed),
+                                        meta["step"])
+    meta, (pool, opt_state, sstate, views) = processes.together(read)
+    if processes.writer():
+        _forget_after(os.path.join(out, "metrics.jsonl"), meta["step"])
+    processes.synced("resumed")  # the others read metrics.jsonl next (`loop._early_stop`)
+    log(f"resumed at step {meta['step']} ({active_count(pool)} Gaussians)")
     if setup.gaussian_devices > 1:
         return _sharded(config, setup, rd, (pool, opt_state, sstate, views), meta["step"],
                         meta["eval_capacity"], meta["skipped"])
@@ -168,7 +180,9 @@ def _forget_after(path: str, step: int) -> None:
 
 
 def save(out: str, config: FitConfig, st: RunState, data: dict) -> None:
-    """The checkpoint of `st` (`data`: `checkpoint.data_of` the run's data) and scene.ply."""
+    """The checkpoint of `st` (`data`: `checkpoint.data_of` the run's data) and scene.ply,
+    read on every process (`parallel.to_host`), written by the one that writes the run folder
+    (`processes.writer`)."""
     meta = dict(step=st.step, capacity=st.capacity, rows=st.rows, eval_capacity=st.eval_capacity,
                 pool_size=st.pool.size, skipped=st.skipped, config=checkpoint.config_of(config),
                 data=data)
@@ -176,9 +190,12 @@ def save(out: str, config: FitConfig, st: RunState, data: dict) -> None:
     if st.order is not None:
         parts = (*sharded_state.in_slot_order(sharded.mesh_of(config), parts[:3], st.order),
                  parts[3])
+    parts, g = to_host(parts), active_gaussians(scene(st))
+    if not processes.writer():
+        return
     checkpoint.save(out, parts, meta)
     with written(os.path.join(out, "scene.ply")) as tmp:
-        save_ply(tmp, active_gaussians(scene(st)))
+        save_ply(tmp, g)
 
 
 _baked = jax.jit(appearance.baked)

@@ -40,6 +40,7 @@ import numpy as np
 import optax
 
 from ..config import RasterConfig
+from ..parallel import to_host
 from ..render import next_pow2, render, render_growing
 from . import appearance, camera_opt, exports, sharded, view_params
 from .losses import loss_fn, psnr
@@ -308,7 +309,7 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap:
     while True:
         state, new_pool, new_opt, report = _refine(strategy_state, pool, opt_state, step, key,
                                                    strategy=strategy, cap=cap)
-        report = {k: int(v) for k, v in jax.device_get(report).items()}
+        report = {k: int(v) for k, v in to_host(report).items()}
         short = report["needed"] - report["free"]
         if short <= 0 or pool.size >= slots:
             return state, new_pool, new_opt, dict(report, grown_to=grown_to)

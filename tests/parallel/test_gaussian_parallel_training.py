@@ -50,21 +50,23 @@ def _rows(run) -> list[dict]:
     return [json.loads(line) for line in open(run / "metrics.jsonl")]
 
 
-def _fields(path) -> dict:
+def ply_fields(path) -> dict:
+    """A scene.ply's parameters by `sharded.drift_bound`'s groups."""
     g = load_ply(str(path))
     return dict(means=g.means, quats=g.quats, log_scales=g.log_scales,
                 logit_opacities=g.logit_opacities, sh_dc=g.sh[:, :1], sh_rest=g.sh[:, 1:])
 
 
-def _beyond(one: dict, got: dict, bound: dict, u: float, pairs: bool = False):
-    """Which Gaussians of `one` differ from those of `got` in some parameter by more than
-    `bound` plus the rounding of the updates: (N,) bool, row against row, or with `pairs`
-    (N, M) bool, every row of `one` against every row of `got`."""
+def beyond(one: dict, got: dict, bound: dict, u: float, pairs: bool = False,
+           steps: int = STEPS):
+    """Which Gaussians of `one` differ from those of `got` (`ply_fields`) in some parameter by
+    more than `bound` plus the rounding of `steps` updates: (N,) bool, row against row, or
+    with `pairs` (N, M) bool, every row of `one` against every row of `got`."""
     far = False
     for k, x in one.items():
         x, y = (x[:, None], got[k][None]) if pairs else (x, got[k])
         err = np.abs(x.astype(np.float64) - y)
-        slack = 2 * STEPS * u * np.maximum(np.abs(x), np.abs(y))
+        slack = 2 * steps * u * np.maximum(np.abs(x), np.abs(y))
         far = far | np.any(err > bound[k] + slack, axis=tuple(range(2 if pairs else 1,
                                                                     err.ndim)))
     return far
@@ -82,7 +84,7 @@ def _same_scene(tmp_path, logs, runs, batch: int):
     scale = float(logs["d1"][0].split("scene scale ")[1]) + 5e-4  # logged to 3 decimals
     bound = sharded.drift_bound(Recipe(batch=batch), STEPS, scale)
     u = np.finfo(np.float32).eps / 2
-    one, one_rows = _fields(tmp_path / "d1" / "scene.ply"), _rows(tmp_path / "d1")
+    one, one_rows = ply_fields(tmp_path / "d1" / "scene.ply"), _rows(tmp_path / "d1")
     counts = lambda rows: [(r["step"], r["gaussians"]) for r in rows if "loss" in r]
     n = batch * PIXELS
     loss = lambda rows, step: [r["loss"] for r in rows if "loss" in r and r["step"] == step][-1]
@@ -92,12 +94,12 @@ def _same_scene(tmp_path, logs, runs, batch: int):
         first = HALF + 1 if logs[run][0].startswith(f"resumed at step {HALF} ") else 1
         a, b = loss(one_rows, first), loss(rows, first)
         assert abs(a - b) <= n * u / (1 - n * u) * (a + 1), (run, first, a, b)
-        got = _fields(tmp_path / run / "scene.ply")
+        got = ply_fields(tmp_path / run / "scene.ply")
         assert all(x.shape == got[k].shape for k, x in one.items()), run
-        moved = np.flatnonzero(_beyond(one, got, bound, u))
+        moved = np.flatnonzero(beyond(one, got, bound, u))
         assert len(moved) <= len(one["means"]) // 50, (run, moved)  # traded slots are rare
         pick = lambda f: {k: x[moved] for k, x in f.items()}
-        close = ~_beyond(pick(one), pick(got), bound, u, pairs=True)
+        close = ~beyond(pick(one), pick(got), bound, u, pairs=True)
         assert close.any(axis=0).all() and close.any(axis=1).all(), (run, moved)
 
 
