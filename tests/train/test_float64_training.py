@@ -1,8 +1,9 @@
 """`FitConfig.precision = "float64"`: training whose every float is float64 (the Gaussians,
 Adam's moments, the strategy's accumulators, the targets, the renders and their gradients),
 checked where a float32 value would show: the gradients of two different float64 backends agree
-to float64 rounding, which a float32 intermediate in either would break. (tests/conftest.py
-turns jax_enable_x64 on for the whole suite.)"""
+to float64 rounding, which a float32 intermediate in either would break (the slow set), and a
+command-line run keeps every float of its outputs float64. (tests/conftest.py turns
+jax_enable_x64 on for the whole suite.)"""
 
 import dataclasses
 import json
@@ -56,6 +57,7 @@ def _worst(a: dict, b: dict) -> float:
             / max(float(np.max(np.abs(b[k]))) for k in b))
 
 
+@pytest.mark.slow  # float64 per kernel (the default set: the float64 CLI run below)
 def test_float64_gradients_agree_across_backends(skull, tmp_path):
     """tiles and pallas (two algorithms; pallas compiled on a GPU, interpreted elsewhere) in
     float64: gradients within 1e-9 of each other, every one float64. Either in float32 differs

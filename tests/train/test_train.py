@@ -344,12 +344,12 @@ def test_resume_is_bit_identical(skull, uninterrupted, tmp_path):
         assert [r["step"] for r in rows if "loss" in r] == list(range(1, STEPS + 1))
 
 
-@pytest.mark.parametrize("mode", ["thread", pytest.param("process", marks=pytest.mark.slow)])
+@pytest.mark.slow  # the default set: test_steps_dispatched_ahead_change_no_bit's thread run
+@pytest.mark.parametrize("mode", ["thread", "process"])
 def test_compiling_ahead_changes_no_bit(skull, tmp_path, mode):
     """`fit` compiles the step for the next pair capacity in a background thread (the default
-    on GPUs) or a child process (through the suite's persistent cache; the slow set: its child
-    compiles the whole step again) and takes it when the pairs grow past the capacity (at step
-    10 here); without it the step is compiled there. Same bits at the end, though the
+    on GPUs) or a child process (through the suite's persistent cache) and takes it when the
+    pairs grow past the capacity (at step 10 here); without it the step is compiled there. Same bits at the end, though the
     capacities may differ (`ahead.Stepper` takes the smallest one that holds the pairs):
     nothing depends on the capacity but drops."""
     logs = {mode: [], "off": []}
