@@ -13,12 +13,13 @@ import json
 import shlex
 
 from . import options, view as view_cmd
-from .args import UsageError, check_dataset, port
+from .args import UsageError, check_dataset, int_at_least, port
 
 ALIASES = {"--no-compile-ahead": ("compile_ahead", "off"),  # older options: flag -> (field,
            "--compile-ahead-process": ("compile_ahead", "process")}  # value they set)
 DERIVED = {"cap_max": "max_gaussians"}  # strategy field -> the FitConfig field it takes
-CLI_ONLY = ("--viewer-port", "--viewer-host", "--debug")  # not configuration
+CLI_ONLY = ("--viewer-port", "--viewer-host", "--debug", "--coordinator", "--num-processes",
+            "--process-id")  # not configuration
 
 
 def config_options() -> list:
@@ -79,7 +80,40 @@ def parser(sub, common) -> None:
                         "and keep serving the trained scene after the run until Ctrl-C")
     f.add_argument("--viewer-host", default="0.0.0.0",
                    help="address the viewer listens on (default: all)")
+    p = f.add_argument_group(
+        "several processes", "one model trained by several processes (one per host, JAX's "
+        "multi-controller model: jax.distributed.initialize), Gaussian parallel over every "
+        "process's devices (--gaussian-devices: all of them unless given); run the same "
+        "command on every process, --process-id its own; process 0 writes OUT, which every "
+        "process must see for --resume (docs/multi-gpu.md)")
+    p.add_argument("--coordinator", metavar="HOST:PORT",
+                   help="process 0's address, where the processes meet")
+    p.add_argument("--num-processes", type=int_at_least(1), help="how many processes")
+    p.add_argument("--process-id", type=int_at_least(0), help="this process's index")
     f.set_defaults(func=run)
+
+
+def _join(args) -> None:
+    """With --coordinator: join the other processes (`jax.distributed.initialize`, before any
+    other JAX work; on CPUs over gloo collectives). A usage error for an incomplete or
+    inconsistent set of the three options."""
+    given = [args.coordinator, args.num_processes, args.process_id]
+    if all(v is None for v in given):
+        return
+    if any(v is None for v in given):
+        raise UsageError("--coordinator, --num-processes and --process-id: give all three or "
+                         "none")
+    if args.process_id >= args.num_processes:
+        raise UsageError(f"--process-id: must be below --num-processes ({args.num_processes}), "
+                         f"got {args.process_id}")
+    host, _, number = args.coordinator.rpartition(":")
+    if not host or not number.isdigit():
+        raise UsageError(f"--coordinator: expected HOST:PORT, got {args.coordinator!r}")
+    import jax
+
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")  # CPUs only; GPUs: NCCL
+    jax.distributed.initialize(coordinator_address=args.coordinator,
+                               num_processes=args.num_processes, process_id=args.process_id)
 
 
 def _strategy(args, recipe: str):
@@ -194,10 +228,17 @@ def run(args) -> int:
         import jax
 
         jax.config.update("jax_enable_x64", True)
-    try:
-        train.check_out(config, config.data)
-    except train.RunDirError as e:
-        raise UsageError(f"--{e.field.replace('_', '-')}: {e.message}") from None
+    _join(args)
+    if args.coordinator is None:
+        try:
+            train.check_out(config, config.data)
+        except train.RunDirError as e:
+            raise UsageError(f"--{e.field.replace('_', '-')}: {e.message}") from None
+    else:  # `fit` checks OUT on process 0 and tells every process its verdict
+        import jax
+
+        if config.gaussian_devices == 1:  # the one mesh that several processes train on
+            config = dataclasses.replace(config, gaussian_devices=jax.device_count())
     data, watch, served = None, None, None
     if args.viewer_port is not None:
         from ..io.datasets import load_dataset
@@ -214,7 +255,9 @@ def run(args) -> int:
             raise UsageError(f"--{e.field.replace('_', '-')}: {e.message}") from None
         if not isinstance(e, KeyboardInterrupt):
             raise
-        print("\n" + _stopped(config, e), file=sys.stderr)
+        again = (" (on every process, each with its own --coordinator, --num-processes and "
+                 "--process-id)" if args.coordinator is not None else "")
+        print("\n" + _stopped(config, e) + again, file=sys.stderr)
         return 130
     print(json.dumps(result, indent=1))
     if served is not None:
