@@ -57,7 +57,11 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def start(rd, setup, n: int, seed: int = 0):
-    """n Gaussians on the device: the capture's start, each point copied (module docstring)."""
+    """n Gaussians on the device: the capture's start, each point copied (module docstring),
+    in one program (its intermediates in XLA's temporary buffer, not left as separate
+    allocations between the steps that build the pool)."""
+    import functools
+
     import jax
     import jax.numpy as jnp
 
@@ -66,16 +70,20 @@ def start(rd, setup, n: int, seed: int = 0):
 
     cfg = FitConfig(data="", out="", strategy=setup.strategy, max_gaussians=10**9, seed=seed)
     g0 = jax.tree.map(jnp.asarray, init.start_gaussians(rd, cfg, log=lambda s: 0))
-    k = -(-n // g0.num)
-    idx = jnp.arange(n) % g0.num
-    k_means, k_sh = jax.random.split(jax.random.key(seed))
-    ls = g0.log_scales[idx]
-    means = g0.means[idx] + jax.random.normal(k_means, (n, 3)) * jnp.exp(
-        ls.max(axis=1, keepdims=True))
-    sh = g0.sh[idx]
-    sh = sh.at[:, 1:].set(0.05 * jax.random.normal(k_sh, sh[:, 1:].shape))
-    return Gaussians(means=means, quats=g0.quats[idx], log_scales=ls - jnp.log(k) / 3,
-                     logit_opacities=g0.logit_opacities[idx], sh=sh)
+
+    @functools.partial(jax.jit, static_argnums=0)
+    def copies(n, g0, key):
+        k = -(-n // g0.num)
+        idx = jnp.arange(n) % g0.num
+        k_means, k_sh = jax.random.split(key)
+        ls = g0.log_scales[idx]
+        means = g0.means[idx] + jax.random.normal(k_means, (n, 3)) * jnp.exp(
+            ls.max(axis=1, keepdims=True))
+        sh = g0.sh[idx]
+        sh = sh.at[:, 1:].set(0.05 * jax.random.normal(k_sh, sh[:, 1:].shape))
+        return Gaussians(means=means, quats=g0.quats[idx], log_scales=ls - jnp.log(k) / 3,
+                         logit_opacities=g0.logit_opacities[idx], sh=sh)
+    return copies(n, g0, jax.random.key(seed))
 
 
 def worker(args) -> dict:
