@@ -68,7 +68,8 @@ def test_box_covers_every_passing_pixel(log_kappa, theta, log_lmin, offset, angl
        edge=_arrays(-3e-6, 3e-6), dtype=st.sampled_from([np.float32, np.float64]))
 def test_box_covers_pixels_on_the_ellipse_edge(log_kappa, theta, log_lmin, angle, logit, edge,
                                                dtype):
-    p = scenes.projected_conics(dtype, log_kappa, theta, log_lmin, np.zeros(M), angle, logit, edge=edge)
+    p = scenes.projected_conics(dtype, log_kappa, theta, log_lmin, np.zeros(M), angle, logit,
+                                edge=edge)
     _check_covered(p)
 
 
@@ -131,8 +132,7 @@ def test_box_is_tight_for_ordinary_gaussians():
 def test_overflow_is_reported_under_jit():
     g = scenes.cast(scenes.scene(5, kinds=("normal", "huge_far")), np.float32)
     cam = scenes.camera()
-    f = jax.jit(lambda g, c: lgs_jax.render(g, c, capacity=2).stats)
-    stats = f(g, cam)
+    stats = scenes.jit_render(g, cam, capacity=2).stats  # tests/test_render.py's program too
     assert bool(stats.overflow) and int(stats.pairs_required) > 2
     full = lgs_jax.render(g, cam)
     assert int(full.stats.pairs_required) == int(stats.pairs_required)
