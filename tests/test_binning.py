@@ -151,6 +151,11 @@ def test_tile_ranges_equal_searchsorted(seed):
     np.testing.assert_array_equal(end, np.searchsorted(tile, ids, side="right"))
 
 
+# Jitted (capacity static): one compile per capacity drawn, where each eager operation compiled
+# again at every new capacity.
+_segment_of_slot = jax.jit(binning.segment_of_slot, static_argnums=2)
+
+
 @given(seed=st.integers(0, 2**32 - 1), cut=st.sampled_from([0.3, 1.0, 2.0]))
 def test_segment_of_slot_equals_searchsorted(seed, cut):
     """Segments with runs of empty ones (first and last included), a capacity below, at and
@@ -159,8 +164,8 @@ def test_segment_of_slot_equals_searchsorted(seed, cut):
     counts = rng.choice(np.array([0, 0, 1, 2, 7]), 40) * (rng.random(40) < 0.7)
     ends = np.cumsum(counts)
     capacity = max(1, int(cut * ends[-1]))
-    got = binning.segment_of_slot(jnp.asarray(ends - counts, jnp.int32),
-                                  jnp.asarray(counts, jnp.int32), capacity)
+    got = _segment_of_slot(jnp.asarray(ends - counts, jnp.int32),
+                           jnp.asarray(counts, jnp.int32), capacity)
     slots = np.arange(capacity)
     want = np.where(slots < ends[-1], np.searchsorted(ends, slots, side="right"), 39)
     np.testing.assert_array_equal(got, want)
