@@ -185,6 +185,13 @@ def projected_conics(dtype, log_kappa, theta, log_lmin, offset, angle, logit, ed
 
 
 @functools.partial(jax.jit, static_argnames="capacity")
+def jit_render(g, cam, capacity=CAPACITY):
+    """`lgs_jax.render` (default backend) under jit, the scene and camera as arguments: the
+    tests that need a traced render share its programs (one per shape and capacity)."""
+    return lgs_jax.render(g, cam, capacity=capacity)
+
+
+@functools.partial(jax.jit, static_argnames="capacity")
 def projected_bins(g, cam, capacity=CAPACITY):
     """(`project(g, cam)`, its `bin_gaussians` at `capacity`), jitted with the scene and camera
     as arguments: one compile per shape, where eager calls compile each operation."""

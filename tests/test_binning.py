@@ -68,7 +68,8 @@ def test_box_covers_every_passing_pixel(log_kappa, theta, log_lmin, offset, angl
        edge=_arrays(-3e-6, 3e-6), dtype=st.sampled_from([np.float32, np.float64]))
 def test_box_covers_pixels_on_the_ellipse_edge(log_kappa, theta, log_lmin, angle, logit, edge,
                                                dtype):
-    p = scenes.projected_conics(dtype, log_kappa, theta, log_lmin, np.zeros(M), angle, logit, edge=edge)
+    p = scenes.projected_conics(dtype, log_kappa, theta, log_lmin, np.zeros(M), angle, logit,
+                                edge=edge)
     _check_covered(p)
 
 
@@ -131,8 +132,7 @@ def test_box_is_tight_for_ordinary_gaussians():
 def test_overflow_is_reported_under_jit():
     g = scenes.cast(scenes.scene(5, kinds=("normal", "huge_far")), np.float32)
     cam = scenes.camera()
-    f = jax.jit(lambda g, c: lgs_jax.render(g, c, capacity=2).stats)
-    stats = f(g, cam)
+    stats = scenes.jit_render(g, cam, capacity=2).stats  # tests/test_render.py's program too
     assert bool(stats.overflow) and int(stats.pairs_required) > 2
     full = lgs_jax.render(g, cam)
     assert int(full.stats.pairs_required) == int(stats.pairs_required)
@@ -151,6 +151,11 @@ def test_tile_ranges_equal_searchsorted(seed):
     np.testing.assert_array_equal(end, np.searchsorted(tile, ids, side="right"))
 
 
+# Jitted (capacity static): one compile per capacity drawn, where each eager operation compiled
+# again at every new capacity.
+_segment_of_slot = jax.jit(binning.segment_of_slot, static_argnums=2)
+
+
 @given(seed=st.integers(0, 2**32 - 1), cut=st.sampled_from([0.3, 1.0, 2.0]))
 def test_segment_of_slot_equals_searchsorted(seed, cut):
     """Segments with runs of empty ones (first and last included), a capacity below, at and
@@ -159,8 +164,8 @@ def test_segment_of_slot_equals_searchsorted(seed, cut):
     counts = rng.choice(np.array([0, 0, 1, 2, 7]), 40) * (rng.random(40) < 0.7)
     ends = np.cumsum(counts)
     capacity = max(1, int(cut * ends[-1]))
-    got = binning.segment_of_slot(jnp.asarray(ends - counts, jnp.int32),
-                                  jnp.asarray(counts, jnp.int32), capacity)
+    got = _segment_of_slot(jnp.asarray(ends - counts, jnp.int32),
+                           jnp.asarray(counts, jnp.int32), capacity)
     slots = np.arange(capacity)
     want = np.where(slots < ends[-1], np.searchsorted(ends, slots, side="right"), 39)
     np.testing.assert_array_equal(got, want)

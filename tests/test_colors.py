@@ -65,7 +65,10 @@ def test_three_colors_are_the_sh_colours_pass():
     np.testing.assert_array_equal(got.alpha, want.alpha)
 
 
-@pytest.mark.parametrize("backend", ["reference", "tiles"])
+# Slow: `reference` (its own backward: tests/backends/test_gradients.py checks it against
+# autodiff through `brute` in the default set); the passes' gradient (render._channel_passes,
+# backend-independent) is `tiles`' in the default set.
+@pytest.mark.parametrize("backend", [pytest.param("reference", marks=pytest.mark.slow), "tiles"])
 def test_color_gradients_equal_autodiff_through_brute(backend):
     """∂L/∂colors and ∂L/∂(every Gaussian field) through two passes (C = 4), float64."""
     g = scenes.scene(21)

@@ -154,20 +154,20 @@ def test_record_columns_are_computed_from_the_lanes_data(hoist):
         assert from_lanes(v), f"record column {c} is a constant"
 
 
-def test_strip_pair_count_is_what_the_tiles_backend_reports():
+# Slow: without warp culling (a render compiled for that config alone); the count is then
+# 8 per pair, which tests/backends/test_tiles.py::test_strip_pairs_report_culling checks the
+# `tiles` backend reports.
+@pytest.mark.parametrize("config", [C(), pytest.param(C(warp_cull=False), marks=SLOW)],
+                         ids=["warp_cull", "no_warp_cull"])
+def test_strip_pair_count_is_what_the_tiles_backend_reports(config):
     """`pairs.strip_pair_count` (the count the Mosaic GPU kernels do not report) equals the
     `tiles` backend's strip pairs, with and without warp culling."""
-    import jax
-
-    import lgs_jax
     from lgs_jax.layout import tile_grid
-    from tests import scenes
 
     g = scenes.cast(scenes.scene(3), np.float32)
     cam = scenes.camera()
     p, bins = scenes.projected_bins(g, cam)
-    for config in (lgs_jax.RasterConfig(), lgs_jax.RasterConfig(warp_cull=False)):
-        out = scenes.render(g, cam, "tiles", config)
-        count = jax.jit(pairs.strip_pair_count, static_argnums=(2, 3))(
-            p, bins, tile_grid(cam.width, cam.height)[0], config)
-        assert int(count) == int(out.stats.backend_stats.strip_pairs)
+    out = scenes.render(g, cam, "tiles", config)
+    count = jax.jit(pairs.strip_pair_count, static_argnums=(2, 3))(
+        p, bins, tile_grid(cam.width, cam.height)[0], config)
+    assert int(count) == int(out.stats.backend_stats.strip_pairs)

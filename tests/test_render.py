@@ -35,10 +35,10 @@ def test_jit_and_vmap_over_cameras_match_single_renders(scene32):
 
 
 def test_new_camera_pose_does_not_recompile(scene32):
-    f = jax.jit(lambda c: lgs_jax.render(scene32, c, capacity=scenes.CAPACITY).image)
-    f(scenes.camera(yaw=0.1))
+    f = scenes.jit_render  # shared by the tests that trace a render: compiled once per worker
+    f(scene32, scenes.camera(yaw=0.1))
     size = f._cache_size()
-    f(scenes.camera(yaw=-0.3))
+    f(scene32, scenes.camera(yaw=-0.3))
     assert f._cache_size() == size
 
 
@@ -56,22 +56,22 @@ def test_eager_overflow_raises_with_required_size(scene32):
 def test_row_capacity_is_ignored_where_the_backward_stores_no_pair_rows(scene32):
     """`tiles` stores no pair rows: row_capacity changes nothing; its stats are its own (the
     strip pairs), the Pallas backends' (walked pairs, row overflow) on the Pallas backends."""
-    cam = scenes.camera()
-    plain = lgs_jax.render(scene32, cam, backend="tiles")
-    small = lgs_jax.render(scene32, cam, backend="tiles", row_capacity=1)
+    cam, cap = scenes.camera(), scenes.CAPACITY  # the pair buffer of the other tests' renders
+    plain = lgs_jax.render(scene32, cam, backend="tiles", capacity=cap)
+    small = lgs_jax.render(scene32, cam, backend="tiles", capacity=cap, row_capacity=1)
     np.testing.assert_array_equal(small.image, plain.image)
     assert small.stats.backend_stats == plain.stats.backend_stats or (
         int(small.stats.backend_stats.strip_pairs) == int(plain.stats.backend_stats.strip_pairs))
     assert not hasattr(small.stats.backend_stats, "row_overflow")
-    assert lgs_jax.render(scene32, cam, backend="reference").stats.backend_stats is None
+    assert lgs_jax.render(scene32, cam, backend="reference",
+                          capacity=cap).stats.backend_stats is None
 
 
 def test_render_growing_settles_on_enough_capacity(scene32):
-    f = jax.jit(lambda g, c, capacity: lgs_jax.render(g, c, capacity=capacity),
-                static_argnames="capacity")
-    out, cap = lgs_jax.render_growing(f, scene32, scenes.camera(), capacity=2)
+    out, cap = lgs_jax.render_growing(scenes.jit_render, scene32, scenes.camera(), capacity=2)
     assert not bool(out.stats.overflow) and cap >= int(out.stats.pairs_required)
-    np.testing.assert_array_equal(out.image, lgs_jax.render(scene32, scenes.camera()).image)
+    np.testing.assert_array_equal(out.image, lgs_jax.render(scene32, scenes.camera(),
+                                                            capacity=scenes.CAPACITY).image)
 
 
 def test_pair_capacity_is_a_power_of_two_then_eight_sizes_per_octave():
@@ -115,13 +115,14 @@ def test_empty_scene_renders_background():
 
 def test_invalid_gaussians_never_reach_the_image():
     g = scenes.cast(scenes.scene(4, kinds=("invalid", "behind")), np.float32)
-    out = lgs_jax.render(g, scenes.camera(), background=np.ones(3))
+    out = lgs_jax.render(g, scenes.camera(), background=np.ones(3), capacity=scenes.CAPACITY)
     assert np.all(np.isfinite(np.asarray(out.image)))
     assert int(out.stats.n_invalid) == scenes.N and int(out.stats.n_valid) == 0
     np.testing.assert_array_equal(out.image, np.ones_like(out.image))
 
 
 def test_repeated_renders_are_bit_identical(scene32):
+    # capacity None: the eager render's own sizing (the other tests pass the shared capacity)
     a = lgs_jax.render(scene32, scenes.camera(yaw=0.2))
     b = lgs_jax.render(scene32, scenes.camera(yaw=0.2))
     np.testing.assert_array_equal(a.image, b.image)
@@ -221,10 +222,9 @@ def test_bad_viewmat_values_raise(scene32, rotation, last_row, match):
 def test_viewmat_within_float32_rounding_and_traced_cameras_pass(scene32):
     view = np.eye(4, dtype=np.float32)
     view[:3, :3] = _rot_z(0.3) * (1 + 2e-7)  # float32 rounding of a stored rotation
-    lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=view))
+    lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=view), capacity=scenes.CAPACITY)
     bad = np.eye(4, dtype=np.float32) * 2  # not checked when traced (values unknown)
-    jax.jit(lambda v: lgs_jax.render(scene32, _replace(scenes.camera(), viewmat=v),
-                                     capacity=scenes.CAPACITY).image)(bad)
+    scenes.jit_render(scene32, _replace(scenes.camera(), viewmat=bad))
 
 
 def test_viewmat_as_list_raises(scene32):
@@ -239,7 +239,8 @@ def test_non_finite_background_raises(scene32, background):
 
 
 def test_background_list_is_accepted(scene32):
-    out = lgs_jax.render(scene32, scenes.camera(), background=[0.1, 0.2, 0.3])
+    out = lgs_jax.render(scene32, scenes.camera(), background=[0.1, 0.2, 0.3],
+                         capacity=scenes.CAPACITY)
     assert out.image.dtype == np.float32
 
 

@@ -2,13 +2,13 @@
 themselves, the render loop's coalescing with stand-in clients, and the server answering."""
 
 import contextlib
+import dataclasses
 import socket
 import threading
 import time
 import types
 import urllib.request
 
-import jax
 import numpy as np
 import pytest
 
@@ -59,16 +59,21 @@ def test_canvas_size_refuses_bad_aspects(aspect):
         viewer.canvas_size(aspect, 512)
 
 
+# Every frame of these tests is 64x32 (max size 64 at aspect 2): the programs one test compiles
+# (the pair count, the render at a capacity) are the ones the next finds compiled.
+SIZE = 64
+
+
 def test_frames_are_the_render_of_the_pose_and_share_their_program():
     scene = lgs_jax.default_scene()
     renderer = viewer.FrameRenderer(scene)
     position, wxyz, fov = viewer.viewer_pose(lgs_jax.default_camera(0))
-    image, _ = renderer.frame(position, wxyz, fov, 2.0, 128)
-    cam = viewer.camera_from_pose(position, wxyz, fov, 128, 64)
+    image, _ = renderer.frame(position, wxyz, fov, 2.0, SIZE)
+    cam = viewer.camera_from_pose(position, wxyz, fov, 64, 32)
     np.testing.assert_array_equal(image, render_image(scene, cam))
-    assert image.shape == (64, 128, 3) and image.max() > 50
+    assert image.shape == (32, 64, 3) and image.max() > 50
     capacity = dict(renderer.capacity)
-    renderer.frame(*viewer.viewer_pose(lgs_jax.default_camera(3)), 2.0, 128)
+    renderer.frame(*viewer.viewer_pose(lgs_jax.default_camera(3)), 2.0, SIZE)
     assert renderer.capacity == capacity  # the same size: the same pair buffer
 
 
@@ -86,7 +91,7 @@ class _Client:
 
 def test_the_loop_renders_each_clients_latest_camera_once():
     reports = []
-    loop = viewer.FrameLoop(viewer.FrameRenderer(lgs_jax.default_scene()), lambda: 64,
+    loop = viewer.FrameLoop(viewer.FrameRenderer(lgs_jax.default_scene()), lambda: SIZE,
                             reports.append)
     a, b, silent = _Client(1, 0), _Client(2, 4), _Client(3, 0, timestamp=0.0)
     loop.request(a)
@@ -102,14 +107,14 @@ def test_the_loop_renders_each_clients_latest_camera_once():
     worker.join()
     assert (len(a.images), len(b.images), len(silent.images)) == (1, 1, 0)
     want = viewer.FrameRenderer(lgs_jax.default_scene()).frame(
-        *viewer.viewer_pose(lgs_jax.default_camera(2)), 2.0, 64)[0]
+        *viewer.viewer_pose(lgs_jax.default_camera(2)), 2.0, SIZE)[0]
     np.testing.assert_array_equal(a.images[0], want)  # the latest pose, not the first
     assert reports and reports[0].startswith("64x32, ")
 
 
 def test_a_failed_render_is_reported_and_the_loop_goes_on():
     reports = []
-    loop = viewer.FrameLoop(viewer.FrameRenderer(lgs_jax.default_scene()), lambda: 64,
+    loop = viewer.FrameLoop(viewer.FrameRenderer(lgs_jax.default_scene()), lambda: SIZE,
                             reports.append)
     bad = _Client(1, 0)
     bad.camera.aspect = float("nan")
@@ -147,7 +152,7 @@ def test_a_shown_scene_is_rendered_for_every_client():
     """No scene: nothing is rendered or reported. `Served.show` swaps the scene in, sets the
     status and renders every connected client's view of the new scene."""
     reports, status = [], types.SimpleNamespace(content="")
-    loop = viewer.FrameLoop(viewer.FrameRenderer(None), lambda: 64, reports.append)
+    loop = viewer.FrameLoop(viewer.FrameRenderer(None), lambda: SIZE, reports.append)
     a, b = _Client(1, 0), _Client(2, 5)
     loop.render(a)
     assert not a.images and not reports
@@ -158,24 +163,30 @@ def test_a_shown_scene_is_rendered_for_every_client():
     _run_until(loop, lambda: a.images and b.images)
     assert status.content == "step 3" and len(a.images) == len(b.images) == 1
     want = viewer.FrameRenderer(scene).frame(*viewer.viewer_pose(lgs_jax.default_camera(5)),
-                                             2.0, 64)[0]
+                                             2.0, SIZE)[0]
     np.testing.assert_array_equal(b.images[0], want)
 
 
 def test_a_growing_scene_grows_the_pair_buffer_with_headroom():
+    """A scene whose views come to need more pairs (as in training) is rendered in a buffer
+    grown to `headroom` times them. The scene grows by switching its Gaussians on (an eighth
+    of them visible at first: opacity 0 makes no pair), so that both scenes have one shape:
+    each capacity is one compiled program (and the pair count the other tests' one)."""
     scene = lgs_jax.default_scene()
-    half = jax.tree.map(lambda x: x[: scene.num // 8], scene)
-    renderer = viewer.FrameRenderer(half, headroom=2.0)
+    off = np.arange(scene.num) >= scene.num // 8
+    first_eighth = dataclasses.replace(scene, logit_opacities=np.where(
+        off, -np.inf, scene.logit_opacities).astype(scene.logit_opacities.dtype))
+    renderer = viewer.FrameRenderer(first_eighth, headroom=2.0)
     state = viewer.viewer_pose(lgs_jax.default_camera(0))
-    renderer.frame(*state, 2.0, 128)
-    first = renderer.capacity[128, 64]
+    renderer.frame(*state, 2.0, SIZE)
+    first = renderer.capacity[64, 32]
     renderer.scene = scene
-    image, _ = renderer.frame(*state, 2.0, 128)
+    image, _ = renderer.frame(*state, 2.0, SIZE)
     # the scene's render in the grown buffer, which holds its pairs (nothing dropped)
-    out, _ = render_output(scene, viewer.camera_from_pose(*state, 128, 64),
-                           renderer.capacity[128, 64])
+    out, _ = render_output(scene, viewer.camera_from_pose(*state, 64, 32),
+                           renderer.capacity[64, 32])
     pairs = int(out.stats.pairs_required)
-    assert pairs > first and renderer.capacity[128, 64] == lgs_jax.pair_capacity(pairs, 2.0)
+    assert pairs > first and renderer.capacity[64, 32] == lgs_jax.pair_capacity(pairs, 2.0)
     assert not bool(out.stats.overflow)
     np.testing.assert_array_equal(image, to_uint8(out.image))
 
