@@ -301,15 +301,10 @@ def test_a_loss_without_depth_gives_the_gradients_of_a_zero_depth_weight(backend
     """A loss of image and alpha alone leaves the depth's cotangent a symbolic zero, which the
     Mosaic GPU backward neither materialises nor reads (`backward.differentiable`): its
     gradients equal those of the same loss plus Σ depth·0 with the zeros an argument (a real
-    zero plane read by the kernel).
-
-    On one 16x16 tile (both half-tile blocks): the depth's cotangent does not depend on the
-    image size, and in interpret mode the Mosaic GPU kernels' time grows with the tiles (the
-    suite's 40x24 image cost CI about 30 s here)."""
-    g, cam = scenes.scene(3), scenes.camera(16, 16, dtype=np.float64)
+    zero plane read by the kernel)."""
+    g, cam = scenes.scene(3), scenes.camera(dtype=np.float64)
     bg = jnp.asarray(scenes.BACKGROUND, np.float64)
-    rng = np.random.default_rng(0)
-    wi, wa = rng.normal(size=(16, 16, 3)), rng.normal(size=(16, 16))
+    wi, wa, _ = _weights(np.float64)
 
     def loss(g, zeros):
         out = lgs_jax.render(g, cam, background=bg, backend=backend, config=config,
@@ -318,7 +313,7 @@ def test_a_loss_without_depth_gives_the_gradients_of_a_zero_depth_weight(backend
         return image_alpha if zeros is None else image_alpha + jnp.sum(out.depth * zeros)
 
     without = jax.jit(jax.grad(lambda g: loss(g, None)))(g)
-    with_zeros = jax.jit(jax.grad(loss))(g, jnp.zeros((16, 16), np.float64))
+    with_zeros = jax.jit(jax.grad(loss))(g, jnp.zeros((H, W), np.float64))
     for field in FIELDS:
         got, want = np.asarray(getattr(without, field)), np.asarray(getattr(with_zeros, field))
         np.testing.assert_array_equal(got, want, field)
