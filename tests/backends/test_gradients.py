@@ -39,12 +39,21 @@ def _loss(g, cam, bg, backend, config, weights):
     return jnp.sum(out.image * wi) + jnp.sum(out.alpha * wa) + 0.1 * jnp.sum(out.depth * wd)
 
 
+# One jitted program per (backend, configuration, dtype), the scene, camera, background and
+# weights its arguments: the tests' programs are compiled, not their examples (a hypothesis
+# example costs milliseconds; a compile seconds), so every test of a backend shares it.
+_grad_program = jax.jit(jax.grad(_loss, argnums=(0, 1, 2)), static_argnums=(3, 4))
+
+
 def _grads(g, cam, backend, config, dtype=np.float64):
     """Gradients of `_loss` w.r.t. (Gaussians, camera, background): every test of a backend
     and configuration takes all three from one program (the camera's cost little), so the
     tests share their compiled programs."""
     bg = jnp.asarray(scenes.BACKGROUND, dtype)
-    return jax.grad(_loss, argnums=(0, 1, 2))(g, cam, bg, backend, config, _weights(dtype))
+    return _grad_program(g, cam, bg, backend, config, _weights(dtype))
+
+
+_invalid = jax.jit(lambda g, cam: project(g, cam).invalid)  # one compile, not one per operation
 
 
 @pytest.mark.parametrize("config", [C(), pytest.param(C(antialiased=True), marks=SLOW),
@@ -58,7 +67,7 @@ def test_reference_gradients_equal_autodiff_through_brute_float64(config, seed):
     g = scenes.scene(seed)
     cam = scenes.camera(dtype=np.float64)
     (gr, _, bgr), (gb, _, bgb) = (_grads(g, cam, b, config) for b in ("reference", "brute"))
-    invalid = np.asarray(project(g, cam).invalid)
+    invalid = np.asarray(_invalid(g, cam))
     for name in FIELDS:
         want, got = np.asarray(getattr(gb, name)), np.asarray(getattr(gr, name))
         assert np.all(np.isfinite(got)), name
@@ -99,8 +108,11 @@ def test_gradients_match_central_differences(backend, config):
     cam = scenes.camera(dtype=np.float64)
     bg = jnp.asarray(scenes.BACKGROUND)
     weights = _weights(np.float64)
-    loss = lambda g: _loss(g, cam, bg, backend, config, weights)
-    f, grads = jax.jit(loss), jax.grad(loss)(g)
+    # One program for the loss and its gradient (the differences read its value): one compile.
+    value_and_grad = jax.jit(jax.value_and_grad(lambda g: _loss(g, cam, bg, backend, config,
+                                                                weights)))
+    f = lambda g: value_and_grad(g)[0]
+    grads = value_and_grad(g)[1]
     rng = np.random.default_rng(0)
     eps = 1e-6
     for name in FIELDS:
@@ -121,8 +133,10 @@ def test_gradients_match_central_differences(backend, config):
     # reach the camera through the projection alone, as checked above (CI time).
     if not config.antialiased:
         return
-    cam_loss = lambda c: _loss(g, c, bg, backend, config, weights)
-    f, grads = jax.jit(cam_loss), jax.grad(cam_loss)(cam)
+    value_and_grad = jax.jit(jax.value_and_grad(lambda c: _loss(g, c, bg, backend, config,
+                                                                weights)))
+    f = lambda c: value_and_grad(c)[0]
+    grads = value_and_grad(cam)[1]
     view = np.asarray(cam.viewmat)
 
     def moved(name, idx, v):
@@ -161,12 +175,15 @@ def test_gradients_are_deterministic_and_compose_with_jit_and_vmap(backend):
     g = scenes.cast(scenes.scene(2), np.float32)
     bg = jnp.asarray(scenes.BACKGROUND, np.float32)
     weights = _weights(np.float32)
-    step = jax.jit(jax.grad(lambda g, c: _loss(g, c, bg, backend, C(), weights)))
+    # The jitted program of `_grads` (shared with the float32 gradient tests), vmapped below.
+    step = lambda g, c: _grad_program(g, c, bg, backend, C(), weights)[0]
     cams = [scenes.camera(yaw=y) for y in (0.0, 0.15)]
     first, again = step(g, cams[0]), step(g, cams[0])
     for name in FIELDS:
         np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
-    batched = jax.jit(jax.vmap(step, in_axes=(None, 0)))(g, lgs_jax.stack_cameras(cams))
+    batched = jax.jit(jax.vmap(lambda g, c, bg, w: _grad_program(g, c, bg, backend, C(), w)[0],
+                               in_axes=(None, 0, None, None)))(
+        g, lgs_jax.stack_cameras(cams), bg, weights)
     # XLA compiles the batched projection differently from the single one (1-ulp differences,
     # CPU and GPU alike), which can flip one pixel's alpha test and move a gradient by that
     # pixel's contribution: measured 3e-4 of the scale on this scene on the H100 and 1.9e-4 on
@@ -192,20 +209,21 @@ def test_screen_space_gradients_and_visibility_for_densification():
     def loss(offsets, backend):
         out = lgs_jax.render(g, cam, background=bg, backend=backend, screen_offsets=offsets,
                              capacity=None if backend == "brute" else scenes.CAPACITY)
-        return jnp.sum(out.image * weights[0])
+        return jnp.sum(out.image * weights[0]), out
 
-    got = np.asarray(jax.grad(loss)(zeros, "reference"))
-    want = np.asarray(jax.grad(loss)(zeros, "brute"))
+    # One program per backend: the render read below is the differentiated one (its aux).
+    grad = jax.jit(jax.grad(loss, has_aux=True), static_argnums=1)
+    got, out = grad(zeros, "reference")
+    got, want = np.asarray(got), np.asarray(grad(zeros, "brute")[0])
     assert_close_to_scale(got, want, 1e-8)
-    out = lgs_jax.render(g, cam, background=bg, backend="reference", capacity=scenes.CAPACITY)
     visible = np.asarray(out.visible)
     assert visible.shape == (g.num,) and visible.sum() > 0
     assert np.all(got[~visible] == 0)
     # visible == has at least one tile pair
     from lgs_jax import binning
-    from lgs_jax.projection import project
 
-    _, _, nx, ny, _ = binning.tile_rects(project(g, cam), cam.width, cam.height)
+    _, _, nx, ny, _ = jax.jit(lambda g, c: binning.tile_rects(project(g, c), c.width,
+                                                                c.height))(g, cam)
     np.testing.assert_array_equal(visible, np.asarray(nx * ny) > 0)
     assert int(np.sum(np.asarray(nx * ny))) == int(out.stats.pairs_required)
 
@@ -267,7 +285,7 @@ def test_pallas_gradients_equal_reference_gradients_float64(name, seed):
     backend, config = PALLAS[name]
     (gp, _, bgp), (gr, _, bgr) = (_grads(g, cam, b, c) for b, c in
                             ((backend, config), ("reference", C(config.convention))))
-    invalid = np.asarray(project(g, cam).invalid)
+    invalid = np.asarray(_invalid(g, cam))
     for field in FIELDS:
         want, got = np.asarray(getattr(gr, field)), np.asarray(getattr(gp, field))
         assert np.all(np.isfinite(got)) and np.all(got[invalid] == 0), field

@@ -191,11 +191,12 @@ def test_pallas_under_jit_and_vmap_reports_overflow_and_matches_single_views():
     for i, yaw in enumerate((0.0, 0.2)):
         np.testing.assert_allclose(out.image[i], one(g, scenes.camera(yaw=yaw)).image, rtol=0,
                                    atol=1e-6)
-    small = jax.jit(lambda c: lgs_jax.render(g, c, backend="pallas", capacity=8).stats)(
-        scenes.camera())
-    assert bool(small.overflow) and int(small.pairs_required) > 8
-    with pytest.raises(lgs_jax.CapacityError):
+    # The overflow the backend reports: `render` raises on its stats with the pairs required
+    # (one program, render's jitted one: under a caller's jit the same stats come back
+    # unchecked, CI time).
+    with pytest.raises(lgs_jax.CapacityError) as err:
         lgs_jax.render(g, scenes.camera(), backend="pallas", capacity=8)
+    assert err.value.required > 8
 
 
 def test_empty_and_background_only_scenes():

@@ -55,6 +55,12 @@ def _four_ways(rows, bins, p, config):
     return kernel, from_table, twin, xla
 
 
+# Jitted once for the tests below (eager, each of their operations compiles on its own).
+_walked_rows = jax.jit(gaussian_grads.walked_rows, static_argnums=2)
+_twin = jax.jit(gaussian_grads.reference, static_argnums=(3, 4))
+_table = jax.jit(pairs.gaussian_table)
+
+
 def _random_rows(bins, blocks: int, seed: int, fill, dtype):
     """(blocks, capacity, row_width(True)) rows: random gradient values and the pair's tile at
     every real pair's emission slot, `fill` elsewhere."""
@@ -111,12 +117,12 @@ def test_float32_kernel_writing_into_the_layouts_buffers_equals_its_twin(seed):
     g = scenes.cast(scenes.scene(seed), np.float32)
     p, bins = _projected_bins(g, scenes.camera(W, H), 1024)
     stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
-    layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
+    layout = _walked_rows(bins, stop, bins.gauss.shape[0])
     first, count = np.asarray(layout.first), np.asarray(layout.count)
-    rows, table = jnp.asarray(_random_rows(bins, 1, seed, 0, np.float32)), pairs.gaussian_table(p)
+    rows, table = jnp.asarray(_random_rows(bins, 1, seed, 0, np.float32)), _table(p)
     kernel = jax.jit(lambda r, l, t: gaussian_grads.sums(r, l, t, TILES_X, C(), True))(
         rows, layout, table)
-    twin = gaussian_grads.reference(rows, layout, table, TILES_X, C())
+    twin = _twin(rows, layout, table, TILES_X, C())
     np.testing.assert_array_equal(np.asarray(kernel), np.asarray(twin))
     assert np.any(np.asarray(kernel) != 0)
     np.testing.assert_array_equal(np.asarray(layout.first), first)
@@ -133,16 +139,16 @@ def test_rows_without_the_depth_column_give_the_sums_of_a_zero_depth_column(seed
     g = scenes.cast(scenes.scene(seed), np.float64)
     p, bins = _projected_bins(g, scenes.camera(W, H), 1024)
     stop = jnp.broadcast_to(bins.tile_end[:, None], (bins.tile_end.shape[0], 256))
-    layout = gaussian_grads.walked_rows(bins, stop, bins.gauss.shape[0])
+    layout = _walked_rows(bins, stop, bins.gauss.shape[0])
     rows = _random_rows(bins, 2, seed, 0, np.float64)
     rows[..., ks.GRAD_VALUES - 1] = 0  # ∂L/∂z
     short = jnp.asarray(np.delete(rows, ks.GRAD_VALUES - 1, axis=-1))
     assert short.shape[-1] == ks.row_width(False)
     rows = jnp.asarray(rows)
-    table = pairs.gaussian_table(p)
+    table = _table(p)
     full = gaussian_grads.sums(rows, layout, table, TILES_X, C(), True)
     for out in (gaussian_grads.sums(short, layout, table, TILES_X, C(), True),
-                gaussian_grads.reference(short, layout, table, TILES_X, C())):
+                _twin(short, layout, table, TILES_X, C())):
         np.testing.assert_array_equal(np.asarray(out), np.asarray(full))
     assert np.any(np.asarray(full)[:, :9] != 0) and np.all(np.asarray(full)[:, 9] == 0)
 
@@ -171,7 +177,7 @@ def test_walked_rows_number_each_gaussians_walked_pairs_consecutively(seed, shar
     tile, slot = np.asarray(bins.tile), np.asarray(bins.slot)
     walked = (tile < start.size) & (np.arange(tile.size) < last[np.minimum(tile, start.size - 1)])
     rows = max(int(walked.sum()) + spare, 1)
-    layout = jax.jit(gaussian_grads.walked_rows, static_argnums=2)(bins, stop, rows)
+    layout = _walked_rows(bins, stop, rows)
     assert layout.size == rows + 1
     np.testing.assert_array_equal(layout.end, last)
     by_slot = np.zeros(tile.size, bool)

@@ -20,10 +20,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import lgs_jax
-from lgs_jax import binning, pairs
+from lgs_jax import pairs
 from lgs_jax.backends import pallas
 from lgs_jax.backends.pallas import mosaic_forward
-from lgs_jax.projection import project
 from tests import scenes
 from tests.compare import (F32_ATOL, F32_FLIP_SHARE, F64_ATOL, assert_composites_equal,
                            assert_render_close)
@@ -224,8 +223,7 @@ def test_render_stops_are_per_block():
     """A render no gradient follows keeps each block's latest stop pair: (n_tiles, 2) for the
     compacted forward's half-tile blocks."""
     g, cam = scenes.scene(0), scenes.camera()
-    p = project(g, cam)
-    bins = binning.bin_gaussians(p, cam.width, cam.height, scenes.CAPACITY)
+    p, bins = scenes.projected_bins(g, cam)  # one compile, not one per eager operation
     stops = jax.eval_shape(lambda p, bins: pallas.rasterize(
         p, bins, cam.width, cam.height, C(kernel="mosaic")).stop, p, bins)
     assert stops.shape == (bins.tile_start.shape[0], 2)

@@ -17,15 +17,18 @@ LENGTH = st.one_of(st.integers(0, 3), st.integers(0, 5000), st.sampled_from(EDGE
 # new compile of every function under test)
 LENGTHS = st.sampled_from([1, 2, 7, 64, 300]).flatmap(
     lambda n: st.lists(LENGTH, min_size=n, max_size=n))
+# Jitted: one compile per list size (eager, each of their operations compiles per size).
+bucket, longest_first = jax.jit(block_order.bucket), jax.jit(block_order.longest_first)
+reference = jax.jit(block_order.reference)
 
 
 @settings(max_examples=50)
 @given(values=LENGTHS)
 def test_bucket_order_is_a_stable_counting_sort_by_bucket(values):
     lengths = np.array(values, np.int32)
-    order = np.asarray(jax.jit(block_order.longest_first)(jnp.asarray(lengths)))
+    order = np.asarray(longest_first(jnp.asarray(lengths)))
     assert sorted(order.tolist()) == list(range(len(values)))
-    key = np.asarray(block_order.bucket(jnp.asarray(lengths)))
+    key = np.asarray(bucket(jnp.asarray(lengths)))
     assert np.all(np.diff(key[order]) <= 0)
     for k in np.unique(key):  # index order within a bucket
         assert np.all(np.diff(order[key[order] == k]) > 0)
@@ -37,19 +40,19 @@ def test_bucket_order_is_a_stable_counting_sort_by_bucket(values):
 @given(values=LENGTHS)
 def test_reference_is_the_stable_argsort_and_agrees_by_bucket(values):
     lengths = np.array(values, np.int32)
-    exact = np.asarray(block_order.reference(jnp.asarray(lengths)))
+    exact = np.asarray(reference(jnp.asarray(lengths)))
     np.testing.assert_array_equal(exact, np.argsort(-lengths.astype(np.int64), kind="stable"))
-    key = np.asarray(block_order.bucket(jnp.asarray(lengths)))
-    bucketed = np.asarray(block_order.longest_first(jnp.asarray(lengths)))
+    key = np.asarray(bucket(jnp.asarray(lengths)))
+    bucketed = np.asarray(longest_first(jnp.asarray(lengths)))
     np.testing.assert_array_equal(key[exact], key[bucketed])  # the same buckets in turn
 
 
 def test_buckets_are_quarters_of_each_octave_of_length_plus_one():
     lengths = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 15, 16, 2 ** 31 - 2], np.int32)
-    np.testing.assert_array_equal(np.asarray(block_order.bucket(jnp.asarray(lengths))),
+    np.testing.assert_array_equal(np.asarray(bucket(jnp.asarray(lengths))),
                                   [0, 4, 4, 8, 9, 10, 11, 12, 12, 16, 16, 123])
     v = np.arange(1, 1 << 16, dtype=np.int64)  # within a bucket: less than 1.25 apart once
-    key = np.asarray(block_order.bucket(jnp.asarray(v - 1, jnp.int32)))  # b >= 2
+    key = np.asarray(bucket(jnp.asarray(v - 1, jnp.int32)))  # b >= 2
     for k in np.unique(key[v >= 4]):
         members = v[key == k]
         assert members.max() / members.min() < 1.25
@@ -57,5 +60,5 @@ def test_buckets_are_quarters_of_each_octave_of_length_plus_one():
 
 def test_one_block_and_all_empty():
     for lengths in ([7], [0, 0, 0]):
-        order = block_order.longest_first(jnp.array(lengths, jnp.int32))
+        order = longest_first(jnp.array(lengths, jnp.int32))
         np.testing.assert_array_equal(np.asarray(order), np.arange(len(lengths)))
