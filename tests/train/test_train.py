@@ -349,9 +349,9 @@ def test_resume_is_bit_identical(skull, uninterrupted, tmp_path):
 def test_compiling_ahead_changes_no_bit(skull, tmp_path, mode):
     """`fit` compiles the step for the next pair capacity in a background thread (the default
     on GPUs) or a child process (through the suite's persistent cache) and takes it when the
-    pairs grow past the capacity (at step 10 here); without it the step is compiled there. Same bits at the end, though the
-    capacities may differ (`ahead.Stepper` takes the smallest one that holds the pairs):
-    nothing depends on the capacity but drops."""
+    pairs grow past the capacity (at step 10 here); without it the step is compiled there. Same
+    bits at the end, though the capacities may differ (`ahead.Stepper` takes the smallest one
+    that holds the pairs): nothing depends on the capacity but drops."""
     logs = {mode: [], "off": []}
     for on, log in logs.items():
         _fit(skull, tmp_path / on, log=log.append, compile_ahead=on)
@@ -511,10 +511,12 @@ def test_lego_train_is_prepared_as_nerf_synthetic(data_dir):
 
 
 def test_fit_cli_writes_outputs_and_refuses_mixing(data_dir, tmp_path, capsys):
-    """--steps 0 (no training step: quick): outputs, then the run-directory rules."""
+    """--steps 0 (no training step: quick): outputs, then the run-directory rules. SH degree 0
+    (as in the viewer's test below, which then reuses this test's compiled evaluations): the
+    higher bands' evaluation adds to every render's compile, and nothing here is about them."""
     out = str(tmp_path / "run")
     args = ["fit", "--data", _lego(data_dir), "--steps", "0", "--out", out, "--init-points",
-            "200", "--crop", "80", "80", "32", "32", "--backend", "reference"]
+            "200", "--crop", "80", "80", "32", "32", "--backend", "reference", "--sh-degree", "0"]
     assert cli.main(args) == 0
     result = json.load(open(os.path.join(out, "result.json")))
     assert '"heldout_psnr"' in capsys.readouterr().out
@@ -563,7 +565,8 @@ def test_fit_cli_shows_the_training_in_a_viewer(data_dir, tmp_path, monkeypatch,
     monkeypatch.setattr(viewer, "wait", wait)
     args = ["fit", "--data", _lego(data_dir), "--steps", "0", "--out", str(tmp_path / "run"),
             "--init-points", "200", "--crop", "80", "80", "32", "32", "--backend",
-            "reference", "--viewer-port", str(port), "--viewer-host", "127.0.0.1"]
+            "reference", "--sh-degree", "0", "--viewer-port", str(port), "--viewer-host",
+            "127.0.0.1"]
     assert cli.main(args) == 0
     assert served == [(True, "step 0 of 0, 200 Gaussians", 256, [True, False])]
     assert "the viewer shows the trained scene" in capsys.readouterr().out
