@@ -20,6 +20,11 @@ The plain-jnp counterpart of the whole rasterization is the `tiles` backend (sam
 hoisted arithmetic, same blending, same backward walk) and `reference` (per-pixel semantics).
 """
 
+# The first pallas_call imports this module lazily, and its import adds to JAX's tracing
+# context: every program traced before it (a run's start-up programs) would miss its jit cache
+# once and be traced again. Imported with the backend, the context is the same from the start.
+import jax.experimental.pallas.fuser  # noqa: F401
+
 from .backend import LOCALGS, VANILLA, PallasStats, forward, gradients, rasterize
 from .plan import Plan, plan
 
