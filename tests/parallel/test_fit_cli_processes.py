@@ -7,13 +7,12 @@ one process)."""
 
 import json
 import os
-import socket
-import subprocess
 import sys
 
 import pytest
 
 from lgs_jax.cli.commands import main
+from tests.parallel.processes import free_port, run_together
 from tests.train.captures import tiny_capture
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -34,30 +33,15 @@ def test_fit_refuses_an_incomplete_set_of_process_options(tmp_path, capsys, extr
     assert not (tmp_path / "run").exists()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_fit_on_two_processes_from_the_command_line(tmp_path):
-    data, out, port = tiny_capture(tmp_path / "data", size=64), tmp_path / "run", _free_port()
+    data, out, port = tiny_capture(tmp_path / "data", size=64), tmp_path / "run", free_port()
     env = dict(os.environ, PYTHONPATH=ROOT, JAX_PLATFORMS="cpu", LGS_JAX_CACHE="",
                XLA_FLAGS="--xla_force_host_platform_device_count=2")
     cmd = [sys.executable, "-m", "lgs_jax", "fit", "--data", data, "--out", str(out),
            "--steps", "3", "--backend", "reference", "--sh-degree", "0", "--eval-every", "100",
            "--coordinator", f"localhost:{port}", "--num-processes", "2"]
-    procs = [subprocess.Popen(cmd + ["--process-id", str(i)], env=env, cwd=ROOT,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for i in range(2)]
-    try:
-        outs = [p.communicate(timeout=600) for p in procs]
-    finally:
-        for p in procs:
-            p.kill()
-    for p, (_, err) in zip(procs, outs):
-        assert p.returncode == 0, err[-3000:]
+    outs = run_together([cmd + ["--process-id", str(i)] for i in range(2)], env, ROOT)
     results = [json.loads(o[o.index("{"):]) for o, _ in outs]
     assert [r["gaussian_devices"] for r in results] == [4, 4]
     assert results[0]["steps"] == results[1]["steps"] == 3

@@ -9,43 +9,27 @@ over the 4 devices), process 0 alone writing the run folder, its scene within
 
 import json
 import os
-import socket
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 
 from lgs_jax.io.ply import load_ply
 from lgs_jax.train import sharded
+from tests.parallel.processes import free_port, run_together
 from tests.parallel.test_gaussian_parallel_training import beyond, ply_fields
 from tests.parallel.tiny_run import RECIPE
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_gaussian_parallel_two_processes(tmp_path):
-    path, port = tmp_path / "multihost.npz", _free_port()
+    path, port = tmp_path / "multihost.npz", free_port()
     env = dict(os.environ, PYTHONPATH=ROOT)
-    procs = [subprocess.Popen([sys.executable, "-m", "tests.parallel.multihost_child", str(i),
-                               str(port), str(path)], env=env, cwd=ROOT,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for i in range(2)]
-    try:
-        outs = [p.communicate(timeout=600) for p in procs]
-    finally:
-        for p in procs:
-            p.kill()
-    for p, (_, err) in zip(procs, outs):
-        assert p.returncode == 0, err[-3000:]
+    run_together([[sys.executable, "-m", "tests.parallel.multihost_child", str(i), str(port),
+                   str(path)] for i in range(2)], env, ROOT)
     res = np.load(path)
     assert bool(res["gathered"]) and not res["overflow"].any()
     for k in ("image", "alpha", "depth"):
@@ -59,25 +43,11 @@ PIXELS = 32 * 64 * 3  # a training view's values (`tiny_run`)
 def _children(tmp_path, part: str, timeout: float = 600) -> list[str]:
     """tests.parallel.multihost_fit_child's two processes of `part` under tmp_path; where one
     fails, the other (waiting at a collective) is killed. Returns their stderr."""
-    port, env = _free_port(), dict(os.environ, PYTHONPATH=ROOT)
-    procs = [subprocess.Popen([sys.executable, "-m", "tests.parallel.multihost_fit_child",
-                               str(i), str(port), str(tmp_path), part], env=env, cwd=ROOT,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-             for i in range(2)]
-    end = time.monotonic() + timeout
-    try:
-        while any(p.poll() is None for p in procs) and time.monotonic() < end:
-            if any(p.poll() not in (None, 0) for p in procs):
-                break
-            time.sleep(0.2)
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-    errs = [p.communicate()[1] for p in procs]
-    for i, p in enumerate(procs):
-        assert p.returncode == 0, (i, errs[i][-3000:], errs[1 - i][-3000:])
-    return errs
+    port, env = free_port(), dict(os.environ, PYTHONPATH=ROOT)
+    outs = run_together([[sys.executable, "-m", "tests.parallel.multihost_fit_child", str(i),
+                          str(port), str(tmp_path), part] for i in range(2)], env, ROOT,
+                        timeout)
+    return [err for _, err in outs]
 
 
 def test_gaussian_parallel_processes_read_and_refuse(tmp_path):
