@@ -6,11 +6,6 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)  # float64 ground truth; float32 tests pass float32
-# The first Pallas call imports this module lazily, and it defines a configuration option that
-# is part of JAX's tracing context: every jitted function traced before it would then miss its
-# cache once and be traced and compiled again (seen: a 10 s Pallas gradient program recompiled
-# on its second call). Imported here, the context is the same from the first trace on.
-import jax.experimental.pallas.fuser  # noqa: E402,F401
 # Persistent compilation cache: the tests of a session share compiled programs (the same
 # program under another jit, the small programs of eager operations: reading one back costs
 # less than compiling it again). A folder per
