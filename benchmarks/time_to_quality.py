@@ -64,6 +64,7 @@ ABLATIONS = {  # variant -> the fit options that switch one technique off
     "strategy_mcmc": ["--strategy", "mcmc"],
     "strategy_default": ["--strategy", "default"],  # 3DGS's clone and split in the schedule
     "budget_3": ["--budget", "3"],  # a smaller Gaussian budget (3x the start)
+    "budget_5": ["--budget", "5"],
     "no_early_stop": ["--no-early-stop"],
     "growth_mcmc": ["--growth", "mcmc"],
     "unseen_off": ["--unseen-after", "0"],
