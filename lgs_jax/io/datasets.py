@@ -97,6 +97,13 @@ def _source(path: str) -> Source:
                        " sparse/0/cameras.bin or .txt)")
 
 
+def sfm_point_count(path) -> int:
+    """The number of SfM points of the dataset at `path` (0 for a format without them, such as
+    transforms.json), read from its model files alone (no image is opened); `DatasetError` as
+    `load_dataset` for a folder that is not a dataset."""
+    return len(_source(os.fspath(path)).points)
+
+
 def _held_out(names: list[str], nerf_synthetic: bool, where: str) -> np.ndarray:
     if not nerf_synthetic:
         return np.arange(len(names)) % 8 == 0

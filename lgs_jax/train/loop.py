@@ -36,9 +36,10 @@ import time
 import jax
 import jax.numpy as jnp
 
+from ..io.datasets import sfm_point_count
 from ..parallel import to_host
 from ..render import default_backend, pair_capacity
-from . import heldout, outputs, processes, report, rundir, sharded_state, state
+from . import heldout, outputs, processes, recipes, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
 from .config import FitConfig, Setup, devices_problem
@@ -426,6 +427,8 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
     check_hooks(watch, watch_every)
+    config = recipes.for_start(config, lambda: len(dataset.points) if dataset is not None
+                               else sfm_point_count(config.data), log)
     devices_problem(config)
     processes.problem(config, watch)
     mode_of(config.compile_ahead)  # checks "process" has its cache

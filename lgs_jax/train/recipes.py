@@ -12,11 +12,15 @@ left None take, and the strategies the command line names (`STRATEGIES`).
            relocated, after Speedy-Splat); SH bands every 500 steps (`Recipe.sh_every`: degree
            3 at step 1,500); an early stop when the training loss stops falling
            (`Recipe.early_stop`, `early_stop`). Measured against gsplat's 7,000-step result by
-           benchmarks/time_to_quality.py.
+           benchmarks/time_to_quality.py. On a capture without SfM points (a random start,
+           `RANDOM_START_VALUES`): 4,000 steps with `DefaultStrategy` instead, since MCMC's
+           relocation from random points needs more steps than the budget schedule has
+           (measured on fox: docs/design-notes.md).
 
-A field given explicitly keeps its value under either recipe. The values are filled in when
-the `Recipe` or `FitConfig` is made, so `dataclasses.replace(config, recipe=Recipe(name="fast"))`
-keeps the run's already filled steps and strategy: make a new `FitConfig` instead.
+A field given explicitly keeps its value under either recipe and either start. The values are
+filled in when the `Recipe` or `FitConfig` is made (the random start's by `fit`, once it knows the
+capture), so `dataclasses.replace(config, recipe=Recipe(name="fast"))` keeps the run's already
+filled steps and strategy: make a new `FitConfig` instead.
 """
 
 from __future__ import annotations
@@ -35,6 +39,10 @@ RUN_VALUES = {  # FitConfig fields (and the strategy, by its command-line name)
     "default": dict(steps=30_000, strategy="default"),
     "fast": dict(steps=2_000, strategy="budget"),
 }
+RANDOM_START_VALUES = {  # FitConfig fields for a capture without SfM points (`for_start`)
+    "default": {},
+    "fast": dict(steps=4_000, strategy="default"),
+}
 STRATEGIES = {"default": DefaultStrategy, "mcmc": MCMCStrategy, "budget": BudgetStrategy}
 """The strategies by their command-line names (`--strategy`)."""
 
@@ -45,10 +53,10 @@ def said(field: str) -> str:
     return ", ".join(f"{name} {table[name][field]}" for name in NAMES)
 
 
-def strategy_of(name: str, max_gaussians: int) -> Strategy:
-    """Recipe `name`'s strategy with its defaults (cap_max, where it has one, max_gaussians:
-    as the command line sets it)."""
-    cls = STRATEGIES[RUN_VALUES[name]["strategy"]]
+def strategy_of(name: str, max_gaussians: int, values: dict | None = None) -> Strategy:
+    """Recipe `name`'s strategy (the one `values`, default `RUN_VALUES[name]`, names) with its
+    defaults (cap_max, where it has one, max_gaussians: as the command line sets it)."""
+    cls = STRATEGIES[(values or RUN_VALUES[name])["strategy"]]
     if "cap_max" in {f.name for f in dataclasses.fields(cls)}:
         return cls(cap_max=max_gaussians)
     return cls()
@@ -56,12 +64,38 @@ def strategy_of(name: str, max_gaussians: int) -> Strategy:
 
 def fill(obj, name: str) -> None:
     """Set the fields of `obj` (a frozen `Recipe` or `FitConfig`, in its __post_init__) that
-    are None and that recipe `name` gives a value to."""
-    if dataclasses.is_dataclass(obj) and hasattr(obj, "recipe"):
-        values = dict(RUN_VALUES[name], strategy=None)
-        values["strategy"] = strategy_of(name, obj.max_gaussians)
+    are None and that recipe `name` gives a value to. A `FitConfig` records the fields it
+    filled (`filled`), which `for_start` may set again."""
+    is_run = hasattr(obj, "recipe")
+    if is_run:
+        values = dict(RUN_VALUES[name], strategy=strategy_of(name, obj.max_gaussians))
     else:
         values = RECIPE_VALUES[name]
-    for field, value in values.items():
-        if getattr(obj, field) is None:
-            object.__setattr__(obj, field, value)
+    left = [field for field in values if getattr(obj, field) is None]
+    for field in left:
+        object.__setattr__(obj, field, values[field])
+    if is_run:
+        object.__setattr__(obj, "_filled", frozenset(left))
+
+
+def filled(config) -> frozenset:
+    """The fields of `config` (a `FitConfig`) that its recipe filled in (`fill`): left None
+    when it was made. `dataclasses.replace` makes a configuration whose fields all count as
+    given."""
+    return getattr(config, "_filled", frozenset())
+
+
+def for_start(config, sfm_points, log=print):
+    """`config` for its capture: itself, or where the capture has no SfM points (a random
+    start), a new `FitConfig` whose recipe-filled fields (`filled`) take `RANDOM_START_VALUES`
+    of its recipe (said through `log`); fields given explicitly keep their values.
+    `sfm_points()`: the capture's SfM point count, called only where the answer matters."""
+    values = {k: v for k, v in RANDOM_START_VALUES[config.recipe.name].items()
+              if k in filled(config)}
+    if not values or sfm_points():
+        return config
+    log(f"no SfM points: the {config.recipe.name} recipe's random start, "
+        + ", ".join(f"{k} {v}" for k, v in values.items()))
+    if "strategy" in values:
+        values["strategy"] = strategy_of(config.recipe.name, config.max_gaussians, values)
+    return dataclasses.replace(config, **values)

@@ -9,6 +9,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 
 import jax
 import jax.numpy as jnp
@@ -19,7 +20,7 @@ import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.cli import fit as fit_cmd
 from lgs_jax.synthetic import random_scene, synthetic_camera
-from lgs_jax.train import ahead, budget, checkpoint, early_stop, levels, optim, report
+from lgs_jax.train import ahead, budget, checkpoint, early_stop, levels, optim, recipes, report
 from lgs_jax.train import pool as P
 from lgs_jax.train.strategy import StepInfo
 
@@ -201,6 +202,58 @@ def test_the_default_recipe_is_unchanged_and_the_fast_one_fills_its_fields():
         dataclasses.replace(c, max_gaussians=5000)))
     assert "settings.name: 'fast' -> 'default'" in problem and "settings.levels: 3 -> 1" \
         in problem and "strategy: 'BudgetStrategy' -> 'DefaultStrategy'" in problem
+
+
+def test_a_random_start_takes_the_recipes_random_start_values_where_it_filled_them():
+    """The fast recipe on a capture without SfM points: the fields it filled take
+    RANDOM_START_VALUES (steps 4,000, DefaultStrategy); fields given keep their values, a
+    capture with points or the default recipe changes nothing, and the point count is read
+    only where it matters."""
+    fast, said = train.Recipe(name="fast"), []
+    f = train.FitConfig(data="d", out="o", recipe=fast, max_gaussians=5000)
+    assert recipes.filled(f) == {"steps", "strategy"}
+    got = recipes.for_start(f, lambda: 0, said.append)
+    assert (got.steps, got.strategy) == (4000, train.DefaultStrategy())
+    assert said == ["no SfM points: the fast recipe's random start, steps 4000, strategy "
+                    "default"]
+    assert got.recipe == f.recipe and got.max_gaussians == 5000
+    assert recipes.for_start(f, lambda: 12, said.append) is f and len(said) == 1
+    mine = train.FitConfig(data="d", out="o", recipe=fast, strategy=train.MCMCStrategy())
+    assert recipes.for_start(mine, lambda: 0, said.append).strategy == train.MCMCStrategy()
+
+    def unread():
+        raise AssertionError("the point count was read")
+
+    for config in (train.FitConfig(data="d", out="o"), dataclasses.replace(f),
+                   train.FitConfig(data="d", out="o", recipe=fast, steps=9,
+                                   strategy=train.MCMCStrategy())):
+        assert recipes.for_start(config, unread) is config
+
+
+def test_fit_applies_the_random_start_values_before_it_claims_the_run_folder(tmp_path,
+                                                                            monkeypatch):
+    """`fit` on a capture without SfM points (transforms.json) checks and trains the random
+    start's configuration; `sfm_point_count` reads a model's points, no image."""
+    from lgs_jax.io.datasets import sfm_point_count
+    from lgs_jax.train import loop
+    from tests.io.captures import tiny_colmap
+
+    data = tiny_capture(tmp_path / "d", views=2, size=8)
+    assert sfm_point_count(data) == 0
+    tiny_colmap(str(tmp_path / "c"))
+    os.remove(tmp_path / "c" / "images" / "a.png")
+    assert sfm_point_count(str(tmp_path / "c")) == 1
+    seen = []
+
+    def claimed(config, path):
+        seen.append(config)
+        raise _Stop
+
+    monkeypatch.setattr(loop.processes, "claimed", claimed)
+    with pytest.raises(_Stop):
+        train.fit(train.FitConfig(data=data, out=str(tmp_path / "o"),
+                                  recipe=train.Recipe(name="fast")), log=lambda m: None)
+    assert (seen[0].steps, seen[0].strategy) == (4000, train.DefaultStrategy())
 
 
 @pytest.fixture
