@@ -97,11 +97,23 @@ def _source(path: str) -> Source:
                        " sparse/0/cameras.bin or .txt)")
 
 
-def sfm_point_count(path) -> int:
-    """The number of SfM points of the dataset at `path` (0 for a format without them, such as
-    transforms.json), read from its model files alone (no image is opened); `DatasetError` as
-    `load_dataset` for a folder that is not a dataset."""
-    return len(_source(os.fspath(path)).points)
+@dataclasses.dataclass(frozen=True)
+class DatasetInfo:
+    """What a dataset is, read from its model files alone (`dataset_info`): `sfm_points`, its
+    SfM point count (0 for a format without them, such as transforms.json); `nerf_synthetic`,
+    a NeRF-synthetic folder (white background)."""
+
+    sfm_points: int
+    nerf_synthetic: bool
+
+
+def dataset_info(data) -> DatasetInfo:
+    """`DatasetInfo` of `data`: a loaded `Dataset`, or the path `load_dataset` takes (no image
+    is opened; `DatasetError` as `load_dataset` for a folder that is not a dataset)."""
+    if isinstance(data, Dataset):
+        return DatasetInfo(len(data.points), bool(np.all(data.background == 1)))
+    source = _source(os.fspath(data))
+    return DatasetInfo(len(source.points), bool(source.nerf_synthetic))
 
 
 def _held_out(names: list[str], nerf_synthetic: bool, where: str) -> np.ndarray:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..io.datasets import dataset_info
 from ..scene import Gaussians
 from ..sh import C0
 
@@ -56,6 +57,14 @@ def initial_gaussians(points: np.ndarray, colors: np.ndarray, init_opacity: floa
     return Gaussians(cast(points), cast(rng.uniform(size=(n, 4))),
                      cast(np.repeat(np.log(scale)[:, None], 3, 1)),
                      cast(np.full(n, np.log(init_opacity / (1 - init_opacity)))), cast(sh))
+
+
+def wide_start(data) -> bool:
+    """Whether `start_gaussians` draws random points in the wide cube for `data` (a `Dataset`
+    or its path; `io.datasets.dataset_info`): no SfM points and no NeRF-synthetic object
+    (where init_extent is not given)."""
+    info = dataset_info(data)
+    return info.sfm_points == 0 and not info.nerf_synthetic
 
 
 def start_gaussians(rd, config, log=print) -> Gaussians:

@@ -36,7 +36,6 @@ import time
 import jax
 import jax.numpy as jnp
 
-from ..io.datasets import sfm_point_count
 from ..parallel import to_host
 from ..render import default_backend, pair_capacity
 from . import heldout, outputs, processes, recipes, report, rundir, sharded_state, state
@@ -45,6 +44,7 @@ from .checkpoint import data_of
 from .config import FitConfig, Setup, devices_problem
 from .early_stop import EarlyStop
 from .feed import RunData, nbytes, prepare, streams
+from .init import wide_start
 from .interrupt import Interrupted, StopRequest
 from .levels import LevelFeed, check as check_levels
 from .sharded import mesh_of
@@ -427,8 +427,8 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     if not isinstance(config, FitConfig):
         raise ValueError(f"config: expected a FitConfig, got {type(config).__name__}")
     check_hooks(watch, watch_every)
-    config = recipes.for_start(config, lambda: len(dataset.points) if dataset is not None
-                               else sfm_point_count(config.data), log)
+    config = recipes.for_start(config, lambda: wide_start(
+        dataset if dataset is not None else config.data), log)
     devices_problem(config)
     processes.problem(config, watch)
     mode_of(config.compile_ahead)  # checks "process" has its cache

@@ -12,10 +12,12 @@ left None take, and the strategies the command line names (`STRATEGIES`).
            relocated, after Speedy-Splat); SH bands every 500 steps (`Recipe.sh_every`: degree
            3 at step 1,500); an early stop when the training loss stops falling
            (`Recipe.early_stop`, `early_stop`). Measured against gsplat's 7,000-step result by
-           benchmarks/time_to_quality.py. On a capture without SfM points (a random start,
-           `RANDOM_START_VALUES`): 4,000 steps with `DefaultStrategy` instead, since MCMC's
-           relocation from random points needs more steps than the budget schedule has
-           (measured on fox: docs/design-notes.md).
+           benchmarks/time_to_quality.py. On a wide random start (`WIDE_START_VALUES`: a
+           real capture without SfM points, whose start is random points in gsplat's cube of
+           3 x the scene scale): 4,000 steps with `DefaultStrategy` instead, since MCMC's
+           relocation of points spread so wide needs more steps than the budget schedule has
+           (measured on fox: docs/design-notes.md). A NeRF-synthetic object's start, in a
+           cube around the object, keeps the budget.
 
 A field given explicitly keeps its value under either recipe and either start. The values are
 filled in when the `Recipe` or `FitConfig` is made (the random start's by `fit`, once it knows the
@@ -39,7 +41,7 @@ RUN_VALUES = {  # FitConfig fields (and the strategy, by its command-line name)
     "default": dict(steps=30_000, strategy="default"),
     "fast": dict(steps=2_000, strategy="budget"),
 }
-RANDOM_START_VALUES = {  # FitConfig fields for a capture without SfM points (`for_start`)
+WIDE_START_VALUES = {  # FitConfig fields for a wide random start (`for_start`)
     "default": {},
     "fast": dict(steps=4_000, strategy="default"),
 }
@@ -85,16 +87,17 @@ def filled(config) -> frozenset:
     return getattr(config, "_filled", frozenset())
 
 
-def for_start(config, sfm_points, log=print):
-    """`config` for its capture: itself, or where the capture has no SfM points (a random
-    start), a new `FitConfig` whose recipe-filled fields (`filled`) take `RANDOM_START_VALUES`
-    of its recipe (said through `log`); fields given explicitly keep their values.
-    `sfm_points()`: the capture's SfM point count, called only where the answer matters."""
-    values = {k: v for k, v in RANDOM_START_VALUES[config.recipe.name].items()
+def for_start(config, wide, log=print):
+    """`config` for its capture: itself, or where the start is wide (`wide()`: the capture
+    has no SfM points and is no NeRF-synthetic object, `init.wide_start`; called only where
+    the answer matters), a new `FitConfig` whose recipe-filled fields (`filled`) take
+    `WIDE_START_VALUES` of its recipe (said through `log`); fields given explicitly keep
+    their values."""
+    values = {k: v for k, v in WIDE_START_VALUES[config.recipe.name].items()
               if k in filled(config)}
-    if not values or sfm_points():
+    if not values or not wide():
         return config
-    log(f"no SfM points: the {config.recipe.name} recipe's random start, "
+    log(f"no SfM points: the {config.recipe.name} recipe's wide random start, "
         + ", ".join(f"{k} {v}" for k, v in values.items()))
     if "strategy" in values:
         values["strategy"] = strategy_of(config.recipe.name, config.max_gaussians, values)

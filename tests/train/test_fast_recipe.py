@@ -204,22 +204,21 @@ def test_the_default_recipe_is_unchanged_and_the_fast_one_fills_its_fields():
         in problem and "strategy: 'BudgetStrategy' -> 'DefaultStrategy'" in problem
 
 
-def test_a_random_start_takes_the_recipes_random_start_values_where_it_filled_them():
-    """The fast recipe on a capture without SfM points: the fields it filled take
-    RANDOM_START_VALUES (steps 4,000, DefaultStrategy); fields given keep their values, a
-    capture with points or the default recipe changes nothing, and the point count is read
-    only where it matters."""
+def test_a_wide_start_takes_the_recipes_wide_start_values_where_it_filled_them():
+    """The fast recipe on a wide random start: the fields it filled take WIDE_START_VALUES
+    (steps 4,000, DefaultStrategy); fields given keep their values, another start or the
+    default recipe changes nothing, and the capture is read only where it matters."""
     fast, said = train.Recipe(name="fast"), []
     f = train.FitConfig(data="d", out="o", recipe=fast, max_gaussians=5000)
     assert recipes.filled(f) == {"steps", "strategy"}
-    got = recipes.for_start(f, lambda: 0, said.append)
+    got = recipes.for_start(f, lambda: True, said.append)
     assert (got.steps, got.strategy) == (4000, train.DefaultStrategy())
-    assert said == ["no SfM points: the fast recipe's random start, steps 4000, strategy "
-                    "default"]
+    assert said == ["no SfM points: the fast recipe's wide random start, steps 4000, "
+                    "strategy default"]
     assert got.recipe == f.recipe and got.max_gaussians == 5000
-    assert recipes.for_start(f, lambda: 12, said.append) is f and len(said) == 1
+    assert recipes.for_start(f, lambda: False, said.append) is f and len(said) == 1
     mine = train.FitConfig(data="d", out="o", recipe=fast, strategy=train.MCMCStrategy())
-    assert recipes.for_start(mine, lambda: 0, said.append).strategy == train.MCMCStrategy()
+    assert recipes.for_start(mine, lambda: True, said.append).strategy == train.MCMCStrategy()
 
     def unread():
         raise AssertionError("the point count was read")
@@ -230,19 +229,24 @@ def test_a_random_start_takes_the_recipes_random_start_values_where_it_filled_th
         assert recipes.for_start(config, unread) is config
 
 
-def test_fit_applies_the_random_start_values_before_it_claims_the_run_folder(tmp_path,
-                                                                            monkeypatch):
-    """`fit` on a capture without SfM points (transforms.json) checks and trains the random
-    start's configuration; `sfm_point_count` reads a model's points, no image."""
-    from lgs_jax.io.datasets import sfm_point_count
+def test_fit_applies_the_wide_start_values_before_it_claims_the_run_folder(tmp_path,
+                                                                          monkeypatch):
+    """`fit` on a capture whose start is wide (a transforms.json without SfM points, not
+    NeRF-synthetic) checks and trains the wide start's configuration; `wide_start` reads the
+    model files alone (no image): false with SfM points (COLMAP) and for a NeRF-synthetic
+    folder, whether given as a path or a loaded dataset."""
+    from lgs_jax.io.datasets import load_dataset
     from lgs_jax.train import loop
-    from tests.io.captures import tiny_colmap
+    from lgs_jax.train.init import wide_start
+    from tests.io.captures import tiny_colmap, tiny_transforms
 
-    data = tiny_capture(tmp_path / "d", views=2, size=8)
-    assert sfm_point_count(data) == 0
+    synthetic = tiny_capture(tmp_path / "s", views=2, size=8)  # transforms_train.json
+    assert not wide_start(synthetic) and not wide_start(load_dataset(synthetic))
     tiny_colmap(str(tmp_path / "c"))
     os.remove(tmp_path / "c" / "images" / "a.png")
-    assert sfm_point_count(str(tmp_path / "c")) == 1
+    assert not wide_start(str(tmp_path / "c"))
+    data = os.path.dirname(tiny_transforms(str(tmp_path / "d")))
+    assert wide_start(data) and wide_start(load_dataset(data))
     seen = []
 
     def claimed(config, path):
