@@ -149,15 +149,17 @@ class FitConfig:
 
     data: str = option(help="dataset folder (or transforms json)")
     out: str = option(help="run directory (new or empty, unless --resume or --overwrite)")
-    steps: int | None = option(None, f"training steps (default: the recipe's: "
-                                     f"{recipes.said('steps')})", low=0)
+    steps: int | None = option(
+        None, f"training steps (default: the recipe's: {recipes.said('steps')}; fast on a real "
+              f"capture without SfM points: {recipes.WIDE_START_VALUES['fast']['steps']})", low=0)
     recipe: Recipe = Recipe()
     strategy: Strategy | None = option(
         None, "densification: default (3DGS clone/split/prune, gsplat's DefaultStrategy), "
               "mcmc (3DGS as MCMC, gsplat's MCMCStrategy, with its recipe: init opacity 0.5, "
               "scale 0.1, regularisers 0.01) or budget (MCMC with Taming 3DGS's budget "
               "schedule and unseen Gaussians relocated, `budget.BudgetStrategy`) (default: the "
-              f"recipe's: {recipes.said('strategy')})")
+              f"recipe's: {recipes.said('strategy')}; fast on a real capture without SfM "
+              "points: default, `recipes.WIDE_START_VALUES`)")
     max_gaussians: int = option(1_000_000, "cap on the number of Gaussians (the pool's; the "
                                            "command line's mcmc takes it as cap_max)", low=1)
     pool_size: int | None = option(
