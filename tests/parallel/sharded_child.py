@@ -175,11 +175,13 @@ def save_projected_bound(res: dict, tag: str, dtype, devices: int):
 
 
 def save_views_mesh(res: dict):
-    """A 2 x 2 mesh ("views" x "gaussians"): a batch of 2 views of the float32 scene, from an
+    """A 2 x 2 mesh ("views" x "gaussians"): a batch of 2 views of the float64 scene, from an
     exchange capacity of 2, which overflows (reported), then `render_sharded_growing` grows it;
     one camera (the first view), rendered on both rows of the mesh; and the one-device render
-    of each view alone."""
-    dtype = np.float32
+    of each view alone (`one_device_grads`' forward: float64, as `save_render_grads` compiled
+    it, rather than a program of its own; float32 on a 2 x 2 mesh: the training run resumed
+    on one, test_gaussian_parallel_training.py)."""
+    dtype = np.float64
     g, bg = scene(dtype), np.asarray(scenes.BACKGROUND, dtype)
     views = [scenes.camera(W, H, dtype=dtype, yaw=y) for y in (0.0, 0.15)]
     cams = lgs_jax.stack_cameras(views)
@@ -204,10 +206,7 @@ def save_views_mesh(res: dict):
                                                          capacity=CAPACITY, exchange_capacity=2)
     res["growth/calls"] = np.asarray(calls, np.int64)
     res["growth/settled"] = np.asarray(settled)
-    # the scene as an argument: a constant scene's projection would be folded at compile time
-    one = jax.jit(lambda g, c, bg: outputs(lgs_jax.render(g, c, background=bg, backend="tiles",
-                                                          capacity=CAPACITY)))
-    alone = [one(g, c, bg) for c in views]
+    alone = [one_device_grads(g, c, bg, weights(dtype))[0] for c in views]
     single, _ = sharded(shards.gaussians, views[0], bg, capacity=settled[0],
                         exchange_capacity=settled[1])
     for k in out:

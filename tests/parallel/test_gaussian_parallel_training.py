@@ -137,8 +137,9 @@ def _refined_alike(logs):
 
 def _resumed(tmp_path, logs):
     """The one-device run stopped after step HALF (its checkpoint) resumes on a 2 x 2 mesh with
-    buffers sized at its first view's needs exactly: the exchange overflows, is reported and
-    grown (a recompile; the result is checked in `_same_scene`). One scene.ply per run."""
+    its exchange sized at its first view's needs exactly (training_child.py): the exchange
+    overflows, is reported and grown (a recompile; the result is checked in `_same_scene`).
+    One scene.ply per run."""
     before = [r["gaussians"] for r in _rows(tmp_path / "d1") if r.get("step") == HALF][0]
     assert f"resumed at step {HALF} ({before} Gaussians)" in logs["d1"], logs["d1"]
     resumed = logs["d1_resumed_on_2x2"]

@@ -6,8 +6,8 @@ OUT/logs.json holds what the folders cannot: each run's log lines.
 
 The runs (`PARTS`): "fast", two views per step, the run on 1 device stopped (Ctrl-C) after step
 `HALF` and resumed on 1 device and on a 2 x 2 mesh (devices=2 rows of gaussian_devices=2, a view
-per row), the latter with buffers sized at the first view's needs exactly (they overflow and
-grow), all on every view (nothing held out, an evaluation due at every step), then each
+per row), the latter with its exchange sized at the first view's needs exactly (it overflows and
+grows), all on every view (nothing held out, an evaluation due at every step), then each
 strategy's refinement of one state on 1 and 4 devices (`refinements`); "slow", one view per
 step, the same run on 1, 2 and 4 devices, view 0 held out and evaluated, and an MCMC run on 2
 devices optimizing the views' poses, colours and bilateral grids, and on a 2 x 2 mesh (two
@@ -118,8 +118,22 @@ def main(out: str, part: str):
             pass
         shutil.copytree(where("d1"), where("d1_resumed_on_2x2"))
         fit("d1", 1, resume=True)  # the same bits as a run that never stopped
-        # the views split over 2 rows, the Gaussians over the 2 devices of each
-        fit("d1_resumed_on_2x2", 2, devices=2, resume=True, pair_headroom=1.0)
+        # the views split over 2 rows, the Gaussians over the 2 devices of each; the exchange
+        # sized at the first view's records exactly (it overflows after the refinement at step
+        # 6 and grows: one recompile), the pairs with room for the whole run: sized exactly too,
+        # they would overflow once the exchange delivers every record, a second recompile
+        # (an overflowing exchange undercounts the pairs), which checks nothing more
+        first_sizes = sharded_state.first_sizes
+
+        def exchange_exact(m, pool, cam, antialiased, headroom):
+            return (first_sizes(m, pool, cam, antialiased, headroom)[0],
+                    first_sizes(m, pool, cam, antialiased, 1.0)[1])
+
+        sharded_state.first_sizes = exchange_exact
+        try:
+            fit("d1_resumed_on_2x2", 2, devices=2, resume=True, pair_headroom=2.0)
+        finally:
+            sharded_state.first_sizes = first_sizes
         logs["refinements"] = refinements()
     with open(os.path.join(out, "logs.json"), "w") as f:
         json.dump(logs, f)

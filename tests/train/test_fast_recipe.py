@@ -317,11 +317,12 @@ class _Stop(Exception):
 
 
 def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path):
-    """Run twice (a, b): the same bits; each level starts with its own pair capacity (which
-    changes no bit); c dies after step 7 (its checkpoint: step 5, at the coarse level) and is
-    resumed: a's bits; resumed again after its early stop, it stops at
-    once. The early stop ends each at step 20, where the rule over metrics.jsonl's training
-    losses says so."""
+    """Run twice (a, then c): the same bits; each level starts with its own pair capacity
+    (which changes no bit); c dies after step 7 (its checkpoint: step 5, at the coarse level)
+    and is resumed: a's bits and a's result (its steps 1 to 5 ran again from the start, the
+    rest resumed: a third, uninterrupted run would check nothing more); resumed again after
+    its early stop, it stops at once. The early stop ends each at step 20, where the rule over
+    metrics.jsonl's training losses says so."""
     data = tiny_capture(tmp_path / "d", views=5, size=16)
     lines = []
     result = train.fit(_fast(data, tmp_path / "a"), log=lines.append)
@@ -332,9 +333,6 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     assert entered == ["step 1: images at 8x8 (1/2)", "step 13: images at 16x16 (full size)"]
     timing = {k for k in result if k.endswith("seconds")
               or k.startswith(("compile_", "programs_"))} | {"ms_per_step"}
-    second = train.fit(_fast(data, tmp_path / "b"), log=lambda m: None)
-    assert {k: v for k, v in second.items() if k not in timing} == {
-        k: v for k, v in result.items() if k not in timing}
 
     def die(step, *_):
         if step == 7:
@@ -343,17 +341,17 @@ def test_a_tiny_fast_fit_is_deterministic_and_resumes_to_the_same_bits(tmp_path)
     with pytest.raises(_Stop):
         train.fit(_fast(data, tmp_path / "c"), watch=die, watch_every=0, log=lambda m: None)
     assert json.load(open(tmp_path / "c" / "checkpoint.json"))["step"] == 5
-    train.fit(_fast(data, tmp_path / "c", resume=True), log=lambda m: None)
+    second = train.fit(_fast(data, tmp_path / "c", resume=True), log=lambda m: None)
+    assert {k: v for k, v in second.items() if k not in timing} == {
+        k: v for k, v in result.items() if k not in timing}
     again = train.fit(_fast(data, tmp_path / "c", resume=True), log=lambda m: None)
     assert again["stopped_early_at"] == 20
-    a = np.load(tmp_path / "a" / "checkpoint.npz")
-    for run in "bc":
-        other = np.load(tmp_path / run / "checkpoint.npz")
-        assert sorted(other.files) == sorted(a.files)
-        for name in a.files:
-            np.testing.assert_array_equal(a[name], other[name], err_msg=f"{run}: {name}")
-        assert (tmp_path / run / "scene.ply").read_bytes() == \
-            (tmp_path / "a" / "scene.ply").read_bytes()
+    a, c = (np.load(tmp_path / run / "checkpoint.npz") for run in "ac")
+    assert sorted(c.files) == sorted(a.files)
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], c[name], err_msg=name)
+    ply = [(tmp_path / run / "scene.ply").read_bytes() for run in "ac"]
+    assert ply[0] == ply[1]
     rows = report.read_metrics(str(tmp_path / "a" / "metrics.jsonl"))
     losses = {r["step"]: r["loss"] for r in rows if "loss" in r}
     assert sorted(losses) == list(range(1, 21))

@@ -1,6 +1,7 @@
 """lgs_jax.train.heldout: scikit-image's PSNR and SSIM on the device, and held-out evaluations
 scored on the device; the MCMC pool sized to the most Gaussians its run can reach."""
 
+import jax
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -39,7 +40,10 @@ def test_evaluations_score_the_pool_they_are_given():
     setup = Setup(backend="tiles")
     pools = [from_gaussians(g, 64), from_gaussians(scenes.cast(scenes.scene(5), np.float32), 64)]
     shown = [train.render_gaussians(pool.params, pool.active) for pool in pools]
-    render = lambda g, c: lgs_jax.render(g, c, background=background).image
+    # one program for both pools (a capacity of their own each: two) and jitted scores (eager,
+    # each of their operations compiles on its own)
+    render = lambda g, c: lgs_jax.render(g, c, background=background, capacity=1024).image
+    view_scores = jax.jit(heldout.view_scores)
     noise = np.random.default_rng(0).normal(0, 0.05, (len(cams), cams[0].height,
                                                      cams[0].width, 3)).astype(np.float32)
     # the first pool's renders, noisy (its scores finite too)
@@ -48,7 +52,7 @@ def test_evaluations_score_the_pool_they_are_given():
     got = [evaluations.score(pool) for pool in pools]
     assert evaluations.capacity > 1
     for (psnr, ssim), g in zip(got, shown):
-        scores = [heldout.view_scores(render(g, c), t) for c, t in zip(cams, targets)]
+        scores = [view_scores(render(g, c), t) for c, t in zip(cams, targets)]
         np.testing.assert_allclose(psnr, np.mean([float(p) for p, _ in scores]), rtol=1e-6)
         np.testing.assert_allclose(ssim, np.mean([float(s) for _, s in scores]), rtol=1e-5)
 

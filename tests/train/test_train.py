@@ -376,13 +376,24 @@ def test_steps_dispatched_ahead_change_no_bit(skull, tmp_path, monkeypatch):
         ahead.append(step - run.st.step)  # 1: dispatched before step `step - 1` was read
         return dispatch(run, feed, steps, step, size, go)
 
-    aheads = {}
+    aheads, logs = {}, []
     for every in (3, 1):
         ahead = aheads[every] = []
         monkeypatch.setattr(loop, "_dispatch", functools.partial(tracked, seen=[]))
         order[every] = loop._dispatch.keywords["seen"]
+        if every == 1:
+            # the step compiled ahead at the size the first run grew to (its checkpoint's
+            # capacity), not at `Sizes.following`'s: that run's program, not another compile
+            grown = json.load(open(tmp_path / "3" / "checkpoint.json"))["capacity"]
+
+            class Sizes(loop.Sizes):
+                def following(self, size):
+                    return grown, size[1]
+
+            monkeypatch.setattr(loop, "Sizes", Sizes)
         _fit(skull, tmp_path / str(every), checkpoint_every=every,  # growth taken from ahead:
-             compile_ahead="thread" if every == 1 else None)
+             compile_ahead="thread" if every == 1 else None, log=logs.append)
+    assert any("grown" in m and "(compiled ahead;" in m for m in logs), logs
     redo = [(9, True), (10, False), (9, True), (10, True), (11, True)]
     assert [s for s in order[3] if not s[1]] == [(10, False)], order[3]
     i = order[3].index((10, False))
