@@ -223,7 +223,7 @@ def test_render_stops_are_per_block():
     """A render no gradient follows keeps each block's latest stop pair: (n_tiles, 2) for the
     compacted forward's half-tile blocks."""
     g, cam = scenes.scene(0), scenes.camera()
-    p, bins = scenes.projected_bins(g, cam)  # one compile, not one per eager operation
+    p, bins = jax.eval_shape(scenes.projected_bins, g, cam)  # shapes only: nothing compiled
     stops = jax.eval_shape(lambda p, bins: pallas.rasterize(
         p, bins, cam.width, cam.height, C(kernel="mosaic")).stop, p, bins)
     assert stops.shape == (bins.tile_start.shape[0], 2)
