@@ -11,7 +11,6 @@ lowering lacks fails here, not first on the GPU.
 """
 
 import dataclasses
-import functools
 
 import jax
 import numpy as np
@@ -66,15 +65,6 @@ def test_localgs_kernel_equals_reference_float64(name, seed):
         assert_render_close(getattr(out, field), getattr(ref, field), atol=F64_ATOL, what=field)
 
 
-@functools.partial(jax.jit, static_argnums=2)
-def _float32_renders(g, cam, config):
-    """`scenes.render` of `reference`, `pallas` and `tiles` at `config` (the reference at its
-    convention), in one program: compiled together, the three cost about a third less than
-    apart (the default float32 tests below read it)."""
-    return [scenes.render(g, cam, b, c) for b, c in (
-        ("reference", C(config.convention)), ("pallas", config), ("tiles", config))]
-
-
 @pytest.mark.parametrize("name", ["local_gs"] + [pytest.param(n, marks=SLOW) for n in (
     "difference", "local_center", "gsplat")])
 @settings(max_examples=6)  # interpret mode on CPU: ~0.7 s per example
@@ -83,9 +73,13 @@ def test_localgs_kernel_equals_reference_float32(name, seed):
     """Same tolerance as the tiles backend (tests/compare.py, F32_ATOL): hoisted and difference
     forms round differently; threshold flips on at most 1% of pixels."""
     g = scenes.cast(scenes.scene(seed), np.float32)
-    ref, out, tiles = _float32_renders(g, scenes.camera(), LOCALGS[name])
+    cam = scenes.camera()
+    config = LOCALGS[name]
+    ref = scenes.render(g, cam, "reference", C(config.convention))
+    out = scenes.render(g, cam, "pallas", config)
     assert out.image.dtype == np.float32
     assert_float32_close(out, ref)
+    tiles = scenes.render(g, cam, "tiles", config)
     assert_render_close(out.image, tiles.image, atol=F32_ATOL, max_flip_share=F32_FLIP_SHARE,
                         flip_atol=2.0)
     # The Mosaic GPU kernel ("auto" on a GPU) builds its masks itself and does not count them.
@@ -193,15 +187,15 @@ def test_pallas_under_jit_and_vmap_reports_overflow_and_matches_single_views():
     g = scenes.cast(scenes.scene(7), np.float32)
     cams = lgs_jax.stack_cameras([scenes.camera(yaw=y) for y in (0.0, 0.2)])
     # The scene is an argument of both programs (a closed-over constant would be folded at
-    # compile time and round differently). A single view is the float32 tests' program above
-    # (`_float32_renders`, its `pallas` render).
+    # compile time and round differently). A single view is `scenes.render`'s program (render's
+    # own jit, the scene its argument), which the float32 tests above compiled.
     one = lambda g, c: scenes.render(g, c, "pallas", C())
     out = jax.jit(jax.vmap(one, in_axes=(None, 0)))(g, cams)
     # XLA vectorises the batched projection differently (CPU and GPU): 1 ulp on a few pixels,
     # as for the tiles backend (BENCHMARKS.md §3).
     for i, yaw in enumerate((0.0, 0.2)):
-        single = _float32_renders(g, scenes.camera(yaw=yaw), C())[1]
-        np.testing.assert_allclose(out.image[i], single.image, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(out.image[i], one(g, scenes.camera(yaw=yaw)).image, rtol=0,
+                                   atol=1e-6)
     # The overflow the backend reports: `render` raises on its stats with the pairs required
     # (one program, render's jitted one: under a caller's jit the same stats come back
     # unchecked, CI time).
@@ -212,7 +206,7 @@ def test_pallas_under_jit_and_vmap_reports_overflow_and_matches_single_views():
 
 def test_empty_and_background_only_scenes():
     g = scenes.cast(scenes.scene(1, kinds=("behind", "invalid")), np.float32)
-    out = _float32_renders(g, scenes.camera(), C())[1]  # the float32 tests' program
+    out = scenes.render(g, scenes.camera(), "pallas", C())
     np.testing.assert_array_equal(out.image, np.broadcast_to(
         np.asarray(scenes.BACKGROUND, np.float32), out.image.shape))
 
