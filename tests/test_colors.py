@@ -4,6 +4,8 @@
 C = 7 takes three passes of three channels (the last padded), C = 1 one padded pass, C = 3 the
 SH colour's single pass: each backend is checked at one of them (each C is a compile)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -55,12 +57,16 @@ def test_three_colors_are_the_sh_colours_pass():
     matters once colours are given."""
     g = scenes.scene(8, kinds=("normal", "opaque", "layers", "needle"))
     cam = scenes.camera(dtype=np.float64)
-    want = lgs_jax.render(g, cam, backend="tiles", capacity=scenes.CAPACITY)
-    rgb = np.asarray(project(g, cam).rgb)
     nan_sh = g.sh.copy()
     nan_sh[0, 0, 0] = np.nan
-    got = _render(lgs_jax.Gaussians(g.means, g.quats, g.log_scales, g.logit_opacities, nan_sh),
-                  cam, "tiles", rgb)
+
+    @jax.jit
+    def both(g, nan_sh):  # one program: compiled together, a third less than apart
+        want = lgs_jax.render(g, cam, backend="tiles", capacity=scenes.CAPACITY)
+        rgb = project(g, cam).rgb
+        return want, _render(dataclasses.replace(g, sh=nan_sh), cam, "tiles", rgb)
+
+    want, got = both(g, nan_sh)
     np.testing.assert_allclose(got.image, want.image, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(got.alpha, want.alpha)
 
@@ -80,7 +86,10 @@ def test_color_gradients_equal_autodiff_through_brute(backend):
         out = _render(g, cam, backend, f)
         return jnp.sum(out.image * weights) + 0.1 * jnp.sum(out.depth)
 
-    (gg, gf), (bg, bf) = (jax.grad(loss, argnums=(0, 1))(g, f, b) for b in (backend, "brute"))
+    # Jitted: one program per backend (eager, the forward and the backward of render's own jit
+    # compile apart, two per backend).
+    grad = jax.jit(jax.grad(loss, argnums=(0, 1)), static_argnums=2)
+    (gg, gf), (bg, bf) = (grad(g, f, b) for b in (backend, "brute"))
     assert np.all(np.isfinite(np.asarray(gf))) and np.all(np.asarray(gf)[[3, 7]] == 0)
     assert np.any(np.asarray(gf) != 0)
     assert_close_to_scale(gf, bf, 1e-8, "colors")

@@ -68,9 +68,13 @@ def test_row_capacity_is_ignored_where_the_backward_stores_no_pair_rows(scene32)
 
 
 def test_render_growing_settles_on_enough_capacity(scene32):
-    out, cap = lgs_jax.render_growing(scenes.jit_render, scene32, scenes.camera(), capacity=2)
+    # Larger Gaussians (158 pairs): the buffer grows from 2 (tests/test_binning.py's program
+    # too) to scenes.CAPACITY, whose program test_new_camera_pose_does_not_recompile compiled.
+    g = dataclasses.replace(scene32, log_scales=scene32.log_scales + np.float32(1.0))
+    out, cap = lgs_jax.render_growing(scenes.jit_render, g, scenes.camera(), capacity=2)
     assert not bool(out.stats.overflow) and cap >= int(out.stats.pairs_required)
-    np.testing.assert_array_equal(out.image, lgs_jax.render(scene32, scenes.camera(),
+    assert cap == scenes.CAPACITY
+    np.testing.assert_array_equal(out.image, lgs_jax.render(g, scenes.camera(),
                                                             capacity=scenes.CAPACITY).image)
 
 

@@ -169,21 +169,21 @@ def test_a_shown_scene_is_rendered_for_every_client():
 
 def test_a_growing_scene_grows_the_pair_buffer_with_headroom():
     """A scene whose views come to need more pairs (as in training) is rendered in a buffer
-    grown to `headroom` times them. The scene grows by switching its Gaussians on (an eighth
-    of them visible at first: opacity 0 makes no pair), so that both scenes have one shape:
-    each capacity is one compiled program (and the pair count the other tests' one)."""
+    grown to `headroom` times them. The scene grows by enlarging its Gaussians (log-scales
+    + 1.3: 8802 pairs, more than the default scene's buffer holds), so that both scenes have one
+    shape: the first frame is the default scene's, the program the other tests compiled, and
+    the grown buffer's is the one new program."""
     scene = lgs_jax.default_scene()
-    off = np.arange(scene.num) >= scene.num // 8
-    first_eighth = dataclasses.replace(scene, logit_opacities=np.where(
-        off, -np.inf, scene.logit_opacities).astype(scene.logit_opacities.dtype))
-    renderer = viewer.FrameRenderer(first_eighth, headroom=2.0)
+    grown = dataclasses.replace(scene, log_scales=(scene.log_scales + 1.3).astype(
+        scene.log_scales.dtype))
+    renderer = viewer.FrameRenderer(scene, headroom=2.0)
     state = viewer.viewer_pose(lgs_jax.default_camera(0))
     renderer.frame(*state, 2.0, SIZE)
     first = renderer.capacity[64, 32]
-    renderer.scene = scene
+    renderer.scene = grown
     image, _ = renderer.frame(*state, 2.0, SIZE)
     # the scene's render in the grown buffer, which holds its pairs (nothing dropped)
-    out, _ = render_output(scene, viewer.camera_from_pose(*state, 64, 32),
+    out, _ = render_output(grown, viewer.camera_from_pose(*state, 64, 32),
                            renderer.capacity[64, 32])
     pairs = int(out.stats.pairs_required)
     assert pairs > first and renderer.capacity[64, 32] == lgs_jax.pair_capacity(pairs, 2.0)
