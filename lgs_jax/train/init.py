@@ -60,9 +60,10 @@ def initial_gaussians(points: np.ndarray, colors: np.ndarray, init_opacity: floa
 
 
 def wide_start(data) -> bool:
-    """Whether `start_gaussians` draws random points in the wide cube for `data` (a `Dataset`
-    or its path; `io.datasets.dataset_info`): no SfM points and no NeRF-synthetic object
-    (where init_extent is not given)."""
+    """Whether the capture `data` (a `Dataset` or its path; `io.datasets.dataset_info`) starts
+    wide: no SfM points, and no NeRF-synthetic object (whose random points fill a cube of 0.25,
+    not 3, times the scene scale by default: `start_gaussians`). Decided by the capture alone,
+    whatever a run's init_extent."""
     info = dataset_info(data)
     return info.sfm_points == 0 and not info.nerf_synthetic
 

@@ -20,7 +20,7 @@ left None take, and the strategies the command line names (`STRATEGIES`).
            cube around the object, keeps the budget.
 
 A field given explicitly keeps its value under either recipe and either start. The values are
-filled in when the `Recipe` or `FitConfig` is made (the random start's by `fit`, once it knows the
+filled in when the `Recipe` or `FitConfig` is made (the wide start's by `fit`, once it knows the
 capture), so `dataclasses.replace(config, recipe=Recipe(name="fast"))` keeps the run's already
 filled steps and strategy: make a new `FitConfig` instead.
 """
