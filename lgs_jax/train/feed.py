@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..io.datasets import Dataset, as_float, load_dataset
+from ..io.datasets import Dataset, as_float, dataset_info, load_dataset
 from ..scene import stack_cameras
 
 
@@ -132,7 +132,7 @@ def prepare(data, downscale: int = 1, crop=None, train_on_all: bool = False,
         test_names=[_stem(d.names[i]) for i in d.test],
         background=np.asarray(d.background, np.float32), scene_scale=1.1 * d.extent,
         points=np.asarray(d.points), colors=np.asarray(d.colors),
-        nerf_synthetic=bool(np.all(d.background == 1)))
+        nerf_synthetic=dataset_info(d).nerf_synthetic)
 
 
 def views_for_step(step: int, batch: int, n_train: int, seed: int,
