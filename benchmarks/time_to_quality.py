@@ -414,6 +414,10 @@ def _ablate(args, scene: str) -> list[dict]:
         if args.warm_ablation:  # fills the cache
             run_ours(args, scene, args.first_seed, cache, name, ABLATIONS[name])
         row, _ = run_ours(args, scene, args.first_seed, cache, name, ABLATIONS[name])
+        if not args.dry_run:  # kept as each run ends (a call cut short keeps the rows done)
+            merge(os.path.join(args.out, "ablation.csv"), [row], FIELDS,
+                  ("scene", "trainer", "seed"))
+            short_table([row])
         rows.append(row)
     return rows
 
@@ -447,9 +451,6 @@ def main(argv=None) -> int:
     for scene in args.scenes:
         if args.ablate:
             rows = _ablate(args, scene)
-            if not args.dry_run:
-                merge(os.path.join(args.out, "ablation.csv"), rows, FIELDS,
-                      ("scene", "trainer", "seed"))
         else:
             rows = _scene_runs(args, scene, gsplat)  # each row kept as its run ended
         every += rows
