@@ -11,7 +11,9 @@ its own compile), for every step at that size. `ahead` compiles for a later step
 next image level's, `fit` with several levels) at a given size, taken by the first step of
 those shapes at that size. The executable is the program `jax.jit` compiles
 for that size (with XLA's autotuning off, `step.COMPILER_OPTIONS`, so that a compile beside
-running steps picks the same kernels as one on an idle GPU): the same bits.
+running steps picks the same kernels as one on an idle GPU): the same bits. Where the step's
+programs are kept across runs (`exports`), a size is rounded up to a kept one at most `REUSE`
+times it (`Stepper.kept`): runs whose pairs differ a little (seeds) share their compiles.
 
 Modes: "thread" compiles in a background thread. XLA compiles outside Python's lock, but tracing
 and lowering hold it: each time the loop's thread waits on the device (a step's metrics) it
@@ -44,6 +46,7 @@ from ..render import pair_capacity
 MODES = ("thread", "process")
 KEPT_SIGNATURES = 8  # `Stepper` keeps compiles ahead for the shapes of this many latest steps
 SWITCH_INTERVAL = 1e-4  # seconds: Python's thread switch interval while a thread compiles ahead
+REUSE = 1.25  # `Stepper.kept`: a kept program's pair capacity taken for a need this much below it
 
 # JAX settings a child compile must share with this process for its cache entry to be the one
 # this process looks up (the cache's key covers the program, the devices and the options).
@@ -74,6 +77,14 @@ def signature(args) -> tuple:
     abstract values (shape, dtype, weak type)."""
     leaves, tree = jax.tree.flatten(args)
     return tree, tuple(jax.typeof(x) for x in leaves)
+
+
+def _abstract_of(sig: tuple):
+    """Arguments shaped as signature `sig` (`jax.ShapeDtypeStruct`s)."""
+    tree, avals = sig
+    return jax.tree.unflatten(tree, [jax.ShapeDtypeStruct(a.shape, a.dtype,
+                                                          weak_type=a.weak_type)
+                                     for a in avals])
 
 
 def _abstract(args):
@@ -146,6 +157,7 @@ class Stepper:
         self._ready = {}  # signature -> (size, executable) taken from a finished job
         self._latest = []  # the signatures run latest, oldest first
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
+        self.took_kept = False  # whether the last growth took a kept size (`kept`)
         self._waited = 0.0  # seconds `run` waited for compiles ahead since `take_waited`
 
     def run(self, args, size: tuple, sig: tuple):
@@ -242,19 +254,38 @@ class Stepper:
                 else self._fn.lower(*abstract, **static).compile())
         self._jobs[sig] = (size, self._threads.submit(compile_))
 
+    def kept(self, sig: tuple, size: tuple) -> tuple:
+        """`size`, or where its program for the shapes `sig` is not kept (`exports.Lowering.
+        holds`: compiled in this process or exported by an earlier run) and that of a larger
+        pair capacity at most `REUSE` times it is, the smallest such size: a buffer a little
+        larger than the need, which changes no bit, for a load instead of a compile. A run
+        whose pairs differ a little from the run that filled the cache (another seed) then
+        takes that run's sizes. Without a lowering, `size`."""
+        if self._lowering is None or self._lowering.directory is None:
+            return size
+        abstract, candidate = _abstract_of(sig), size
+        while candidate[0] <= REUSE * size[0]:
+            if self._lowering.holds(self._fn, abstract, self._static(candidate)):
+                return candidate
+            candidate = (pair_capacity(candidate[0] + 1), size[1])
+        return size
+
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at
         `size` that needs `need` = (pairs, walked): the prepared size if it holds them and fits
         the shapes `sig` (waiting for its compile if unfinished), else `Sizes.grown` (compiled
         by the next `run`; also when the compile ahead failed, which `failure` then says, else
-        None)."""
-        job, self.failure = self._jobs.pop(sig, None), None
+        None) or a kept size a little above it (`kept`; `took_kept` then says so)."""
+        job, self.failure, self.took_kept = self._jobs.pop(sig, None), None, False
         self._ready.pop(sig, None)
         if job is not None and self._sizes.holds(job[0], need):
             waited, compiled = self._take(sig, job)
             if compiled:
                 return job[0], waited, True
-        return self._sizes.grown(size, need), 0.0, False
+        grown = self._sizes.grown(size, need)
+        kept = self.kept(sig, grown)
+        self.took_kept = kept != grown
+        return kept, 0.0, False
 
     def close(self) -> None:
         """Forget the executables; a compile under way finishes in the background unwaited."""

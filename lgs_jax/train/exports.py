@@ -105,6 +105,18 @@ class Lowering:
         self.failure = None
         return lowered
 
+    def holds(self, fn, abstract, static: dict) -> bool:
+        """Whether the program is kept: compiled by this process (`compiled`) or its entry in
+        the directory (another run's export, whose executable the persistent cache then
+        holds too): taking it costs a load, not a trace and compile."""
+        entry = key(_name(fn), abstract, static)
+        memo = (entry, self.directory, self.donate, repr(self.compiler_options))
+        with _lock:
+            if memo in _executables:
+                return True
+        return self.directory is not None and os.path.exists(
+            os.path.join(self.directory, entry + ".export"))
+
     def compiled(self, fn, abstract, static: dict):
         """`self(fn, abstract, static).compile()`, or the executable this process compiled
         for the same program before (the `KEPT` latest kept)."""

@@ -4,6 +4,7 @@ Per step s (0-based): the views of `feed.views_for_step` at the step's image lev
 (`levels.LevelFeed`: full resolution unless `Recipe.levels` > 1), one `step.train_step` (through
 `ahead.Stepper`; redone with a larger pair capacity whenever a view overflows: no pair is
 dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`,
+or to a size up to `ahead.REUSE` times that whose program an earlier run kept (`Stepper.kept`),
 and with several levels starts again at each level's first step, sized to its first view;
 likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Sizes`), then
 `step.refine` where the strategy asks (the pool doubles when it needs room, up to
@@ -103,20 +104,28 @@ class _Run:
             self.go = jax.device_put(self.go, where)
 
 
-def _enter_level(run: _Run, feed: LevelFeed) -> None:
-    """With several image levels, at the first step of a level (and of the run): the pair
-    capacity sized to the level's first training view, as `state.fresh` sizes it at full
-    resolution (a coarse level's step needs a fraction of the pairs; the capacity changes no
-    bit, `docs/determinism-and-capacities.md`), times the pool's slots over its active
-    Gaussians: room for the pairs of a pool filled during the level (the fast recipe's budget
-    rises through the coarse levels), so a level compiles once rather than at every growth.
-    Where the level's step was compiled ahead (`_level_ahead`) at a capacity that holds this
-    one and is at most twice it, that capacity."""
+def _enter_level(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
+    """At the run's first step and, with several image levels, at the first step of a level:
+    the pair capacity, or a kept one a little above it (`Stepper.kept`: the size another
+    seed's run compiled). One level: the capacity the run's state has (`state.fresh`'s, or
+    a checkpoint's). Several: sized to the level's first training view, as `state.fresh`
+    sizes it at full resolution (a coarse level's step needs a fraction of the pairs; the
+    capacity changes no bit, `docs/determinism-and-capacities.md`), times the pool's slots
+    over its active Gaussians: room for the pairs of a pool filled during the level (the fast
+    recipe's budget rises through the coarse levels), so a level compiles once rather than
+    at every growth. Where the level's step was compiled ahead (`_level_ahead`) at a
+    capacity that holds this one and is at most twice it, that capacity."""
     st, level = run.st, feed.level(run.st.step)
-    if len(feed.levels) == 1 or level == run.level:
+    if level == run.level:
         return
     run.level, lv = level, feed.levels[level]
-    st.capacity = _level_capacity(run, lv)
+    images, idx = feed.args(st.step)
+    sig = signature(_args(run, feed.cams(st.step), images, idx, st.step, run.go))
+    if len(feed.levels) == 1:
+        field = SECOND[run.setup.gaussian_devices > 1][0]
+        st.capacity = steps.kept(sig, (st.capacity, getattr(st, field)))[0]
+        return
+    st.capacity = _level_capacity(run, lv, steps, sig)
     ahead = run.next_level
     took = ahead is not None and ahead[0] == level and st.capacity <= ahead[1] <= 2 * st.capacity
     if took:
@@ -126,12 +135,16 @@ def _enter_level(run: _Run, feed: LevelFeed) -> None:
             f"{st.capacity}" + (" (compiled ahead)" if took else ""))
 
 
-def _level_capacity(run: _Run, lv) -> int:
-    """The pair capacity of level `lv` for the pool as it is (`_enter_level`)."""
+def _level_capacity(run: _Run, lv, steps: Stepper, sig: tuple) -> int:
+    """The pair capacity of level `lv` for the pool as it is (`_enter_level`), or a kept one
+    a little above it for the level's step shaped `sig` (`Stepper.kept`: the size another
+    seed's run compiled)."""
     st = run.st
     pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
     filled = st.pool.size / max(state.active_count(st.pool), 1)
-    return pair_capacity(int(pairs * filled), run.config.pair_headroom)
+    need = pair_capacity(int(pairs * filled), run.config.pair_headroom)
+    field = SECOND[run.setup.gaussian_devices > 1][0]
+    return steps.kept(sig, (need, getattr(st, field)))[0]
 
 
 def _level_ahead(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
@@ -149,14 +162,14 @@ def _level_ahead(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
     if st.step < (start + end) // 2 or run.next_level is not None and run.next_level[0] > level:
         return
     lv = feed.levels[level + 1]
-    run.next_level = (level + 1, _level_capacity(run, lv))
     images, idx = feed.args(st.step)
     width, height = lv.sizes[0]
     shaped = jax.ShapeDtypeStruct((images.shape[0], height, width) + images.shape[3:],
                                   images.dtype)
+    args = _args(run, lv.cams, shaped, idx, end, run.go)
+    run.next_level = (level + 1, _level_capacity(run, lv, steps, signature(args)))
     field = SECOND[run.setup.gaussian_devices > 1][0]
-    steps.ahead(_args(run, lv.cams, shaped, idx, end, run.go),
-                (run.next_level[1], getattr(st, field)))
+    steps.ahead(args, (run.next_level[1], getattr(st, field)))
 
 
 def _args(run: _Run, cams, images, idx, step: int, go) -> tuple:
@@ -190,7 +203,7 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
     field, flag, needed, name = SECOND[run.setup.gaussian_devices > 1]
     pending, run.pending = run.pending, None
     if pending is None:
-        _enter_level(run, feed)
+        _enter_level(run, feed, steps)
     _level_ahead(run, feed, steps)
     while True:
         size = (st.capacity, getattr(st, field))
@@ -217,7 +230,8 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
                  (("pair capacity", grown_size[0], size[0]), (name, grown_size[1], size[1]))
                  if new_size != old_size]
         run.say(f"step {st.step + 1}: {' and '.join(grown)} "
-                + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else "(one recompile)")
+                + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else
+                   "(a size kept from an earlier run)" if steps.took_kept else "(one recompile)")
                 + (f"; the compile ahead failed: {steps.failure}" if steps.failure else ""))
 
 

@@ -189,3 +189,29 @@ def test_steps_compile_ahead_on_one_device_only(devices, gaussian_devices, want)
     stepper = loop.stepper(config, setup)
     assert stepper.compiles_ahead == want
     stepper.close()
+
+
+def test_a_size_takes_a_kept_program_a_little_above_it(tmp_path):
+    """`Stepper.kept`: a size whose program is not kept becomes the smallest larger pair
+    capacity, at most `REUSE` times it, whose program an earlier run exported (another seed's
+    run: a load, not a compile); a growth does the same (`took_kept`); farther above, or with
+    no exports, the size stays."""
+    from lgs_jax.train import exports
+
+    x = jnp.arange(8.0)
+    sig, earlier = ahead.signature((x,)), 1_310_720  # 10 x 2^17, on the pair-capacity grid
+    lowering = lambda: exports.Lowering(str(tmp_path / "exports"))
+    first = ahead.Stepper(_scaled, _static, ahead.Sizes(1.0), None, lowering())
+    first.run((x,), (earlier, None), sig)  # exported and compiled
+    stepper = ahead.Stepper(_scaled, _static, ahead.Sizes(1.0), None, lowering())
+    assert stepper.kept(sig, (1_179_648, None)) == (earlier, None)  # 1.11x below: taken
+    assert stepper.kept(sig, (1_048_576, None)) == (earlier, None)  # 1.25x: taken
+    assert stepper.kept(sig, (983_040, None)) == (983_040, None)  # 1.33x: compiled instead
+    assert stepper.kept(ahead.signature((jnp.arange(9.0),)), (1_179_648, None)) == (
+        1_179_648, None)  # another shape: nothing kept for it
+    size, waited, took_ahead = stepper.grow((983_040, None), (1_100_000, 0), sig)
+    assert size == (earlier, None) and stepper.took_kept and not took_ahead
+    size, _, _ = stepper.grow((earlier, None), (1_400_000, 0), sig)
+    assert size == (1_441_792, None) and not stepper.took_kept  # pair_capacity(1.4M): compiled
+    plain = ahead.Stepper(_scaled, _static, ahead.Sizes(1.0), None)
+    assert plain.kept(sig, (1_179_648, None)) == (1_179_648, None)
