@@ -71,7 +71,8 @@ class ShardedStats:
       n_valid, n_invalid, n_transparent, n_unbounded: as `render.RenderStats`, of the real
         Gaussians (the padding rows are not counted).
       pairs_required: (D,) tile–Gaussian pairs each device's render needs (each received
-        Gaussian's whole tile rectangle).
+        Gaussian's whole tile rectangle; where the exchange left records behind, theirs
+        counted too, from the sources' plans).
       capacity: the pair buffer of each device.
       overflow: some device's pairs_required > capacity (its band lacks the farthest pairs).
       exchange_counts: (D, D) records source s must send to destination d ([s, d]).
@@ -124,6 +125,7 @@ def _composite_band(p, background, *, width: int, height: int, devices: int, bac
     masks = exchange.band_masks(p, width, height, devices)
     _, _, nx, ny, unbounded = binning.tile_rects(p, width, height)
     send, counts = exchange.pack(exchange.to_records(p), masks, exchange_capacity)
+    planned = exchange.band_pairs(p, masks, width, height)  # the pairs it brings each device
     q = exchange.from_records(exchange.exchange(send, GAUSSIANS))
     out = composite_projected(q, width, height, background, backend, config, capacity)
     band = exchange.band_rows(height, devices) * TILE
@@ -136,7 +138,16 @@ def _composite_band(p, background, *, width: int, height: int, devices: int, bac
     one = lambda x: jnp.reshape(x, (1,) + jnp.shape(x))
     return dict(image=rows(out.image), alpha=rows(out.alpha), depth=rows(out.depth),
                 visible=nx * ny > 0, sources=one(_source_counts(p, unbounded)),
-                counts=one(counts), pairs=one(out.stats.pairs_required))
+                counts=one(counts), pairs=one(out.stats.pairs_required), planned=one(planned))
+
+
+def _saturating_sum(x):
+    """int32 (…, D) sums over the sources' axis of (…, sources, D), saturating at 2^31 − 1."""
+    total = jnp.zeros(x.shape[:-2] + x.shape[-1:], jnp.int32)
+    for s in range(x.shape[-2]):
+        v = x[..., s, :]
+        total = jnp.where(total > binning.MAX_PAIRS - v, binning.MAX_PAIRS, total + v)
+    return total
 
 
 def _one_view(g, cam, background, offsets, **static):
@@ -155,7 +166,10 @@ def _assembled(out: dict, height: int, padding: int, backend: str, capacity: int
     totals = jnp.sum(out["sources"], axis=-2, dtype=jnp.int32)  # (…, 4) over sources
     counts = out["counts"]  # (…, sources, destinations)
     required = jnp.max(counts, axis=(-2, -1))
-    pairs = out["pairs"]
+    # a destination some source could not send every record counts the pairs of the plans
+    short = jnp.any(counts > exchange_capacity, axis=-2)
+    pairs = jnp.where(short, jnp.maximum(out["pairs"], _saturating_sum(out["planned"])),
+                      out["pairs"])
     stats = ShardedStats(
         n_valid=totals[..., 0], n_invalid=totals[..., 1] - padding,
         n_transparent=totals[..., 2], n_unbounded=totals[..., 3], pairs_required=pairs,
@@ -349,9 +363,8 @@ def _raise_overflow(stats: ShardedStats) -> None:
 def grown_capacities(stats, capacity: int, exchange_capacity: int) -> tuple[int, int] | None:
     """The (capacity, exchange_capacity) to retry with after a render whose `ShardedStats`
     (any pytree holding them) report an overflow, or None when nothing overflowed: each
-    overflowing buffer grown to `pair_capacity` of the largest requirement. A render whose
-    exchange overflowed undercounts its pairs (records were left behind), so a retry may grow
-    the pair buffer again."""
+    overflowing buffer grown to `pair_capacity` of the largest requirement (a render whose
+    exchange overflowed counts the pairs of the records it left behind: both grow at once)."""
     found = [s for s in jax.tree.leaves(stats, is_leaf=lambda x: isinstance(x, ShardedStats))
              if isinstance(s, ShardedStats)]
     if not found:

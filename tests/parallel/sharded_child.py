@@ -199,11 +199,12 @@ def save_views_mesh(res: dict):
     def fn(*args, capacity, exchange_capacity):
         out, stats = sharded(*args, capacity=capacity, exchange_capacity=exchange_capacity)
         calls.append((capacity, exchange_capacity, bool(np.any(stats.exchange_overflow)),
-                      int(np.max(stats.exchange_required)), bool(np.any(stats.overflow))))
+                      int(np.max(stats.exchange_required)), bool(np.any(stats.overflow)),
+                      int(np.max(stats.pairs_required))))
         return out, stats
 
     (out, _), *settled = parallel.render_sharded_growing(fn, shards.gaussians, cams, bg,
-                                                         capacity=CAPACITY, exchange_capacity=2)
+                                                         capacity=16, exchange_capacity=2)
     res["growth/calls"] = np.asarray(calls, np.int64)
     res["growth/settled"] = np.asarray(settled)
     alone = [one_device_grads(g, c, bg, weights(dtype))[0] for c in views]

@@ -87,11 +87,13 @@ def test_gaussian_parallel_matches_one_device(tmp_path):
     assert res["f64d4/concentrated/one/out/counts"].sum() == N
     sent = res["f64d4/concentrated/0/exchange_counts"]  # [source, destination]
     assert sent[:, 0].sum() > sent[:, 1:].sum() and not sent[:, 3].any()
-    # 2 x 2 mesh (views x Gaussians), 2 views from an exchange capacity of 2: the overflow is
-    # reported (flag, count needed) and grown out of once; each view then is `render` of it alone
-    calls = res["growth/calls"]  # (capacity, exchange capacity, overflow, required, pairs)
-    assert calls.tolist() == [[512, 2, 1, 14, 0], [512, 16, 0, 14, 0]]
-    assert res["growth/settled"].tolist() == [512, 16]
+    # 2 x 2 mesh (views x Gaussians), 2 views from an exchange capacity of 2 and 16 pairs: the
+    # overflows are reported (flags, counts needed; the pairs of the records left behind
+    # counted too) and grown out of at once; each view then is `render` of it alone
+    calls = res["growth/calls"]  # (capacity, exchange capacity, exchange overflow, records
+    # required, pair overflow, pairs required)
+    assert calls.tolist() == [[16, 2, 1, 14, 1, 97], [128, 16, 0, 14, 0, 97]]
+    assert res["growth/settled"].tolist() == [128, 16]
     _same_bits(res, "views/one", "views/sharded")
     assert np.array_equal(res["views/sharded/visible"][:, :N], res["views/one/visible"])
     # one camera on the 2 x 2 mesh: every row renders it (a Gaussian-parallel run's held-out

@@ -137,14 +137,17 @@ def _refined_alike(logs):
 
 def _resumed(tmp_path, logs):
     """The one-device run stopped after step HALF (its checkpoint) resumes on a 2 x 2 mesh with
-    its exchange sized at its first view's needs exactly (training_child.py): the exchange
-    overflows, is reported and grown (a recompile; the result is checked in `_same_scene`).
+    its buffers sized at its first view's needs exactly (training_child.py): the exchange
+    overflows, and the pairs it could not deliver are counted, so both buffers grow at once
+    (one recompile; the result is checked in `_same_scene`).
     One scene.ply per run."""
     before = [r["gaussians"] for r in _rows(tmp_path / "d1") if r.get("step") == HALF][0]
     assert f"resumed at step {HALF} ({before} Gaussians)" in logs["d1"], logs["d1"]
     resumed = logs["d1_resumed_on_2x2"]
     assert resumed[0] == f"resumed at step {HALF} ({before} Gaussians)", resumed
-    assert any("exchange capacity grown to" in line for line in resumed), resumed
+    grown = [line for line in resumed if "grown to" in line]
+    assert len(grown) == 1 and "pair capacity grown to" in grown[0] and (
+        "exchange capacity grown to" in grown[0]), resumed  # both at once: one recompile
     for run, devices in (("d1", (1, 1)), ("d1_resumed_on_2x2", (2, 2))):
         result = json.load(open(tmp_path / run / "result.json"))
         assert (result["devices"], result["gaussian_devices"]) == devices

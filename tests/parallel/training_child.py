@@ -118,20 +118,18 @@ def main(out: str, part: str):
             pass
         shutil.copytree(where("d1"), where("d1_resumed_on_2x2"))
         fit("d1", 1, resume=True)  # the same bits as a run that never stopped
-        # the views split over 2 rows, the Gaussians over the 2 devices of each; the exchange
-        # sized at the first view's records exactly (it overflows after the refinement at step
-        # 6 and grows: one recompile), the pairs with room for the whole run: sized exactly too,
-        # they would overflow once the exchange delivers every record, a second recompile
-        # (an overflowing exchange undercounts the pairs), which checks nothing more
+        # the views split over 2 rows, the Gaussians over the 2 devices of each; the buffers
+        # sized at the first view's pairs and records exactly: the exchange overflows after the
+        # refinement at step 6 and both grow at once (one recompile; the render counts the
+        # pairs of the records it left behind)
         first_sizes = sharded_state.first_sizes
 
-        def exchange_exact(m, pool, cam, antialiased, headroom):
-            return (first_sizes(m, pool, cam, antialiased, headroom)[0],
-                    first_sizes(m, pool, cam, antialiased, 1.0)[1])
+        def exact(m, pool, cam, antialiased, headroom):
+            return first_sizes(m, pool, cam, antialiased, 1.0)
 
-        sharded_state.first_sizes = exchange_exact
+        sharded_state.first_sizes = exact
         try:
-            fit("d1_resumed_on_2x2", 2, devices=2, resume=True, pair_headroom=2.0)
+            fit("d1_resumed_on_2x2", 2, devices=2, resume=True)
         finally:
             sharded_state.first_sizes = first_sizes
         logs["refinements"] = refinements()
