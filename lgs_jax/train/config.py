@@ -286,6 +286,13 @@ def devices_problem(config: FitConfig) -> None:
                          f"{kind} devices here")
 
 
+LOOP_ONLY = dict(name="default", levels=1, full_resolution_at=0.5, early_stop=False,
+                 stop_window=400, stop_gain=0.002)
+"""`Recipe` fields no training step reads (`Setup.for_step`), at the values a step is keyed by:
+the recipe's name (its defaults are filled in by then), the image levels' schedule (a level's
+image size is in the step's shapes) and the early stop."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """What the jitted functions of one run depend on statically (hashable): the recipe, the
@@ -313,6 +320,14 @@ class Setup:
                              "'jax_enable_x64', True) before any JAX work; `fit "
                              "--precision float64` does it); without it JAX computes in "
                              "float32")
+
+    @property
+    def for_step(self) -> "Setup":
+        """This setup with the recipe's fields that only `fit`'s loop reads (`LOOP_ONLY`: the
+        image levels' schedule and the early stop) at fixed values: the training step's
+        static argument, so that runs differing only in them share the step's programs (one
+        jit entry, one export entry) instead of compiling their own."""
+        return dataclasses.replace(self, recipe=dataclasses.replace(self.recipe, **LOOP_ONLY))
 
     @property
     def dtype(self):

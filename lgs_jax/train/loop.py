@@ -62,14 +62,15 @@ SECOND = {False: ("rows", "row_overflow", "walked", "backward rows"),
 
 
 def stepper(config: FitConfig, setup: Setup) -> Stepper:
-    """`train_step` of this run (its `setup`) behind an `ahead.Stepper` of the configured
-    mode, lowered through export entries (`step.lowering`), on one device; with Gaussian
+    """`train_step` of this run (keyed by `setup.for_step`) behind an `ahead.Stepper` of the
+    configured mode, lowered through export entries (`step.lowering`), on one device; with Gaussian
     parallel, the exchange capacity grown with the pair headroom. Neither on several devices
     (an executable is for arguments on one device: their shardings are not in the shapes)."""
+    keyed = setup.for_step  # runs differing only in the loop's settings share the programs
     if setup.gaussian_devices > 1:
-        static = lambda size: dict(setup=setup, capacity=size[0], exchange=size[1])
+        static = lambda size: dict(setup=keyed, capacity=size[0], exchange=size[1])
         return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom), None)
-    static = lambda size: dict(setup=setup, capacity=size[0], rows=size[1])
+    static = lambda size: dict(setup=keyed, capacity=size[0], rows=size[1])
     mode = mode_of(config.compile_ahead) if setup.devices == 1 else None
     return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom), mode,
                    lowering() if setup.devices == 1 and mode != "process" else None)

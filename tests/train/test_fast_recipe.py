@@ -424,3 +424,21 @@ def test_time_to_quality_pairs_the_seeds_and_checks_the_targets(tmp_path, capsys
     text = capsys.readouterr().out
     assert "lgs_jax fit --data" in text and "--recipe fast --seed 0" in text
     assert not (tmp_path / "dry" / "results.csv").exists()
+
+
+def test_the_steps_key_leaves_out_what_only_the_loop_reads():
+    """`Setup.for_step`: runs differing only in the image levels' schedule or the early stop
+    share the training step's programs (`--no-early-stop` compiled the recipe's steps again);
+    a field the step reads still tells them apart, and the step's own fields are kept."""
+    from lgs_jax.train.config import LOOP_ONLY, Recipe, Setup
+
+    fast = Setup(recipe=Recipe(name="fast"), steps=2000)
+    loop_only = Setup(recipe=Recipe(name="fast", early_stop=False, stop_window=100, levels=2,
+                                    full_resolution_at=0.7), steps=2000)
+    assert fast != loop_only and fast.for_step == loop_only.for_step
+    assert hash(fast.for_step) == hash(loop_only.for_step)
+    assert Setup(recipe=Recipe(name="fast", batch=1), steps=2000).for_step != fast.for_step
+    kept = {f: getattr(fast.recipe, f) for f in fast.recipe.__dataclass_fields__
+            if f not in LOOP_ONLY}
+    assert {f: getattr(fast.for_step.recipe, f) for f in kept} == kept
+    assert fast.for_step.recipe.batch == 2 and fast.for_step.strategy == fast.strategy
