@@ -12,8 +12,9 @@ next image level's, `fit` with several levels) at a given size, taken by the fir
 those shapes at that size. The executable is the program `jax.jit` compiles
 for that size (with XLA's autotuning off, `step.COMPILER_OPTIONS`, so that a compile beside
 running steps picks the same kernels as one on an idle GPU): the same bits. Where the step's
-programs are kept across runs (`exports`), a size is rounded up to a kept one at most `REUSE`
-times it (`Stepper.kept`): runs whose pairs differ a little (seeds) share their compiles.
+programs are kept across runs (`exports`), a size becomes a kept one near it (`Stepper.kept`: up
+to `REUSE` times it, or below it down to half the headroom's room): runs whose pairs differ a
+little (seeds) share their compiles.
 
 Modes: "thread" compiles in a background thread. XLA compiles outside Python's lock, but tracing
 and lowering hold it: each time the loop's thread waits on the device (a step's metrics) it
@@ -46,7 +47,7 @@ from ..render import pair_capacity
 MODES = ("thread", "process")
 KEPT_SIGNATURES = 8  # `Stepper` keeps compiles ahead for the shapes of this many latest steps
 SWITCH_INTERVAL = 1e-4  # seconds: Python's thread switch interval while a thread compiles ahead
-REUSE = 1.25  # `Stepper.kept`: a kept program's pair capacity taken for a need this much below it
+REUSE = 1.25  # `Stepper.kept`: a kept program's pair capacity taken up to this much above a size
 
 # JAX settings a child compile must share with this process for its cache entry to be the one
 # this process looks up (the cache's key covers the program, the devices and the options).
@@ -112,6 +113,11 @@ class Sizes:
 
     def following(self, size: tuple) -> tuple:
         return pair_capacity(size[0] + 1, self.pair_headroom), size[1]
+
+    def least(self, pairs: int) -> int:
+        """The smallest pair capacity a kept program may have for `pairs` pairs
+        (`Stepper.kept`): half the headroom's room, and at least the pairs."""
+        return pair_capacity(pairs, max(1.0, self.pair_headroom / 2))
 
     def holds(self, size: tuple, need: tuple) -> bool:
         return size[0] >= need[0] and (size[1] is None or size[1] >= need[1])
@@ -254,28 +260,39 @@ class Stepper:
                 else self._fn.lower(*abstract, **static).compile())
         self._jobs[sig] = (size, self._threads.submit(compile_))
 
-    def kept(self, sig: tuple, size: tuple) -> tuple:
+    def kept(self, sig: tuple, size: tuple, least: int | None = None) -> tuple:
         """`size`, or where its program for the shapes `sig` is not kept (`exports.Lowering.
-        holds`: compiled in this process or exported by an earlier run) and that of a larger
-        pair capacity at most `REUSE` times it is, the smallest such size: a buffer a little
-        larger than the need, which changes no bit, for a load instead of a compile. A run
-        whose pairs differ a little from the run that filled the cache (another seed) then
-        takes that run's sizes. Without a lowering, `size`."""
+        holds`: compiled in this process or exported by an earlier run) and that of another
+        pair capacity near it is, that size: the smallest kept one above `size`, at most
+        `REUSE` times it, else the largest kept one below it, at least `least` (None: none
+        below). A buffer a little larger than the need changes no bit; a little smaller (still
+        `least`: room for the pairs) at worst grows sooner. Either way a load instead of a
+        compile: a run whose pairs differ a little from the run that filled the cache (another
+        seed) takes that run's sizes. Without a lowering, `size`."""
         if self._lowering is None or self._lowering.directory is None:
             return size
-        abstract, candidate = _abstract_of(sig), size
-        while candidate[0] <= REUSE * size[0]:
-            if self._lowering.holds(self._fn, abstract, self._static(candidate)):
-                return candidate
-            candidate = (pair_capacity(candidate[0] + 1), size[1])
-        return size
+        abstract = _abstract_of(sig)
+        held = lambda pairs: self._lowering.holds(self._fn, abstract,
+                                                  self._static((pairs, size[1])))
+        pairs = size[0]
+        while pairs <= REUSE * size[0]:
+            if held(pairs):
+                return pairs, size[1]
+            pairs = pair_capacity(pairs + 1)
+        below, pairs = None, pair_capacity(least) if least else size[0]
+        while pairs < size[0]:
+            if held(pairs):
+                below = pairs
+            pairs = pair_capacity(pairs + 1)
+        return size if below is None else (below, size[1])
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at
         `size` that needs `need` = (pairs, walked): the prepared size if it holds them and fits
         the shapes `sig` (waiting for its compile if unfinished), else `Sizes.grown` (compiled
         by the next `run`; also when the compile ahead failed, which `failure` then says, else
-        None) or a kept size a little above it (`kept`; `took_kept` then says so)."""
+        None) or a kept size near it (`kept`, down to `Sizes.least` of the pairs; `took_kept`
+        then says so)."""
         job, self.failure, self.took_kept = self._jobs.pop(sig, None), None, False
         self._ready.pop(sig, None)
         if job is not None and self._sizes.holds(job[0], need):
@@ -283,7 +300,7 @@ class Stepper:
             if compiled:
                 return job[0], waited, True
         grown = self._sizes.grown(size, need)
-        kept = self.kept(sig, grown)
+        kept = self.kept(sig, grown, self._sizes.least(need[0]) if grown[0] != size[0] else None)
         self.took_kept = kept != grown
         return kept, 0.0, False
 

@@ -138,14 +138,15 @@ def _enter_level(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
 
 def _level_capacity(run: _Run, lv, steps: Stepper, sig: tuple) -> int:
     """The pair capacity of level `lv` for the pool as it is (`_enter_level`), or a kept one
-    a little above it for the level's step shaped `sig` (`Stepper.kept`: the size another
-    seed's run compiled)."""
+    near it for the level's step shaped `sig` (`Stepper.kept`, down to `Sizes.least`: the
+    size another seed's run compiled)."""
     st = run.st
     pairs = state.pairs(st.pool, lv.camera(0), run.setup.recipe.antialiased)
-    filled = st.pool.size / max(state.active_count(st.pool), 1)
-    need = pair_capacity(int(pairs * filled), run.config.pair_headroom)
+    filled = int(pairs * st.pool.size / max(state.active_count(st.pool), 1))
+    need = pair_capacity(filled, run.config.pair_headroom)
     field = SECOND[run.setup.gaussian_devices > 1][0]
-    return steps.kept(sig, (need, getattr(st, field)))[0]
+    return steps.kept(sig, (need, getattr(st, field)),
+                      Sizes(run.config.pair_headroom).least(filled))[0]
 
 
 def _level_ahead(run: _Run, feed: LevelFeed, steps: Stepper) -> None:

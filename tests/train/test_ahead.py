@@ -194,8 +194,9 @@ def test_steps_compile_ahead_on_one_device_only(devices, gaussian_devices, want)
 def test_a_size_takes_a_kept_program_a_little_above_it(tmp_path):
     """`Stepper.kept`: a size whose program is not kept becomes the smallest larger pair
     capacity, at most `REUSE` times it, whose program an earlier run exported (another seed's
-    run: a load, not a compile); a growth does the same (`took_kept`); farther above, or with
-    no exports, the size stays."""
+    run: a load, not a compile), else the largest smaller one down to `least`; a growth does
+    the same, down to `Sizes.least` of its pairs (`took_kept`); farther away, or with no
+    exports, the size stays."""
     from lgs_jax.train import exports
 
     x = jnp.arange(8.0)
@@ -207,11 +208,23 @@ def test_a_size_takes_a_kept_program_a_little_above_it(tmp_path):
     assert stepper.kept(sig, (1_179_648, None)) == (earlier, None)  # 1.11x below: taken
     assert stepper.kept(sig, (1_048_576, None)) == (earlier, None)  # 1.25x: taken
     assert stepper.kept(sig, (983_040, None)) == (983_040, None)  # 1.33x: compiled instead
+    # below the size, down to `least`: the largest kept one (room for the pairs, if less)
+    assert stepper.kept(sig, (1_441_792, None), least=1_310_720) == (earlier, None)
+    assert stepper.kept(sig, (2_097_152, None), least=1_048_576) == (earlier, None)
+    assert stepper.kept(sig, (2_097_152, None), least=1_441_792) == (2_097_152, None)
+    assert stepper.kept(sig, (2_097_152, None)) == (2_097_152, None)  # no least: none below
     assert stepper.kept(ahead.signature((jnp.arange(9.0),)), (1_179_648, None)) == (
         1_179_648, None)  # another shape: nothing kept for it
     size, waited, took_ahead = stepper.grow((983_040, None), (1_100_000, 0), sig)
     assert size == (earlier, None) and stepper.took_kept and not took_ahead
     size, _, _ = stepper.grow((earlier, None), (1_400_000, 0), sig)
     assert size == (1_441_792, None) and not stepper.took_kept  # pair_capacity(1.4M): compiled
+    # a headroom of 3: 1M pairs grow to 3.1M, not to the kept 1.31M (under 1.5x the pairs);
+    # 0.8M pairs take it (at least 1.2M) rather than compile 2.6M
+    roomy = ahead.Stepper(_scaled, _static, ahead.Sizes(3.0), None, lowering())
+    assert roomy.grow((524_288, None), (1_000_000, 0), sig)[0] == (3_145_728, None)
+    assert not roomy.took_kept
+    assert roomy.grow((524_288, None), (800_000, 0), sig)[0] == (earlier, None)
+    assert roomy.took_kept
     plain = ahead.Stepper(_scaled, _static, ahead.Sizes(1.0), None)
     assert plain.kept(sig, (1_179_648, None)) == (1_179_648, None)
