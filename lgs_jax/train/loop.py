@@ -4,7 +4,7 @@ Per step s (0-based): the views of `feed.views_for_step` at the step's image lev
 (`levels.LevelFeed`: full resolution unless `Recipe.levels` > 1), one `step.train_step` (through
 `ahead.Stepper`; redone with a larger pair capacity whenever a view overflows: no pair is
 dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`,
-or to a size up to `ahead.REUSE` times that whose program an earlier run kept (`Stepper.kept`),
+or to a kept size near that, whose program an earlier run exported (`Stepper.kept`),
 and with several levels starts again at each level's first step, sized to its first view;
 likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Sizes`), then
 `step.refine` where the strategy asks (the pool doubles when it needs room, up to
@@ -107,15 +107,16 @@ class _Run:
 
 def _enter_level(run: _Run, feed: LevelFeed, steps: Stepper) -> None:
     """At the run's first step and, with several image levels, at the first step of a level:
-    the pair capacity, or a kept one a little above it (`Stepper.kept`: the size another
-    seed's run compiled). One level: the capacity the run's state has (`state.fresh`'s, or
-    a checkpoint's). Several: sized to the level's first training view, as `state.fresh`
-    sizes it at full resolution (a coarse level's step needs a fraction of the pairs; the
-    capacity changes no bit, `docs/determinism-and-capacities.md`), times the pool's slots
-    over its active Gaussians: room for the pairs of a pool filled during the level (the fast
-    recipe's budget rises through the coarse levels), so a level compiles once rather than
-    at every growth. Where the level's step was compiled ahead (`_level_ahead`) at a
-    capacity that holds this one and is at most twice it, that capacity."""
+    the pair capacity, or a kept one near it (`Stepper.kept`: the size another seed's run
+    compiled; above it only at a single level's start, whose pairs were not counted). One
+    level: the capacity the run's state has (`state.fresh`'s, or a checkpoint's). Several:
+    sized to the level's first training view, as `state.fresh` sizes it at full resolution (a
+    coarse level's step needs a fraction of the pairs; the capacity changes no bit,
+    `docs/determinism-and-capacities.md`), times the pool's slots over its active Gaussians:
+    room for the pairs of a pool filled during the level (the fast recipe's budget rises
+    through the coarse levels), so a level compiles once rather than at every growth. Where
+    the level's step was compiled ahead (`_level_ahead`) at a capacity that holds this one and
+    is at most twice it, that capacity."""
     st, level = run.st, feed.level(run.st.step)
     if level == run.level:
         return
