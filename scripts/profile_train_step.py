@@ -13,9 +13,9 @@ of a `fit` run, whose Gaussians crowd where the object is) in --pool slots (at l
 size). The per-tile load of the first training view is printed too: pairs in the busiest
 tile and in the busiest 10% of tiles, against the mean (one program per tile runs its pairs
 one after another, so the busiest tiles bound a kernel's time when there are few tiles). The
-pair capacity is `lgs_jax.pair_capacity(pairs, --headroom)` of the view's pairs (1.5: what
-`fit` picks by default, `train.FitConfig.pair_headroom`; 1: the tightest size, to see what the
-stages sized by the capacity cost; below 1 is refused). Rows (median ms of --repeat alternating
+pair capacity is `lgs_jax.pair_capacity(pairs, --headroom)` of the view's pairs (default 1.5;
+`fit` starts and grows at `train.FitConfig.pair_headroom`, 3; 1: the tightest size, to see
+what the stages sized by the capacity cost; below 1 is refused). Rows (median ms of --repeat alternating
 rounds, one training view):
   render        forward image only
   render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
