@@ -141,13 +141,12 @@ def _composite_band(p, background, *, width: int, height: int, devices: int, bac
                 counts=one(counts), pairs=one(out.stats.pairs_required), planned=one(planned))
 
 
-def _saturating_sum(x):
-    """int32 (…, D) sums over the sources' axis of (…, sources, D), saturating at 2^31 − 1."""
-    total = jnp.zeros(x.shape[:-2] + x.shape[-1:], jnp.int32)
-    for s in range(x.shape[-2]):
-        v = x[..., s, :]
-        total = jnp.where(total > binning.MAX_PAIRS - v, binning.MAX_PAIRS, total + v)
-    return total
+def _over_sources(x):
+    """(…, D) int32 sums over the sources' axis of (…, sources, D), saturating as
+    `binning.total_pairs`."""
+    rows = jnp.moveaxis(x, -2, -1)
+    return jax.vmap(binning.total_pairs)(rows.reshape(-1, rows.shape[-1])).reshape(
+        rows.shape[:-1])
 
 
 def _one_view(g, cam, background, offsets, **static):
@@ -168,7 +167,7 @@ def _assembled(out: dict, height: int, padding: int, backend: str, capacity: int
     required = jnp.max(counts, axis=(-2, -1))
     # a destination some source could not send every record counts the pairs of the plans
     short = jnp.any(counts > exchange_capacity, axis=-2)
-    pairs = jnp.where(short, jnp.maximum(out["pairs"], _saturating_sum(out["planned"])),
+    pairs = jnp.where(short, jnp.maximum(out["pairs"], _over_sources(out["planned"])),
                       out["pairs"])
     stats = ShardedStats(
         n_valid=totals[..., 0], n_invalid=totals[..., 1] - padding,

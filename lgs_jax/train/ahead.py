@@ -260,30 +260,30 @@ class Stepper:
                 else self._fn.lower(*abstract, **static).compile())
         self._jobs[sig] = (size, self._threads.submit(compile_))
 
-    def kept(self, sig: tuple, size: tuple, least: int | None = None) -> tuple:
+    def kept(self, sig: tuple, size: tuple, pairs: int | None = None) -> tuple:
         """`size`, or where its program for the shapes `sig` is not kept (`exports.Lowering.
         holds`: compiled in this process or exported by an earlier run) and that of another
         pair capacity near it is, that size: the smallest kept one above `size`, at most
-        `REUSE` times it, else the largest kept one below it, at least `least` (None: none
-        below). A buffer a little larger than the need changes no bit; a little smaller (still
-        `least`: room for the pairs) at worst grows sooner. Either way a load instead of a
-        compile: a run whose pairs differ a little from the run that filled the cache (another
-        seed) takes that run's sizes. Without a lowering, `size`."""
+        `REUSE` times it, else, given the `pairs` the size is for, the largest kept one below
+        it down to `Sizes.least(pairs)`. A buffer a little larger than the need changes no
+        bit; a little smaller (still room for the pairs) at worst grows sooner. Either way a
+        load instead of a compile: a run whose pairs differ a little from the run that filled
+        the cache (another seed) takes that run's sizes. Without a lowering, `size`."""
         if self._lowering is None or self._lowering.directory is None:
             return size
         abstract = _abstract_of(sig)
-        held = lambda pairs: self._lowering.holds(self._fn, abstract,
-                                                  self._static((pairs, size[1])))
-        pairs = size[0]
-        while pairs <= REUSE * size[0]:
-            if held(pairs):
-                return pairs, size[1]
-            pairs = pair_capacity(pairs + 1)
-        below, pairs = None, pair_capacity(least) if least else size[0]
-        while pairs < size[0]:
-            if held(pairs):
-                below = pairs
-            pairs = pair_capacity(pairs + 1)
+        held = lambda capacity: self._lowering.holds(self._fn, abstract,
+                                                     self._static((capacity, size[1])))
+        above = size[0]
+        while above <= REUSE * size[0]:
+            if held(above):
+                return above, size[1]
+            above = pair_capacity(above + 1)
+        below, capacity = None, size[0] if pairs is None else self._sizes.least(pairs)
+        while capacity < size[0]:
+            if held(capacity):
+                below = capacity
+            capacity = pair_capacity(capacity + 1)
         return size if below is None else (below, size[1])
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
@@ -300,7 +300,7 @@ class Stepper:
             if compiled:
                 return job[0], waited, True
         grown = self._sizes.grown(size, need)
-        kept = self.kept(sig, grown, self._sizes.least(need[0]) if grown[0] != size[0] else None)
+        kept = self.kept(sig, grown, need[0] if grown[0] != size[0] else None)
         self.took_kept = kept != grown
         return kept, 0.0, False
 

@@ -146,8 +146,7 @@ def _level_capacity(run: _Run, lv, steps: Stepper, sig: tuple) -> int:
     filled = int(pairs * st.pool.size / max(state.active_count(st.pool), 1))
     need = pair_capacity(filled, run.config.pair_headroom)
     field = SECOND[run.setup.gaussian_devices > 1][0]
-    return steps.kept(sig, (need, getattr(st, field)),
-                      Sizes(run.config.pair_headroom).least(filled))[0]
+    return steps.kept(sig, (need, getattr(st, field)), filled)[0]
 
 
 def _level_ahead(run: _Run, feed: LevelFeed, steps: Stepper) -> None:

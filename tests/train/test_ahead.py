@@ -194,8 +194,8 @@ def test_steps_compile_ahead_on_one_device_only(devices, gaussian_devices, want)
 def test_a_size_takes_a_kept_program_a_little_above_it(tmp_path):
     """`Stepper.kept`: a size whose program is not kept becomes the smallest larger pair
     capacity, at most `REUSE` times it, whose program an earlier run exported (another seed's
-    run: a load, not a compile), else the largest smaller one down to `least`; a growth does
-    the same, down to `Sizes.least` of its pairs (`took_kept`); farther away, or with no
+    run: a load, not a compile), else the largest smaller one down to `Sizes.least` of the
+    pairs it is for; a growth does the same (`took_kept`); farther away, or with no
     exports, the size stays."""
     from lgs_jax.train import exports
 
@@ -208,11 +208,12 @@ def test_a_size_takes_a_kept_program_a_little_above_it(tmp_path):
     assert stepper.kept(sig, (1_179_648, None)) == (earlier, None)  # 1.11x below: taken
     assert stepper.kept(sig, (1_048_576, None)) == (earlier, None)  # 1.25x: taken
     assert stepper.kept(sig, (983_040, None)) == (983_040, None)  # 1.33x: compiled instead
-    # below the size, down to `least`: the largest kept one (room for the pairs, if less)
-    assert stepper.kept(sig, (1_441_792, None), least=1_310_720) == (earlier, None)
-    assert stepper.kept(sig, (2_097_152, None), least=1_048_576) == (earlier, None)
-    assert stepper.kept(sig, (2_097_152, None), least=1_441_792) == (2_097_152, None)
-    assert stepper.kept(sig, (2_097_152, None)) == (2_097_152, None)  # no least: none below
+    # given the pairs, below the size down to `Sizes.least` of them (here the pairs: headroom
+    # 1): the largest kept one
+    assert stepper.kept(sig, (1_441_792, None), pairs=1_310_720) == (earlier, None)
+    assert stepper.kept(sig, (2_097_152, None), pairs=1_048_576) == (earlier, None)
+    assert stepper.kept(sig, (2_097_152, None), pairs=1_441_792) == (2_097_152, None)
+    assert stepper.kept(sig, (2_097_152, None)) == (2_097_152, None)  # no pairs: none below
     assert stepper.kept(ahead.signature((jnp.arange(9.0),)), (1_179_648, None)) == (
         1_179_648, None)  # another shape: nothing kept for it
     size, waited, took_ahead = stepper.grow((983_040, None), (1_100_000, 0), sig)
