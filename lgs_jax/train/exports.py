@@ -105,14 +105,18 @@ class Lowering:
         self.failure = None
         return lowered
 
+    def _memo(self, entry: str) -> tuple:
+        """The key of program `entry`'s executable in this process (`_executables`): the
+        entry, and how this lowering loads and compiles it."""
+        return entry, self.directory, self.donate, repr(self.compiler_options)
+
     def holds(self, fn, abstract, static: dict) -> bool:
         """Whether the program is kept: compiled by this process (`compiled`) or its entry in
         the directory (another run's export, whose executable the persistent cache then
         holds too): taking it costs a load, not a trace and compile."""
         entry = key(_name(fn), abstract, static)
-        memo = (entry, self.directory, self.donate, repr(self.compiler_options))
         with _lock:
-            if memo in _executables:
+            if self._memo(entry) in _executables:
                 return True
         return self.directory is not None and os.path.exists(
             os.path.join(self.directory, entry + ".export"))
@@ -121,7 +125,7 @@ class Lowering:
         """`self(fn, abstract, static).compile()`, or the executable this process compiled
         for the same program before (the `KEPT` latest kept)."""
         entry = key(_name(fn), abstract, static)
-        memo = (entry, self.directory, self.donate, repr(self.compiler_options))
+        memo = self._memo(entry)
         with _lock:
             if memo in _executables:
                 _executables.move_to_end(memo)
