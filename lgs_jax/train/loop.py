@@ -18,8 +18,10 @@ s + 1 gets step s's `fits` as its `go`, so where s overflowed, s + 1 changes not
 run again in order: the same bits as one step after another.
 
 The run folder (`rundir`) is checked and locked before any work. OUT/metrics.jsonl gets a row
-per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts) and
-per evaluation (held-out PSNR/SSIM: `heldout.Evaluations`, scored on the device); a checkpoint
+per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts),
+per growth of a step's buffers (their new sizes) and per evaluation (held-out PSNR/SSIM:
+`heldout.Evaluations`, scored on the device), the last three with the device's memory in use
+and its peak so far (`report.device_memory`, on a GPU); a checkpoint
 (`checkpoint`, `state.save`; bit-identical resume) every config.checkpoint_every steps, at the
 end, and at Ctrl-C (`interrupt`: the run stops at the next step boundary and raises
 `Interrupted`); the outputs at the end (`outputs.finish`), which with `Recipe.early_stop` may
@@ -231,6 +233,8 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
         grown = [f"{what} grown to {new_size}" for what, new_size, old_size in
                  (("pair capacity", grown_size[0], size[0]), (name, grown_size[1], size[1]))
                  if new_size != old_size]
+        run.record(grown_step=st.step + 1, pair_capacity=grown_size[0],
+                   **{field: grown_size[1]}, **report.device_memory())
         run.say(f"step {st.step + 1}: {' and '.join(grown)} "
                 + (f"(compiled ahead; waited {waited:.1f} s)" if ahead else
                    "(a size kept from an earlier run)" if steps.took_kept else "(one recompile)")
@@ -271,7 +275,7 @@ def _refine(run: _Run) -> int:
     if not rep["ok"]:
         run.say(f"step {st.step}: refinement skipped: it would make parameters non-finite")
     count = state.active_count(st.pool)
-    run.record(refine_step=st.step, **rep, gaussians=count)
+    run.record(refine_step=st.step, **rep, gaussians=count, **report.device_memory())
     return count
 
 
@@ -306,7 +310,7 @@ def _after_step(run: _Run, m: dict, watch: Watch, data: dict, last: bool) -> Non
         psnr, ssim = run.evaluations.score(state.scene(st))
         st.eval_capacity = run.evaluations.capacity
         run.eval_seconds += time.perf_counter() - t0
-        run.record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
+        run.record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim, **report.device_memory())
         run.say(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
     if st.step % config.checkpoint_every == 0 or last:
         t0 = time.perf_counter()
@@ -431,7 +435,8 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     (`report.CompileClock.result`), the parts of `seconds` (load_seconds: data and the start
     or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
     the run; finish_seconds: the final evaluation and the output files; logged in one line at
-    the end) and stopped_early_at (the step the early stop ended the run at, or None).
+    the end), peak_mib (the device's peak memory in the process, MiB; None on the CPU) and
+    stopped_early_at (the step the early stop ended the run at, or None).
 
     Several processes (`jax.distributed.initialize`, docs/multi-gpu.md "Several hosts"): every
     process makes the same call, with gaussian_devices = `jax.device_count()` and the same

@@ -135,6 +135,7 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log,
             report.plot_curves(report.read_metrics(os.path.join(out, "metrics.jsonl")), tmp)
     run = dict(run, finish_seconds=time.perf_counter() - t0)
     run["seconds"] += run["finish_seconds"]
+    run["peak_mib"] = report.device_memory().get("peak_mib")
     log(time_parts(run))
     result = dict(steps=st.step, heldout_psnr=psnr, heldout_ssim=ssim,
                   gaussians=active_count(st.pool), pool_size=st.pool.size,

@@ -182,6 +182,17 @@ class CompileClock:
                     ahead_compile_seconds=self.ahead_seconds)
 
 
+def device_memory() -> dict:
+    """{mib_in_use, peak_mib}: the local devices' bytes in use now and their peak since the
+    process started (the allocator's `memory_stats`, MiB; the largest device's where there
+    are several), or {} where the backend keeps no such statistics (the CPU)."""
+    stats = [d.memory_stats() or {} for d in jax.local_devices()]
+    if not any("peak_bytes_in_use" in s for s in stats):
+        return {}
+    return dict(mib_in_use=round(max(s.get("bytes_in_use", 0) for s in stats) / 2**20, 1),
+                peak_mib=round(max(s.get("peak_bytes_in_use", 0) for s in stats) / 2**20, 1))
+
+
 def _threads(fn, *lists) -> list:
     """[fn(*items) for items in zip(*lists)] on a few threads (numpy, scikit-image and PNG
     compression release Python's lock in their loops), in order."""
