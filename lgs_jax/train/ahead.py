@@ -2,8 +2,9 @@
 
 A training step is compiled for static sizes (`Sizes`: the pair capacity and the backward's
 rows); when a step's views need more pairs than the capacity, `fit` grows it and the step is
-compiled again for the new size. Pairs grow gradually (densification), so the next capacity is
-predictable: the smallest one a growth can pick, `pair_capacity(capacity + 1, headroom)`.
+compiled again for the new size (likewise the rows, for the pairs some pixel reached). Pairs
+grow gradually (densification), so the next size is predictable: the smallest one a growth can
+pick, `pair_capacity(capacity + 1, headroom)`, and the same of the rows.
 `Stepper` wraps a jitted function (`step.train_step`): it calls it at a size, and compiles it for
 the following size in the background while steps go on; at the growth it uses that executable if
 it holds the pairs and was compiled for the same argument shapes (a pool that grew since needs
@@ -103,16 +104,18 @@ class Sizes:
 
     The rows are `render`'s row_capacity (None: a row per pair slot, which nothing overflows).
     A step needs (pairs, walked): its views' largest pair count and largest count of walked
-    pairs. `following` is the size a growth of the pairs picks first (compiled ahead),
-    `grown` the size for a need the current size does not hold: what overflowed grows to
-    `pair_capacity(need, headroom)`, the rest stays.
+    pairs. `following` is the size compiled ahead: both buffers at the smallest size a growth
+    of each can pick, so that it holds a growth of either; `grown` the size for a need the
+    current size does not hold: what overflowed grows to `pair_capacity(need, headroom)`, the
+    rest stays.
     """
 
     pair_headroom: float
     row_headroom: float | None = None
 
     def following(self, size: tuple) -> tuple:
-        return pair_capacity(size[0] + 1, self.pair_headroom), size[1]
+        rows = None if size[1] is None else pair_capacity(size[1] + 1, self.row_headroom)
+        return pair_capacity(size[0] + 1, self.pair_headroom), rows
 
     def least(self, pairs: int) -> int:
         """The smallest pair capacity a kept program may have for `pairs` pairs

@@ -208,8 +208,9 @@ class FitConfig:
              "growth (a recompile); larger: fewer recompiles, larger buffers", low=1)
     row_headroom: float | None = option(
         None, "size the Pallas backward's gradient rows to this multiple of the walked "
-              "pairs, growing them when a view walks more (a recompile each): less memory, "
-              "the same results (default: a row per pair slot)", low=1)
+              "pairs, growing them when a view walks more (a recompile each): the same "
+              "results; larger: fewer recompiles, more memory (default: 1.5 on one Gaussian "
+              "device; with Gaussian parallel a row per pair slot)", low=1)
     stream_images: bool | None = option(
         None, "keep only each step's views on the device (copied while the step before runs) "
               "instead of the whole capture; the same results (default: on a GPU, and on "
@@ -291,6 +292,19 @@ LOOP_ONLY = dict(name="default", levels=1, full_resolution_at=0.5, early_stop=Fa
 """`Recipe` fields no training step reads (`Setup.for_step`), at the values a step is keyed by:
 the recipe's name (its defaults are filled in by then), the image levels' schedule (a level's
 image size is in the step's shapes) and the early stop."""
+
+
+ROW_HEADROOM = 1.5
+"""`FitConfig.row_headroom` where it is None, on one Gaussian device (`row_headroom`)."""
+
+
+def row_headroom(config: FitConfig) -> float | None:
+    """The headroom a run sizes the backward's rows with: `config.row_headroom`, or where that
+    is None, `ROW_HEADROOM` on one Gaussian device and None (a row per pair slot, which the
+    sharded render keeps) with Gaussian parallel."""
+    if config.row_headroom is not None or config.gaussian_devices > 1:
+        return config.row_headroom
+    return ROW_HEADROOM
 
 
 @dataclasses.dataclass(frozen=True)

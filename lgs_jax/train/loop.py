@@ -6,7 +6,7 @@ Per step s (0-based): the views of `feed.views_for_step` at the step's image lev
 dropped; the capacity starts at and grows to `pair_capacity(pairs, config.pair_headroom)`,
 or to a kept size near that, whose program an earlier run exported (`Stepper.kept`),
 and with several levels starts again at each level's first step, sized to its first view;
-likewise the backward's rows where `config.row_headroom` sizes them, `ahead.Sizes`), then
+likewise the backward's rows, sized by `config.row_headroom`, `ahead.Sizes`), then
 `step.refine` where the strategy asks (the pool doubles when it needs room, up to
 `max_gaussians`: a recompile; both are logged). A step whose loss or gradients would not be
 finite is skipped (nothing changes), logged and recorded. The step donates the run's state
@@ -44,7 +44,7 @@ from ..render import default_backend, pair_capacity
 from . import heldout, outputs, processes, recipes, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
-from .config import FitConfig, Setup, devices_problem
+from .config import FitConfig, Setup, devices_problem, row_headroom
 from .early_stop import EarlyStop
 from .feed import RunData, nbytes, prepare, streams
 from .init import wide_start
@@ -74,7 +74,7 @@ def stepper(config: FitConfig, setup: Setup) -> Stepper:
         return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom), None)
     static = lambda size: dict(setup=keyed, capacity=size[0], rows=size[1])
     mode = mode_of(config.compile_ahead) if setup.devices == 1 else None
-    return Stepper(train_step, static, Sizes(config.pair_headroom, config.row_headroom), mode,
+    return Stepper(train_step, static, Sizes(config.pair_headroom, row_headroom(config)), mode,
                    lowering() if setup.devices == 1 and mode != "process" else None)
 
 
@@ -268,7 +268,7 @@ def _refine(run: _Run) -> int:
     else:
         st.strategy_state, st.pool, st.opt_state, rep = refine(
             setup.strategy, st.strategy_state, st.pool, st.opt_state, st.step, run.key,
-            run.config.max_gaussians)
+            run.config.max_gaussians, in_place=True)
     _place(setup, st)
     if rep["grown_to"]:
         run.say(f"step {st.step}: pool grown to {rep['grown_to']} slots (one recompile)")

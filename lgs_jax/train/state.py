@@ -12,16 +12,15 @@ import jax.numpy as jnp
 
 from ..io.ply import save_ply
 from ..backends import REGISTRY
-from ..render import count_pairs, next_pow2, pair_capacity, render
+from ..render import count_pairs, next_pow2, pair_capacity
 from . import appearance, checkpoint, processes, report, sharded, sharded_state, view_params
-from .config import FitConfig, Setup
+from .config import FitConfig, Setup, row_headroom
 from ..files import written
 from .feed import RunData
 from ..parallel.shards import padded_rows, to_host
 from .init import start_gaussians
 from .optim import optimizer
 from .pool import Pool, active_gaussians, from_gaussians, render_gaussians
-from .step import row_stats
 
 
 @dataclasses.dataclass
@@ -86,14 +85,6 @@ def active_count(pool: Pool) -> int:
     return int(to_host(jnp.sum(pool.active)))
 
 
-def walked(setup: Setup, pool: Pool, cam, background, capacity: int) -> int:
-    """Pairs some pixel reached in one view (the Pallas backends' `pairs_walked`, 0 for
-    backends that store no pair rows: `step.row_stats`): a forward render."""
-    out = render(render_gaussians(pool.params, pool.active), cam, background=background,
-                 backend=setup.backend, capacity=capacity, config=setup.recipe.raster)
-    return int(to_host(row_stats(out.stats)[1]))
-
-
 def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     """The state at step 0: the start's Gaussians (`init.start_gaussians`) in a pool of
     config.pool_size slots (default: the most Gaussians the strategy can reach in the run,
@@ -112,13 +103,21 @@ def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     if setup.gaussian_devices > 1:
         return _sharded(config, setup, rd, (pool, opt_state, sstate, views), step=0,
                         eval_capacity=None)
-    first = rd.train_camera(0)
-    capacity = pair_capacity(pairs(pool, first, setup.recipe.antialiased), config.pair_headroom)
-    rows = None
-    if config.row_headroom is not None and REGISTRY[setup.backend].row_capacity:
-        rows = pair_capacity(walked(setup, pool, first, jnp.asarray(rd.background), capacity),
-                             config.row_headroom)
-    return RunState(pool, opt_state, sstate, 0, capacity, capacity, rows=rows, views=views)
+    first = pairs(pool, rd.train_camera(0), setup.recipe.antialiased)
+    capacity = pair_capacity(first, config.pair_headroom)
+    return RunState(pool, opt_state, sstate, 0, capacity, capacity,
+                    rows=start_rows(config, setup, first), views=views)
+
+
+def start_rows(config: FitConfig, setup: Setup, first: int) -> int | None:
+    """The backward's rows a fresh run starts with: `pair_capacity` of the first view's pairs
+    (`first`; the pairs some pixel reaches are among them, so the first step's rows do not
+    overflow) at the run's row headroom (`config.row_headroom`), or None (a row per pair slot)
+    where that is None or the backend stores no rows."""
+    headroom = row_headroom(config)
+    if headroom is None or not REGISTRY[setup.backend].row_capacity:
+        return None
+    return pair_capacity(first, headroom)
 
 
 def balance_cameras(rd: RunData) -> list:
@@ -165,7 +164,7 @@ def resumed(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     if setup.gaussian_devices > 1:
         return _sharded(config, setup, rd, (pool, opt_state, sstate, views), meta["step"],
                         meta["eval_capacity"], meta["skipped"])
-    rows = meta.get("rows") if config.row_headroom is not None else None
+    rows = meta.get("rows") if row_headroom(config) is not None else None
     return RunState(pool, opt_state, sstate, meta["step"], meta["capacity"],
                     meta["eval_capacity"], meta["skipped"], rows, views)
 

@@ -288,27 +288,38 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     return pool, opt_state, strategy_state, views, metrics
 
 
-@functools.partial(jax.jit, static_argnames=("strategy", "cap"),
-                   compiler_options=COMPILER_OPTIONS)
-def _refine(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
+def _refined(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
     new = strategy.refine(strategy_state, pool, opt_state, step, step_keys(key, step)[1], cap)
     ok = _finite(new[1].params, new[1].active)
     state, pool, opt_state = _select(ok, new[:3], (strategy_state, pool, opt_state))
     return state, pool, opt_state, dict(new[3], ok=ok)
 
 
+_refine = jax.jit(_refined, static_argnames=("strategy", "cap"),
+                  compiler_options=COMPILER_OPTIONS)
+# the same with the state donated: its outputs take the arguments' buffers, so a refinement
+# holds the state once (and the new values it selects from), not twice
+_refine_in_place = jax.jit(_refined, static_argnames=("strategy", "cap"),
+                           donate_argnames=("strategy_state", "pool", "opt_state"),
+                           compiler_options=COMPILER_OPTIONS)
+
+
 def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int,
-           multiple: int = 1):
+           multiple: int = 1, in_place: bool = False):
     """`strategy.refine` at `step` (`key`: the run's; `cap`: at most so many Gaussians), the
     pool first grown (doubled, at most to `cap` slots rounded up to a multiple of `multiple`,
     and to such a multiple) while the refinement needs more new slots than are free, so nothing
     is cut short below the cap. A refinement that would make an active parameter non-finite is
     not applied (ok False). Returns (state, pool, opt_state, report): the report's counts as
-    ints, plus `grown_to` (the new pool size, or 0)."""
+    ints, plus `grown_to` (the new pool size, or 0). `in_place`: the state's arrays are donated
+    (used up: read only the returned state afterwards) where the pool is at its largest size
+    (no growth calls again with them): the refinement holds the state once, not twice (`fit`
+    does this; its memory peaked here otherwise)."""
     grown_to, slots = 0, -(-cap // multiple) * multiple
     while True:
-        state, new_pool, new_opt, report = _refine(strategy_state, pool, opt_state, step, key,
-                                                   strategy=strategy, cap=cap)
+        fn = _refine_in_place if in_place and pool.size >= slots else _refine
+        state, new_pool, new_opt, report = fn(strategy_state, pool, opt_state, step, key,
+                                              strategy=strategy, cap=cap)
         report = {k: int(v) for k, v in to_host(report).items()}
         short = report["needed"] - report["free"]
         if short <= 0 or pool.size >= slots:

@@ -345,3 +345,22 @@ def test_refine_grows_the_pool_by_doubling_until_it_fits():
     _, new, _, rep = S.refine(s, state5, pool5, _opt_state(pool5), 600, jax.random.key(0), 5)
     assert rep["grown_to"] == 0 and rep["cloned"] == 1
     np.testing.assert_array_equal(_p(new, "means")[4], _p(pool5, "means")[2])
+
+
+def test_refine_in_place_gives_the_same_bits_and_uses_up_its_arguments():
+    """`fit`'s refinement donates the state where the pool is at its largest size: the same
+    result as the kept call; below that size (a growth may call again) nothing is donated."""
+    o = np.full(64, 0.5)
+    o[[0, 5]] = 0.001
+    pool = _pool(40, 64, opacities=o)
+    s = MCMCStrategy()
+    kept = S.refine(s, {}, pool, _opt_state(pool), 600, jax.random.key(0), 64)
+    copy = jax.tree.map(jnp.copy, (pool, _opt_state(pool)))
+    done = S.refine(s, {}, *copy, 600, jax.random.key(0), 64, in_place=True)
+    for a, b in zip(jax.tree.leaves(kept[:3]), jax.tree.leaves(done[:3])):
+        np.testing.assert_array_equal(a, b)
+    assert kept[3] == done[3]
+    assert all(x.is_deleted() for x in jax.tree.leaves(copy))
+    below = jax.tree.map(jnp.copy, (pool, _opt_state(pool)))
+    S.refine(s, {}, *below, 600, jax.random.key(0), 128, in_place=True)
+    assert not any(x.is_deleted() for x in jax.tree.leaves(below))

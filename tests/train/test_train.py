@@ -431,10 +431,11 @@ class _Jitted:
 
 
 @pytest.mark.parametrize("need,same_shapes,fail,want", [
-    # the prepared size holds the pairs and walked pairs: taken
-    ((1100, 600), True, False, ("executable", (2048, 800))),
+    # the prepared size (both buffers grown) holds the pairs and walked pairs: taken
+    ((1100, 600), True, False, ("executable", (2048, 2048))),
+    ((1000, 900), True, False, ("executable", (2048, 2048))),  # a growth of the rows alone
     ((2100, 600), True, False, None),  # not the pairs: the jitted step at pair_capacity(2100)
-    ((1100, 900), True, False, None),  # not the walked pairs: the step with grown rows
+    ((1100, 2100), True, False, None),  # not the walked pairs: the step with grown rows
     ((1100, 600), False, False, None),  # the pool grew since: the jitted step
     ((1100, 600), True, True, None),  # its compile failed: the jitted step
 ])
@@ -445,7 +446,7 @@ def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(need, same_sha
     args = (jnp.zeros(3), 7)
     sig = ahead.signature(args)
     assert stepper.run(args, (1024, 800), sig) == ("jit", (1024, 800))
-    stepper.prepare(args, (1024, 800), sig)  # (pair_capacity(1025, 1.5), 800) = (2048, 800)
+    stepper.prepare(args, (1024, 800), sig)  # pair_capacity of (1025, 1.5) and (801, 2.0)
     other = sig if same_shapes else ahead.signature((jnp.zeros(4), 7))
     size, waited, taken = stepper.grow((1024, 800), need, other)
     assert taken == (want is not None) and waited >= 0
@@ -479,7 +480,8 @@ def test_sizes_grow_what_overflowed():
     per pair slot) never grow."""
     sizes = ahead.Sizes(1.5, row_headroom=2.0)
     cap = lgs_jax.pair_capacity
-    assert sizes.following((1024, 300)) == (cap(1025, 1.5), 300)
+    assert sizes.following((1024, 300)) == (cap(1025, 1.5), cap(301, 2.0))
+    assert sizes.following((1024, None)) == (cap(1025, 1.5), None)
     assert sizes.grown((1024, 300), (2000, 100)) == (cap(2000, 1.5), 300)
     assert sizes.grown((1024, 300), (1000, 301)) == (1024, cap(301, 2.0))
     assert sizes.grown((1024, 300), (2000, 5000)) == (cap(2000, 1.5), cap(5000, 2.0))
@@ -719,26 +721,24 @@ def test_fit_usage_errors_exit_2(tmp_path, capsys):
 @pytest.mark.slow
 def test_rows_sized_to_the_walked_pairs_change_no_bit(skull, tmp_path, monkeypatch):
     """Training with the Pallas backward (interpret mode on a CPU) and its rows sized to the
-    walked pairs (`FitConfig.row_headroom`), started at one row (as if the first view walked
-    one pair): the first step overflows them, they grow and the step runs again, and the run
-    ends with the same bits as with a row per pair slot."""
+    walked pairs (`FitConfig.row_headroom`), once started at one row (as if the first view
+    walked one pair): the first step overflows them, they grow and the step runs again, and
+    the run ends with the same bits as the run whose rows never overflowed."""
     from lgs_jax.train import state
 
-    monkeypatch.setattr(state, "walked", lambda *args: 1)
-    sums = {}
-    for h in (None, 1.5):
-        logs = []
-        config = dataclasses.replace(_config(skull, tmp_path / str(h)), steps=6,
-                                     backend="pallas", row_headroom=h)
+    real, sums = state.start_rows, {}
+    for grown in (False, True):
+        monkeypatch.setattr(state, "start_rows", (lambda *args: 1) if grown else real)
+        logs, out = [], tmp_path / str(grown)
+        config = dataclasses.replace(_config(skull, out), steps=6, backend="pallas")
         train.fit(config, skull, log=logs.append)
-        z = np.load(tmp_path / str(h) / "checkpoint.npz")
-        sums[h] = {k: z[k] for k in z.files}
-        meta = json.loads((tmp_path / str(h) / "checkpoint.json").read_text())
-        assert (meta["rows"] is None) == (h is None)
+        z = np.load(out / "checkpoint.npz")
+        sums[grown] = {k: z[k] for k in z.files}
+        assert json.loads((out / "checkpoint.json").read_text())["rows"] > 1
         grew = [line for line in logs if "step 1: backward rows grown to" in line]
-        assert len(grew) == (h is not None), logs
-    for k, v in sums[None].items():
-        np.testing.assert_array_equal(sums[1.5][k], v, err_msg=k)
+        assert len(grew) == grown, logs
+    for k, v in sums[False].items():
+        np.testing.assert_array_equal(sums[True][k], v, err_msg=k)
 
 
 def test_progress_bar_redraws_while_a_step_runs():
@@ -1009,23 +1009,23 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
         checkpoint.read_meta(str(tmp_path))
 
 
-def test_sized_rows_start_at_the_first_views_walked_pairs(skull, tmp_path):
-    """`FitConfig.row_headroom`: a run's rows start at `pair_capacity(walked, headroom)` of the
-    first training view's walked pairs (a forward render), at most its pairs, where the backend
-    stores gradient rows (the Pallas backends); None, or a backend without rows: no rows."""
-    from lgs_jax.train import state
+def test_sized_rows_start_at_the_first_views_pairs(skull, tmp_path):
+    """`FitConfig.row_headroom`: a run's rows start at `pair_capacity(pairs, headroom)` of the
+    first training view's pairs (the walked pairs are among them) where the backend stores
+    gradient rows (the Pallas backends), at `config.ROW_HEADROOM` where it is None; a backend
+    without rows, or Gaussian parallel by default: no rows (a row per pair slot)."""
+    from lgs_jax.train import config as C, state
 
     rd = train_data.prepare(skull, 1, None)
-    for h, backend in ((None, "pallas"), (2.0, "tiles"), (2.0, "pallas")):
+    first = jax.tree.map(lambda x: x[0], rd.train_cams)
+    for h, backend, want in ((None, "pallas", C.ROW_HEADROOM), (2.0, "tiles", None),
+                             (2.0, "pallas", 2.0)):
         config = train.FitConfig(data=skull.path, out=str(tmp_path), steps=10, row_headroom=h,
                                  pool_size=1024)
         setup = train.Setup.of(config, rd.scene_scale, backend)
         st = state.fresh(config, setup, rd, lambda m: None)
-        if h is None or backend == "tiles":
-            assert st.rows is None
-            continue
-        first = jax.tree.map(lambda x: x[0], rd.train_cams)
-        walked = state.walked(setup, st.pool, first, jnp.asarray(rd.background), st.capacity)
         pairs = lgs_jax.count_pairs(train.render_gaussians(st.pool.params, st.pool.active), first)
-        assert 0 < walked <= int(pairs) and int(pairs) == state.pairs(st.pool, first)
-        assert st.rows == lgs_jax.pair_capacity(walked, 2.0)
+        assert int(pairs) == state.pairs(st.pool, first) > 0
+        assert st.rows == (want and lgs_jax.pair_capacity(int(pairs), want)), (h, backend)
+    assert C.row_headroom(train.FitConfig(data="d", out="o", gaussian_devices=2)) is None
+    assert C.row_headroom(train.FitConfig(data="d", out="o", row_headroom=3.0)) == 3.0
