@@ -2,9 +2,9 @@
 
 A training step is compiled for static sizes (`Sizes`: the pair capacity and the backward's
 rows); when a step's views need more pairs than the capacity, `fit` grows it and the step is
-compiled again for the new size (likewise the rows, for the pairs some pixel reached). Pairs
-grow gradually (densification), so the next size is predictable: the smallest one a growth can
-pick, `pair_capacity(capacity + 1, headroom)`, and the same of the rows.
+compiled again for the new size (and the backward's rows with it, `Sizes`). Pairs grow
+gradually (densification), so the next size is predictable: the smallest one a growth can
+pick, `pair_capacity(capacity + 1, headroom)`.
 `Stepper` wraps a jitted function (`step.train_step`): it calls it at a size, and compiles it for
 the following size in the background while steps go on; at the growth it uses that executable if
 it holds the pairs and was compiled for the same argument shapes (a pool that grew since needs
@@ -104,18 +104,29 @@ class Sizes:
 
     The rows are `render`'s row_capacity (None: a row per pair slot, which nothing overflows).
     A step needs (pairs, walked): its views' largest pair count and largest count of walked
-    pairs. `following` is the size compiled ahead: both buffers at the smallest size a growth
-    of each can pick, so that it holds a growth of either; `grown` the size for a need the
-    current size does not hold: what overflowed grows to `pair_capacity(need, headroom)`, the
-    rest stays.
+    pairs (the pairs some pixel reached: among the pairs, so never more rows than pair slots
+    are needed). A capacity sized for p pairs (`pair_capacity(p, pair_headroom)`) comes with
+    rows for `row_headroom` times p (`rows_for`): the rows grow with the pairs, in one program.
+    `following` is the size compiled ahead, the smallest a growth of the pairs can pick;
+    `grown` the size for a need the current size does not hold: the pairs, where they
+    overflowed, to `pair_capacity(need, pair_headroom)` and their rows; the rows, where the
+    walked pairs overflowed them, to `pair_capacity(walked, row_headroom)`; never smaller.
     """
 
     pair_headroom: float
     row_headroom: float | None = None
 
+    def rows_for(self, capacity: int) -> int | None:
+        """The rows a pair capacity comes with: `pair_capacity` of `row_headroom` times the
+        pairs it holds at `pair_headroom`, at most a row per slot; None without a row
+        headroom."""
+        if self.row_headroom is None:
+            return None
+        return min(capacity, pair_capacity(capacity * self.row_headroom / self.pair_headroom))
+
     def following(self, size: tuple) -> tuple:
-        rows = None if size[1] is None else pair_capacity(size[1] + 1, self.row_headroom)
-        return pair_capacity(size[0] + 1, self.pair_headroom), rows
+        pairs = pair_capacity(size[0] + 1, self.pair_headroom)
+        return pairs, None if size[1] is None else max(size[1], self.rows_for(pairs))
 
     def least(self, pairs: int) -> int:
         """The smallest pair capacity a kept program may have for `pairs` pairs
@@ -129,8 +140,9 @@ class Sizes:
         pairs, rows = size
         if pairs < need[0]:
             pairs = pair_capacity(need[0], self.pair_headroom)
+            rows = None if rows is None else max(rows, self.rows_for(pairs))
         if rows is not None and rows < need[1]:
-            rows = pair_capacity(need[1], self.row_headroom)
+            rows = min(pairs, pair_capacity(need[1], self.row_headroom))
         return pairs, rows
 
 
@@ -291,14 +303,15 @@ class Stepper:
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at
-        `size` that needs `need` = (pairs, walked): the prepared size if it holds them and fits
-        the shapes `sig` (waiting for its compile if unfinished), else `Sizes.grown` (compiled
+        `size` that needs `need` = (pairs, walked): where the pairs overflowed, the prepared
+        size if it holds them and fits the shapes `sig` (waiting for its compile if
+        unfinished; a growth of the rows alone keeps the pair capacity), else `Sizes.grown` (compiled
         by the next `run`; also when the compile ahead failed, which `failure` then says, else
         None) or a kept size near it (`kept`, down to `Sizes.least` of the pairs; `took_kept`
         then says so)."""
         job, self.failure, self.took_kept = self._jobs.pop(sig, None), None, False
         self._ready.pop(sig, None)
-        if job is not None and self._sizes.holds(job[0], need):
+        if job is not None and need[0] > size[0] and self._sizes.holds(job[0], need):
             waited, compiled = self._take(sig, job)
             if compiled:
                 return job[0], waited, True

@@ -207,10 +207,11 @@ class FitConfig:
         3.0, "pair buffer size as a multiple of a view's pairs, at the start and at each "
              "growth (a recompile); larger: fewer recompiles, larger buffers", low=1)
     row_headroom: float | None = option(
-        None, "size the Pallas backward's gradient rows to this multiple of the walked "
-              "pairs, growing them when a view walks more (a recompile each): the same "
-              "results; larger: fewer recompiles, more memory (default: 1.5 on one Gaussian "
-              "device; with Gaussian parallel a row per pair slot)", low=1)
+        None, "the Pallas backward's gradient rows: this multiple of the pairs a pair "
+              "buffer is sized for (and of the walked pairs, growing them where a view walks "
+              "more: a recompile); the same results; larger: fewer recompiles, more memory "
+              "(default: 1.5 on one Gaussian device; with Gaussian parallel a row per pair "
+              "slot)", low=1)
     stream_images: bool | None = option(
         None, "keep only each step's views on the device (copied while the step before runs) "
               "instead of the whole capture; the same results (default: on a GPU, and on "

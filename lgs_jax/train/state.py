@@ -14,6 +14,7 @@ from ..io.ply import save_ply
 from ..backends import REGISTRY
 from ..render import count_pairs, next_pow2, pair_capacity
 from . import appearance, checkpoint, processes, report, sharded, sharded_state, view_params
+from .ahead import Sizes
 from .config import FitConfig, Setup, row_headroom
 from ..files import written
 from .feed import RunData
@@ -103,21 +104,21 @@ def fresh(config: FitConfig, setup: Setup, rd: RunData, log) -> RunState:
     if setup.gaussian_devices > 1:
         return _sharded(config, setup, rd, (pool, opt_state, sstate, views), step=0,
                         eval_capacity=None)
-    first = pairs(pool, rd.train_camera(0), setup.recipe.antialiased)
-    capacity = pair_capacity(first, config.pair_headroom)
+    capacity = pair_capacity(pairs(pool, rd.train_camera(0), setup.recipe.antialiased),
+                             config.pair_headroom)
     return RunState(pool, opt_state, sstate, 0, capacity, capacity,
-                    rows=start_rows(config, setup, first), views=views)
+                    rows=start_rows(config, setup, capacity), views=views)
 
 
-def start_rows(config: FitConfig, setup: Setup, first: int) -> int | None:
-    """The backward's rows a fresh run starts with: `pair_capacity` of the first view's pairs
-    (`first`; the pairs some pixel reaches are among them, so the first step's rows do not
-    overflow) at the run's row headroom (`config.row_headroom`), or None (a row per pair slot)
-    where that is None or the backend stores no rows."""
-    headroom = row_headroom(config)
-    if headroom is None or not REGISTRY[setup.backend].row_capacity:
+def start_rows(config: FitConfig, setup: Setup, capacity: int) -> int | None:
+    """The backward's rows a fresh run starts with: those of its pair capacity
+    (`ahead.Sizes.rows_for` at the run's headroom, `config.row_headroom`: the first view's
+    pairs times it; the walked pairs are among them, so the first step's rows do not
+    overflow), or None (a row per pair slot) where the headroom is None or the backend stores
+    no rows."""
+    if not REGISTRY[setup.backend].row_capacity:
         return None
-    return pair_capacity(first, headroom)
+    return Sizes(config.pair_headroom, row_headroom(config)).rows_for(capacity)
 
 
 def balance_cameras(rd: RunData) -> list:

@@ -431,22 +431,22 @@ class _Jitted:
 
 
 @pytest.mark.parametrize("need,same_shapes,fail,want", [
-    # the prepared size (both buffers grown) holds the pairs and walked pairs: taken
-    ((1100, 600), True, False, ("executable", (2048, 2048))),
-    ((1000, 900), True, False, ("executable", (2048, 2048))),  # a growth of the rows alone
-    ((2100, 600), True, False, None),  # not the pairs: the jitted step at pair_capacity(2100)
+    # the prepared size (pairs grown, their rows with them) holds the pairs and walked pairs
+    ((1100, 600), True, False, ("executable", (4096, 2048))),
+    ((1000, 900), True, False, None),  # a growth of the rows alone: the pairs stay
+    ((4100, 600), True, False, None),  # not the pairs: the jitted step at pair_capacity(4100)
     ((1100, 2100), True, False, None),  # not the walked pairs: the step with grown rows
     ((1100, 600), False, False, None),  # the pool grew since: the jitted step
     ((1100, 600), True, True, None),  # its compile failed: the jitted step
 ])
 def test_stepper_takes_the_step_compiled_ahead_only_where_it_fits(need, same_shapes, fail,
                                                                   want):
-    sizes = ahead.Sizes(1.5, row_headroom=2.0)
+    sizes = ahead.Sizes(2.0, row_headroom=1.0)
     stepper = ahead.Stepper(_Jitted(fail), lambda size: dict(size=size), sizes)
     args = (jnp.zeros(3), 7)
     sig = ahead.signature(args)
     assert stepper.run(args, (1024, 800), sig) == ("jit", (1024, 800))
-    stepper.prepare(args, (1024, 800), sig)  # pair_capacity of (1025, 1.5) and (801, 2.0)
+    stepper.prepare(args, (1024, 800), sig)  # (pair_capacity(1025, 2), its rows: 2048)
     other = sig if same_shapes else ahead.signature((jnp.zeros(4), 7))
     size, waited, taken = stepper.grow((1024, 800), need, other)
     assert taken == (want is not None) and waited >= 0
@@ -475,16 +475,22 @@ def test_stepper_takes_a_later_steps_compile_at_its_shapes_and_size(fail):
 
 
 def test_sizes_grow_what_overflowed():
-    """`ahead.Sizes`: the pairs to `pair_capacity(pairs, pair_headroom)` and the rows to
-    `pair_capacity(walked, row_headroom)`, each only where it overflowed; rows of None (a row
-    per pair slot) never grow."""
-    sizes = ahead.Sizes(1.5, row_headroom=2.0)
+    """`ahead.Sizes`: the pairs, where they overflowed, to `pair_capacity(pairs,
+    pair_headroom)` with their rows (`rows_for`: row_headroom times the pairs the capacity is
+    sized for, at most a row per slot); the rows, where the walked pairs overflowed them, to
+    `pair_capacity(walked, row_headroom)`, at most a row per slot; never smaller; rows of None
+    (a row per pair slot) never grow."""
+    sizes = ahead.Sizes(3.0, row_headroom=1.5)
     cap = lgs_jax.pair_capacity
-    assert sizes.following((1024, 300)) == (cap(1025, 1.5), cap(301, 2.0))
-    assert sizes.following((1024, None)) == (cap(1025, 1.5), None)
-    assert sizes.grown((1024, 300), (2000, 100)) == (cap(2000, 1.5), 300)
-    assert sizes.grown((1024, 300), (1000, 301)) == (1024, cap(301, 2.0))
-    assert sizes.grown((1024, 300), (2000, 5000)) == (cap(2000, 1.5), cap(5000, 2.0))
+    assert sizes.rows_for(3 * 2**20) == 3 * 2**19 and sizes.rows_for(4) == 2
+    assert ahead.Sizes(1.5, 2.0).rows_for(2**20) == 2**20 and sizes.rows_for(1) == 1
+    assert sizes.following((2**20, 300)) == (cap(2**20 + 1, 3.0), cap((2**20 + 1) * 1.5))
+    assert sizes.following((2**20, 2**21)) == (cap(2**20 + 1, 3.0), 2**21)  # never smaller
+    assert sizes.following((1024, None)) == (cap(1025, 3.0), None)
+    assert sizes.grown((2**20, 300), (2**21, 100)) == (cap(2**21, 3.0), cap(2**21 * 1.5))
+    assert sizes.grown((2**20, 300), (1000, 301)) == (2**20, cap(301, 1.5))
+    assert sizes.grown((2**20, 300), (2**21, 2**21)) == (cap(2**21, 3.0), cap(2**21, 1.5))
+    assert sizes.grown((4096, 300), (1000, 4000)) == (4096, 4096)  # at most a row per slot
     assert sizes.grown((1024, None), (1000, 5000)) == (1024, None)
     assert sizes.holds((1024, None), (1024, 10**9)) and not sizes.holds((1024, 8), (1, 9))
 
@@ -1010,8 +1016,9 @@ def test_resume_refuses_other_settings_and_old_checkpoints(tmp_path):
 
 
 def test_sized_rows_start_at_the_first_views_pairs(skull, tmp_path):
-    """`FitConfig.row_headroom`: a run's rows start at `pair_capacity(pairs, headroom)` of the
-    first training view's pairs (the walked pairs are among them) where the backend stores
+    """`FitConfig.row_headroom`: a run's rows start at those of its pair capacity
+    (`ahead.Sizes.rows_for`: headroom times the first training view's pairs, among which are
+    the walked pairs) where the backend stores
     gradient rows (the Pallas backends), at `config.ROW_HEADROOM` where it is None; a backend
     without rows, or Gaussian parallel by default: no rows (a row per pair slot)."""
     from lgs_jax.train import config as C, state
@@ -1026,6 +1033,8 @@ def test_sized_rows_start_at_the_first_views_pairs(skull, tmp_path):
         st = state.fresh(config, setup, rd, lambda m: None)
         pairs = lgs_jax.count_pairs(train.render_gaussians(st.pool.params, st.pool.active), first)
         assert int(pairs) == state.pairs(st.pool, first) > 0
-        assert st.rows == (want and lgs_jax.pair_capacity(int(pairs), want)), (h, backend)
+        assert st.capacity == lgs_jax.pair_capacity(int(pairs), config.pair_headroom)
+        rows = want and ahead.Sizes(config.pair_headroom, want).rows_for(st.capacity)
+        assert st.rows == rows and (rows is None or int(pairs) * want <= rows), (h, backend)
     assert C.row_headroom(train.FitConfig(data="d", out="o", gaussian_devices=2)) is None
     assert C.row_headroom(train.FitConfig(data="d", out="o", row_headroom=3.0)) == 3.0
