@@ -15,8 +15,8 @@ tile and in the busiest 10% of tiles, against the mean (one program per tile run
 one after another, so the busiest tiles bound a kernel's time when there are few tiles). The
 pair capacity is `lgs_jax.pair_capacity(pairs, --headroom)` of the view's pairs (default 1.5;
 `fit` starts and grows at `train.FitConfig.pair_headroom`, 3; 1: the tightest size, to see
-what the stages sized by the capacity cost; below 1 is refused). Rows (median ms of --repeat alternating
-rounds, one training view):
+what the stages sized by the capacity cost; below 1 is refused). Rows (median ms of --repeat
+alternating rounds, one training view):
   render        forward image only
   render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
   loss+bwd      the training loss (L1 + SSIM + MCMC regulariser) and its gradients
@@ -35,8 +35,11 @@ rounds, one training view):
   gsplat adam       torch's fused Adam over the same parameters, one optimizer per group
 Then the step's memory by part (MiB): the pool's parameters, the optimizer state, the strategy
 state, the view's target, and XLA's buffers of the compiled `train_step` (arguments, outputs,
-temporaries: the pair and row buffers, the render's per-pair records, the loss's images; and
-how much of the outputs XLA writes in place of the donated state).
+temporaries: the pair and row buffers, the render's per-pair records, the gradients, the
+loss's images; and how much of the outputs XLA writes in place of the donated state). With a
+backend that stores backward rows (Pallas), the temporaries are split by compiling the step
+twice more (half the rows; twice the pairs): bytes per pair slot, bytes per backward row, and
+the rest (the gradients, the loss's images: what does not scale with the buffers).
 """
 
 from __future__ import annotations
@@ -223,23 +226,35 @@ def memory_parts(setup, pool, opt_state, sstate, rd, capacity: int) -> dict:
     import jax
     import jax.numpy as jnp
 
+    from lgs_jax.backends import REGISTRY
     from lgs_jax.train import step as st
 
     mib = lambda tree: sum(x.nbytes for x in jax.tree.leaves(tree)) / 2**20
     targets = jnp.asarray(as_float(rd.train_images[:1]))
     args = (pool, opt_state, sstate, None, rd.train_cams, targets, jnp.array([0]),
             jnp.asarray(rd.background), jnp.int32(6000), jax.random.key(0))
-    compiled = st.train_step.lower(*args, setup=setup, capacity=capacity).compile()
-    m = compiled.memory_analysis()
+    analysis = lambda capacity, rows: st.train_step.lower(
+        *args, setup=setup, capacity=capacity, rows=rows).compile().memory_analysis()
+    m = analysis(capacity, None)
     parts = {"pool parameters": mib(pool.params), "optimizer state": mib(opt_state),
              "strategy state": mib(sstate), "one target image": mib(targets),
              "all training images (as fit holds them)": nbytes_mib(rd.train_images)}
-    if m is not None:
-        parts.update({"XLA arguments": m.argument_size_in_bytes / 2**20,
-                      "XLA outputs": m.output_size_in_bytes / 2**20,
-                      "XLA outputs in their donated arguments' place":
-                          m.alias_size_in_bytes / 2**20,
-                      "XLA temporaries": m.temp_size_in_bytes / 2**20})
+    if m is None:
+        return parts
+    parts.update({"XLA arguments": m.argument_size_in_bytes / 2**20,
+                  "XLA outputs": m.output_size_in_bytes / 2**20,
+                  "XLA outputs in their donated arguments' place": m.alias_size_in_bytes / 2**20,
+                  "XLA temporaries (a row per pair slot)": m.temp_size_in_bytes / 2**20})
+    if REGISTRY[setup.backend].row_capacity:  # the temporaries split by differences
+        half = capacity // 2
+        fewer, more = analysis(capacity, half), analysis(2 * capacity, half)
+        per_row = (m.temp_size_in_bytes - fewer.temp_size_in_bytes) / (capacity - half)
+        per_slot = (more.temp_size_in_bytes - fewer.temp_size_in_bytes) / capacity
+        parts.update({
+            "  of which the pair slots (bytes a slot)": per_slot,
+            "  of which the backward rows (bytes a row)": per_row,
+            "  of which the rest": (m.temp_size_in_bytes - capacity * (per_slot + per_row))
+            / 2**20})
     return parts
 
 
@@ -297,7 +312,7 @@ def main(argv=None) -> int:
         print(f"  {name:<16s} {t:8.2f} ms")
     print("memory by part:")
     for name, size in memory_parts(setup, pool, opt_state, sstate, rd, capacity).items():
-        print(f"  {name:<40s} {size:9.1f} MiB")
+        print(f"  {name:<45s} {size:9.1f} " + ("B" if "bytes" in name else "MiB"))
     return 0
 
 
