@@ -304,6 +304,16 @@ _refine_in_place = jax.jit(_refined, static_argnames=("strategy", "cap"),
                            compiler_options=COMPILER_OPTIONS)
 
 
+@functools.partial(jax.jit, static_argnames=("strategy", "cap"),
+                   compiler_options=COMPILER_OPTIONS)
+def _shortfall(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
+    """The new slots a refinement wants beyond the free ones (its report's needed − free):
+    XLA computes the counts alone, not the refined parameters."""
+    report = strategy.refine(strategy_state, pool, opt_state, step, step_keys(key, step)[1],
+                             cap)[3]
+    return report["needed"] - report["free"]
+
+
 def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap: int,
            multiple: int = 1, in_place: bool = False):
     """`strategy.refine` at `step` (`key`: the run's; `cap`: at most so many Gaussians), the
@@ -312,18 +322,23 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap:
     is cut short below the cap. A refinement that would make an active parameter non-finite is
     not applied (ok False). Returns (state, pool, opt_state, report): the report's counts as
     ints, plus `grown_to` (the new pool size, or 0). `in_place`: the state's arrays are donated
-    (used up: read only the returned state afterwards) where the pool is at its largest size
-    (no growth calls again with them): the refinement holds the state once, not twice (`fit`
-    does this; its memory peaked here otherwise)."""
+    (used up: read only the returned state afterwards), so that the refinement holds the state
+    once, not twice (`fit` does this; its memory peaked here otherwise); below the largest
+    pool, the shortfall of slots is counted first (`_shortfall`), and the pool grown before
+    the one refinement that uses the state up."""
     grown_to, slots = 0, -(-cap // multiple) * multiple
     while True:
-        fn = _refine_in_place if in_place and pool.size >= slots else _refine
-        state, new_pool, new_opt, report = fn(strategy_state, pool, opt_state, step, key,
-                                              strategy=strategy, cap=cap)
-        report = {k: int(v) for k, v in to_host(report).items()}
-        short = report["needed"] - report["free"]
-        if short <= 0 or pool.size >= slots:
-            return state, new_pool, new_opt, dict(report, grown_to=grown_to)
+        if in_place and pool.size < slots:
+            short = int(to_host(_shortfall(strategy_state, pool, opt_state, step, key,
+                                           strategy=strategy, cap=cap)))
+        if not in_place or pool.size >= slots or short <= 0:
+            fn = _refine_in_place if in_place else _refine
+            state, new_pool, new_opt, report = fn(strategy_state, pool, opt_state, step, key,
+                                                  strategy=strategy, cap=cap)
+            report = {k: int(v) for k, v in to_host(report).items()}
+            short = report["needed"] - report["free"]
+            if in_place or short <= 0 or pool.size >= slots:
+                return state, new_pool, new_opt, dict(report, grown_to=grown_to)
         grown_to = min(slots, max(2 * pool.size, next_pow2(pool.size + short)))
         grown_to = -(-grown_to // multiple) * multiple
         pool, opt_state, strategy_state = grow(pool, opt_state, strategy_state, grown_to)

@@ -348,19 +348,28 @@ def test_refine_grows_the_pool_by_doubling_until_it_fits():
 
 
 def test_refine_in_place_gives_the_same_bits_and_uses_up_its_arguments():
-    """`fit`'s refinement donates the state where the pool is at its largest size: the same
-    result as the kept call; below that size (a growth may call again) nothing is donated."""
+    """`fit`'s refinement donates the state: the same result as the kept call, at the pool's
+    largest size and below it; where the pool must grow first, the grown state is the one
+    used up and the result is the kept call's."""
     o = np.full(64, 0.5)
     o[[0, 5]] = 0.001
     pool = _pool(40, 64, opacities=o)
     s = MCMCStrategy()
-    kept = S.refine(s, {}, pool, _opt_state(pool), 600, jax.random.key(0), 64)
-    copy = jax.tree.map(jnp.copy, (pool, _opt_state(pool)))
-    done = S.refine(s, {}, *copy, 600, jax.random.key(0), 64, in_place=True)
+    for cap in (64, 128):  # the largest pool; below it, with room for the additions
+        kept = S.refine(s, {}, pool, _opt_state(pool), 600, jax.random.key(0), cap)
+        copy = jax.tree.map(jnp.copy, (pool, _opt_state(pool)))
+        done = S.refine(s, {}, *copy, 600, jax.random.key(0), cap, in_place=True)
+        for a, b in zip(jax.tree.leaves(kept[:3]), jax.tree.leaves(done[:3])):
+            np.testing.assert_array_equal(a, b)
+        assert kept[3] == done[3] and kept[3]["grown_to"] == 0
+        assert all(x.is_deleted() for x in jax.tree.leaves(copy)), cap
+    full = _pool(4, 4, log_scales=np.log(np.full((4, 3), 0.05)))  # clones need 2 more slots
+    d = DefaultStrategy()
+    state = dict(d.init(full, 10.0), grad2d=jnp.array([0.01, 0.0, 0.03, 0.0]),
+                 count=jnp.ones(4))
+    kept = S.refine(d, state, full, _opt_state(full), 600, jax.random.key(0), 100)
+    args = jax.tree.map(jnp.copy, (state, full, _opt_state(full)))
+    done = S.refine(d, *args, 600, jax.random.key(0), 100, in_place=True)
+    assert kept[3] == done[3] and done[3]["grown_to"] == 8
     for a, b in zip(jax.tree.leaves(kept[:3]), jax.tree.leaves(done[:3])):
         np.testing.assert_array_equal(a, b)
-    assert kept[3] == done[3]
-    assert all(x.is_deleted() for x in jax.tree.leaves(copy))
-    below = jax.tree.map(jnp.copy, (pool, _opt_state(pool)))
-    S.refine(s, {}, *below, 600, jax.random.key(0), 128, in_place=True)
-    assert not any(x.is_deleted() for x in jax.tree.leaves(below))
