@@ -283,32 +283,39 @@ class Stepper:
         it down to `Sizes.least(pairs)`. A buffer a little larger than the need changes no
         bit; a little smaller (still room for the pairs) at worst grows sooner. Either way a
         load instead of a compile: a run whose pairs differ a little from the run that filled
-        the cache (another seed) takes that run's sizes. Without a lowering, `size`."""
+        the cache (another seed) takes that run's sizes. Each capacity is looked for with the
+        rows it comes with (`Sizes.rows_for`; above `size`, at least its rows: below, a view
+        walking more than they hold grows the rows alone). Without a lowering, `size`."""
         if self._lowering is None or self._lowering.directory is None:
             return size
         abstract = _abstract_of(sig)
-        held = lambda capacity: self._lowering.holds(self._fn, abstract,
-                                                     self._static((capacity, size[1])))
+        held = lambda size: self._lowering.holds(self._fn, abstract, self._static(size))
         above = size[0]
         while above <= REUSE * size[0]:
-            if held(above):
-                return above, size[1]
+            if held(candidate := (above, self._rows_above(size, above))):
+                return candidate
             above = pair_capacity(above + 1)
         below, capacity = None, size[0] if pairs is None else self._sizes.least(pairs)
         while capacity < size[0]:
-            if held(capacity):
-                below = capacity
+            if held(candidate := (capacity, self._sizes.rows_for(capacity))):
+                below = candidate
             capacity = pair_capacity(capacity + 1)
-        return size if below is None else (below, size[1])
+        return size if below is None else below
+
+    def _rows_above(self, size: tuple, capacity: int) -> int | None:
+        """The rows of a kept program at a capacity above size's: those that capacity comes
+        with (`Sizes.rows_for`, as a run that grew to it has them), and never fewer than
+        size's."""
+        return None if size[1] is None else max(size[1], self._sizes.rows_for(capacity))
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at
         `size` that needs `need` = (pairs, walked): where the pairs overflowed, the prepared
         size if it holds them and fits the shapes `sig` (waiting for its compile if
-        unfinished; a growth of the rows alone keeps the pair capacity), else `Sizes.grown` (compiled
-        by the next `run`; also when the compile ahead failed, which `failure` then says, else
-        None) or a kept size near it (`kept`, down to `Sizes.least` of the pairs; `took_kept`
-        then says so)."""
+        unfinished; a growth of the rows alone keeps the pair capacity), else `Sizes.grown`
+        (compiled by the next `run`; also when the compile ahead failed, which `failure` then
+        says, else None) or a kept size near it (`kept`, down to `Sizes.least` of the pairs;
+        `took_kept` then says so)."""
         job, self.failure, self.took_kept = self._jobs.pop(sig, None), None, False
         self._ready.pop(sig, None)
         if job is not None and need[0] > size[0] and self._sizes.holds(job[0], need):
@@ -317,6 +324,8 @@ class Stepper:
                 return job[0], waited, True
         grown = self._sizes.grown(size, need)
         kept = self.kept(sig, grown, need[0] if grown[0] != size[0] else None)
+        if not self._sizes.holds(kept, need):  # rows below the walked pairs: no use
+            kept = grown
         self.took_kept = kept != grown
         return kept, 0.0, False
 

@@ -24,6 +24,14 @@ def _static(size):
     return dict(capacity=size[0])
 
 
+def _scaled_rows(x, capacity, rows):
+    return jnp.cumsum(jnp.sin(x) * capacity) + rows
+
+
+def _static_rows(size):
+    return dict(capacity=size[0], rows=size[1])
+
+
 @pytest.fixture
 def empty_cache(tmp_path):
     """A persistent compilation cache of its own, empty, caching every compile; the suite's
@@ -229,3 +237,26 @@ def test_a_size_takes_a_kept_program_a_little_above_it(tmp_path):
     assert roomy.took_kept
     plain = ahead.Stepper(_scaled, _static, ahead.Sizes(1.0), None)
     assert plain.kept(sig, (1_179_648, None)) == (1_179_648, None)
+
+
+def test_a_kept_program_is_looked_for_with_the_rows_of_its_capacity(tmp_path):
+    """With backward rows (`Sizes.rows_for`: a capacity comes with its rows), `Stepper.kept`
+    looks for each capacity at the rows a run that grew to it has (above the size, never fewer
+    than the size's); a growth takes a kept size only where its rows hold the walked pairs."""
+    from lgs_jax.train import exports
+
+    x, sizes = jnp.arange(8.0), ahead.Sizes(3.0, 1.5)
+    sig, earlier = ahead.signature((x,)), 1_310_720
+    rows = sizes.rows_for(earlier)  # 655,360
+    lowering = lambda: exports.Lowering(str(tmp_path / "exports"))
+    ahead.Stepper(_scaled_rows, _static_rows, sizes, None, lowering()).run((x,), (earlier, rows), sig)
+    stepper = ahead.Stepper(_scaled_rows, _static_rows, sizes, None, lowering())
+    size = (1_179_648, sizes.rows_for(1_179_648))
+    assert stepper.kept(sig, size) == (earlier, rows)  # above, with its rows
+    assert stepper.kept(sig, (1_179_648, 700_000)) == (1_179_648, 700_000)  # rows grown alone
+    big = (sizes.grown((524_288, 262_144), (800_000, 0)))  # 800k pairs: 2.4M, least 1.2M
+    assert stepper.kept(sig, big, pairs=800_000) == (earlier, rows)  # below, with its rows
+    assert stepper.grow((524_288, 262_144), (800_000, 600_000), sig)[0] == (earlier, rows)
+    assert stepper.took_kept
+    assert stepper.grow((524_288, 262_144), (800_000, 700_000), sig)[0] == big  # rows short
+    assert not stepper.took_kept
