@@ -174,7 +174,8 @@ def _forget_after(path: str, step: int) -> None:
     if not os.path.exists(path):
         return
     rows = [r for r in report.read_metrics(path)
-            if r.get("step", 0) <= step and r.get("refine_step", -1) < step]
+            if r.get("step", 0) <= step and r.get("refine_step", -1) < step
+            and r.get("grown_step", 0) <= step]
     with written(path) as tmp, open(tmp, "w") as f:
         f.writelines(json.dumps(r) + "\n" for r in rows)
 

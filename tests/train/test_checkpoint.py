@@ -96,3 +96,18 @@ def test_a_corrupted_checkpoint_is_named_and_changes_nothing(saved, tmp_path, ca
     assert "start a new run (--overwrite)" in err
     after = {n: open(os.path.join(out, n), "rb").read() for n in sorted(os.listdir(out))}
     assert after == before
+
+
+def test_a_resume_forgets_the_rows_after_its_checkpoint(tmp_path):
+    """metrics.jsonl at a resume from step 5 (five steps done): the rows the resumed run
+    writes again go (step 6's, the refinement recorded as 5, which follows the sixth step,
+    and the growths of the steps it redoes), those of the first five steps stay."""
+    from lgs_jax.train import report, state
+
+    rows = [dict(step=4, loss=1.0), dict(grown_step=5, pair_capacity=64), dict(step=5, loss=0.9),
+            dict(refine_step=5, added=1), dict(step=5, heldout_psnr=20.0),
+            dict(grown_step=6, pair_capacity=128), dict(step=6, loss=0.8)]
+    path = tmp_path / "metrics.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    state._forget_after(str(path), 5)
+    assert report.read_metrics(str(path)) == [rows[0], rows[1], rows[2], rows[4]]
