@@ -44,7 +44,7 @@ from ..render import default_backend, pair_capacity
 from . import heldout, outputs, processes, recipes, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
 from .checkpoint import data_of
-from .config import FitConfig, Setup, devices_problem, row_headroom
+from .config import FitConfig, Setup, devices_problem
 from .early_stop import EarlyStop
 from .feed import RunData, nbytes, prepare, streams
 from .init import wide_start
@@ -74,7 +74,7 @@ def stepper(config: FitConfig, setup: Setup) -> Stepper:
         return Stepper(train_step, static, Sizes(config.pair_headroom, config.pair_headroom), None)
     static = lambda size: dict(setup=keyed, capacity=size[0], rows=size[1])
     mode = mode_of(config.compile_ahead) if setup.devices == 1 else None
-    return Stepper(train_step, static, Sizes(config.pair_headroom, row_headroom(config)), mode,
+    return Stepper(train_step, static, state.sizes(config), mode,
                    lowering() if setup.devices == 1 and mode != "process" else None)
 
 

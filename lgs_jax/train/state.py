@@ -118,7 +118,14 @@ def start_rows(config: FitConfig, setup: Setup, capacity: int) -> int | None:
     no rows."""
     if not REGISTRY[setup.backend].row_capacity:
         return None
-    return Sizes(config.pair_headroom, row_headroom(config)).rows_for(capacity)
+    return sizes(config).rows_for(capacity)
+
+
+def sizes(config: FitConfig) -> Sizes:
+    """How a run's step buffers are sized and grow (`ahead.Sizes`): at its pair headroom and
+    its row headroom (the field, or where None the default that `.config.row_headroom`
+    gives)."""
+    return Sizes(config.pair_headroom, row_headroom(config))
 
 
 def balance_cameras(rd: RunData) -> list:

@@ -328,10 +328,11 @@ def refine(strategy, strategy_state, pool: Pool, opt_state, step: int, key, cap:
     the one refinement that uses the state up."""
     grown_to, slots = 0, -(-cap // multiple) * multiple
     while True:
-        if in_place and pool.size < slots:
+        counted = in_place and pool.size < slots  # a growth may follow: the state kept
+        if counted:
             short = int(to_host(_shortfall(strategy_state, pool, opt_state, step, key,
                                            strategy=strategy, cap=cap)))
-        if not in_place or pool.size >= slots or short <= 0:
+        if not counted or short <= 0:
             fn = _refine_in_place if in_place else _refine
             state, new_pool, new_opt, report = fn(strategy_state, pool, opt_state, step, key,
                                                   strategy=strategy, cap=cap)
