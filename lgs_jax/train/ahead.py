@@ -124,9 +124,14 @@ class Sizes:
             return None
         return min(capacity, pair_capacity(capacity * self.row_headroom / self.pair_headroom))
 
+    def rows_at(self, rows: int | None, capacity: int) -> int | None:
+        """Rows `rows` taken to a larger `capacity`: those it comes with (`rows_for`), never
+        fewer than `rows`; None stays None (a row per pair slot)."""
+        return None if rows is None else max(rows, self.rows_for(capacity))
+
     def following(self, size: tuple) -> tuple:
         pairs = pair_capacity(size[0] + 1, self.pair_headroom)
-        return pairs, None if size[1] is None else max(size[1], self.rows_for(pairs))
+        return pairs, self.rows_at(size[1], pairs)
 
     def least(self, pairs: int) -> int:
         """The smallest pair capacity a kept program may have for `pairs` pairs
@@ -140,7 +145,7 @@ class Sizes:
         pairs, rows = size
         if pairs < need[0]:
             pairs = pair_capacity(need[0], self.pair_headroom)
-            rows = None if rows is None else max(rows, self.rows_for(pairs))
+            rows = self.rows_at(rows, pairs)
         if rows is not None and rows < need[1]:
             rows = min(pairs, pair_capacity(need[1], self.row_headroom))
         return pairs, rows
@@ -292,7 +297,7 @@ class Stepper:
         held = lambda size: self._lowering.holds(self._fn, abstract, self._static(size))
         above = size[0]
         while above <= REUSE * size[0]:
-            if held(candidate := (above, self._rows_above(size, above))):
+            if held(candidate := (above, self._sizes.rows_at(size[1], above))):
                 return candidate
             above = pair_capacity(above + 1)
         below, capacity = None, size[0] if pairs is None else self._sizes.least(pairs)
@@ -302,11 +307,6 @@ class Stepper:
             capacity = pair_capacity(capacity + 1)
         return size if below is None else below
 
-    def _rows_above(self, size: tuple, capacity: int) -> int | None:
-        """The rows of a kept program at a capacity above size's: those that capacity comes
-        with (`Sizes.rows_for`, as a run that grew to it has them), and never fewer than
-        size's."""
-        return None if size[1] is None else max(size[1], self._sizes.rows_for(capacity))
 
     def grow(self, size: tuple, need: tuple, sig: tuple) -> tuple[tuple, float, bool]:
         """(new size, seconds waited for the compile ahead, whether it was used) for a step at
