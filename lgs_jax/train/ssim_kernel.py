@@ -4,7 +4,7 @@ docstring has the equations; `losses.ssim` runs these on GPUs).
 The images are (H, W, C), read as (H, W·C) planes: pixel x's channel c is column x·C + c, so a
 horizontal tap of the window moves a column by C and every column is one independent output.
 
-Forward (`forward_kernel`): one program per block of BLOCK_COLS columns and BLOCK_ROWS output
+Forward (`forward_kernel`): one program per block of BLOCK_COLS columns and `block_rows` output
 rows, one column per lane. It sweeps its block's rows top to bottom from RADIUS rows above to
 RADIUS rows below. For each input row it blurs a, b, a², b², ab horizontally (2·RADIUS + 1 taps,
 each a masked load at a shifted column: zero outside the image, the window's zero padding) and
@@ -41,8 +41,18 @@ from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
 BLOCK_COLS = 64  # columns per program (a power of two): one per lane
-BLOCK_ROWS = 32  # output rows per program
+ROW_BLOCKS = (32, 16, 8)  # output rows per program, the largest giving MIN_PROGRAMS programs
+MIN_PROGRAMS = 256  # about two per SM of an H100: a small image in short blocks fills the GPU
 WARPS = BLOCK_COLS // 32
+
+
+def block_rows(h: int, wc: int) -> int:
+    """Output rows per program for an (h, wc) plane: the largest of ROW_BLOCKS whose grid has
+    at least MIN_PROGRAMS programs, else the smallest. A program sweeps 2·RADIUS rows more than
+    it writes, so long blocks waste less; but each row of its sweep waits on the one before,
+    and a small image in long blocks leaves most of the GPU idle."""
+    cols = -(-wc // BLOCK_COLS)
+    return next((r for r in ROW_BLOCKS if cols * -(-h // r) >= MIN_PROGRAMS), ROW_BLOCKS[-1])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,6 +66,7 @@ class _Static:
     valid: bool
     shape: tuple[int, int]
     channels: int
+    rows: int  # output rows per program (`block_rows`)
 
     @property
     def radius(self) -> int:
@@ -72,7 +83,7 @@ class _Static:
 
     def grid(self):
         h, wc = self.shape
-        return pl.cdiv(wc, BLOCK_COLS), pl.cdiv(h, BLOCK_ROWS)
+        return pl.cdiv(wc, BLOCK_COLS), pl.cdiv(h, self.rows)
 
 
 def _columns():
@@ -98,7 +109,7 @@ def _sweep(row_blur, emit, n_maps: int, acc, dt, st: _Static):
     blurs of input row r; `emit(row, vertical blurs, acc)` gets each output row's n_maps
     blurred values and returns the new `acc`. Returns the last `acc`."""
     span = 2 * st.radius
-    r0 = pl.program_id(1) * BLOCK_ROWS
+    r0 = pl.program_id(1) * st.rows
 
     def step(i, carry, out: bool):
         ring, acc = carry
@@ -113,7 +124,7 @@ def _sweep(row_blur, emit, n_maps: int, acc, dt, st: _Static):
     zero = jnp.zeros((BLOCK_COLS,), dt)
     carry = lax.fori_loop(0, span, functools.partial(step, out=False),
                           (((zero,) * n_maps,) * span, acc))
-    return lax.fori_loop(span, span + BLOCK_ROWS, functools.partial(step, out=True), carry)[1]
+    return lax.fori_loop(span, span + st.rows, functools.partial(step, out=True), carry)[1]
 
 
 def _ssim_terms(vertical, st: _Static):
@@ -205,10 +216,11 @@ def _forward(a, b, st: _Static, partials: bool, interpret: bool):
     return jnp.sum(outs[0]) / st.counted, tuple(outs[1:])
 
 
-def _static(a, window, data_range: float, padding: str) -> _Static:
+def _static(a, window, data_range: float, padding: str, rows: int | None) -> _Static:
     h, w, c = a.shape
     return _Static(tuple(float(x) for x in window), (0.01 * data_range) ** 2,
-                   (0.03 * data_range) ** 2, padding == "valid", (h, w * c), c)
+                   (0.03 * data_range) ** 2, padding == "valid", (h, w * c), c,
+                   rows or block_rows(h, w * c))
 
 
 def _planes(a, b):
@@ -217,20 +229,22 @@ def _planes(a, b):
     return a.reshape(h, w * c).astype(dt), b.reshape(h, w * c).astype(dt)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(2, 3, 4, 5))
-def _ssim(a, b, window, data_range, padding, interpret):
-    return _forward(*_planes(a, b), _static(a, window, data_range, padding), False, interpret)[0]
+@functools.partial(jax.custom_vjp, nondiff_argnums=(2, 3, 4, 5, 6))
+def _ssim(a, b, window, data_range, padding, interpret, rows):
+    return _forward(*_planes(a, b), _static(a, window, data_range, padding, rows), False,
+                    interpret)[0]
 
 
-def _ssim_fwd(a, b, window, data_range, padding, interpret):
+def _ssim_fwd(a, b, window, data_range, padding, interpret, rows):
     pa, pb = _planes(a, b)
-    mean, partials = _forward(pa, pb, _static(a, window, data_range, padding), True, interpret)
+    mean, partials = _forward(pa, pb, _static(a, window, data_range, padding, rows), True,
+                              interpret)
     return mean, (a, b, pa, pb, partials)
 
 
-def _ssim_bwd(window, data_range, padding, interpret, res, ct):
+def _ssim_bwd(window, data_range, padding, interpret, rows, res, ct):
     a, b, pa, pb, partials = res
-    st = _static(a, window, data_range, padding)
+    st = _static(a, window, data_range, padding, rows)
     plane = jax.ShapeDtypeStruct(pa.shape, pa.dtype)
     da, db = _call(backward_kernel, st, [plane, plane], interpret, "ssim_backward")(
         jnp.reshape(ct, (1,)).astype(pa.dtype), pa, pb, *partials)
@@ -240,15 +254,19 @@ def _ssim_bwd(window, data_range, padding, interpret, res, ct):
 _ssim.defvjp(_ssim_fwd, _ssim_bwd)
 
 
-def ssim(a, b, window: tuple[float, ...], data_range: float, padding: str, interpret: bool):
+def ssim(a, b, window: tuple[float, ...], data_range: float, padding: str, interpret: bool,
+         rows: int | None = None):
     """Mean SSIM of two (H, W, C) images with the 1D `window` (odd length, symmetric),
     `padding` "same" or "valid" (losses module docstring; "valid" needs an image larger than the
     window), by the kernels (interpret mode, or
-    lowered for the GPU); differentiable through the backward kernel."""
+    lowered for the GPU); differentiable through the backward kernel. `rows`: output rows per
+    program (None: `block_rows` of the image's size); the gradients do not depend on it, the
+    value only through the grouping of its sum."""
     if a.ndim != 3 or a.shape != b.shape:
         raise ValueError(f"ssim: expected two (H, W, C) images of one shape, got {a.shape} and "
                          f"{b.shape}")
-    if not _static(a, window, data_range, padding).counted:
+    if not _static(a, window, data_range, padding, rows).counted:
         raise ValueError(f"ssim: padding='valid' counts no pixel of a {a.shape[0]}x{a.shape[1]} "
                          f"image (the window's {len(window) - 1}-pixel border is left out)")
-    return _ssim(a, b, tuple(float(x) for x in window), float(data_range), padding, interpret)
+    return _ssim(a, b, tuple(float(x) for x in window), float(data_range), padding, interpret,
+                 rows)

@@ -249,7 +249,8 @@ def test_a_kept_program_is_looked_for_with_the_rows_of_its_capacity(tmp_path):
     sig, earlier = ahead.signature((x,)), 1_310_720
     rows = sizes.rows_for(earlier)  # 655,360
     lowering = lambda: exports.Lowering(str(tmp_path / "exports"))
-    ahead.Stepper(_scaled_rows, _static_rows, sizes, None, lowering()).run((x,), (earlier, rows), sig)
+    ahead.Stepper(_scaled_rows, _static_rows, sizes, None, lowering()).run((x,), (earlier, rows),
+                                                                         sig)
     stepper = ahead.Stepper(_scaled_rows, _static_rows, sizes, None, lowering())
     size = (1_179_648, sizes.rows_for(1_179_648))
     assert stepper.kept(sig, size) == (earlier, rows)  # above, with its rows

@@ -1,8 +1,9 @@
 """lgs_jax.train.ssim_kernel: the fused SSIM kernels against `losses.ssim_reference` (JAX's
 gradient of the XLA SSIM) and the XLA `ssim`, values and both images' gradients, on images whose
 sizes are no multiple of the kernels' blocks (37x53: a partial row block and a partial column
-block; 64x48: whole row blocks), with both paddings; under vmap (the training step's views);
-`losses.ssim` running them on a GPU; and their lowering for the GPU.
+block; 64x48: whole row blocks), with both paddings; in short and long row blocks; under vmap
+(the training step's views); `losses.ssim` running them on a GPU; and their lowering for the
+GPU.
 
 Without a GPU the kernels run in Pallas interpret mode (what CI exercises); on a GPU the same
 tests run the compiled kernels. The default set runs each shape with one padding in float32 and
@@ -94,6 +95,23 @@ def test_kernels_under_vmap():
         np.testing.assert_array_equal(v[i], vi)
         np.testing.assert_array_equal(da[i], dai)
         np.testing.assert_array_equal(db[i], dbi)
+
+
+def test_the_row_block_changes_no_gradient_bit():
+    """Small images sweep in short row blocks (`block_rows`: more programs), large ones in long
+    blocks: the same image in 32-row blocks gives the gradients of 8-row blocks to the bit
+    (each pixel's partials and blur are its own), the value within the rounding of its sum (the
+    programs' sums are added in another grouping)."""
+    h, w, c = SHAPES["37x53"]
+    assert ssim_kernel.block_rows(h, w * c) == 8 and ssim_kernel.block_rows(533, 951 * 3) == 32
+    a, b = _images(SHAPES["37x53"], seed=4)
+    short = _value_and_grads(_kernel, a, b, "same", jnp.float32)
+    long = _value_and_grads(lambda x, y, padding: ssim_kernel.ssim(
+        x, y, tuple(losses.gaussian_window()), 1.0, padding, INTERPRET, rows=32), a, b, "same",
+        jnp.float32)
+    for x, y in zip(short[1], long[1]):
+        np.testing.assert_array_equal(x, y)
+    assert abs(float(short[0]) - float(long[0])) <= 8 * np.finfo(np.float32).eps * SCALE
 
 
 def test_bad_arguments():
