@@ -113,19 +113,18 @@ class BudgetStrategy(MCMCStrategy):
         return jnp.minimum(top, n + n // 20)
 
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
-        k_move, k_add = jax.random.split(key)
         step = jnp.asarray(step, jnp.int32)
         o = jax.nn.sigmoid(pool.params["logit_opacities"])
         unseen = jnp.zeros(pool.size, bool)
         if self.unseen_after:
             unseen = pool.active & (step - state["last_seen"] >= self.unseen_after)
         dead = (o <= self.min_opacity) | unseen
-        pool, opt_state, moved = ops.relocate(pool, opt_state, dead, k_move, self.min_opacity)
         n = _count(pool.active)
         want = jnp.maximum(self._target(state, n, step, cap) - n, 0)
         free = _count(~pool.active)
-        pool, opt_state, added = ops.sample_add(pool, opt_state, want, k_add, self.min_opacity)
+        pool, opt_state, moved, added, ok = ops.relocate_and_add(
+            pool, opt_state, dead, want, jax.random.split(key), self.min_opacity)
         last_seen = jnp.where(moved | added, step, state["last_seen"])
         report = dict(relocated=_count(moved), unseen=_count(moved & unseen), added=_count(added),
-                      needed=want, free=free)
+                      needed=want, free=free, ok=ok)
         return dict(state, last_seen=last_seen), pool, opt_state, report

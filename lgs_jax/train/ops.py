@@ -24,21 +24,30 @@ masks out, new Gaussians placed in free slots (`allocate`), Adam moments carried
 Where gsplat appends new Gaussians, these fill free slots in ascending slot order; candidates
 are taken in `priority` order (highest first) when the free slots run short (at the cap).
 Random numbers come from a JAX key (gsplat uses torch's generator, so draws differ).
+
+In place: `relocate_and_add` (MCMC's refinement) plans both moves on the opacity and scale
+columns, checks that what they would write is finite, then writes: the shared columns
+elementwise, the copies row by row in chunks (`copy_rows`), the moments elementwise
+(`optim.zero_moments`). With the state donated, XLA then holds the pool once; a gather of
+every row (x[sources] over the pool, as `duplicate` and `split` do) holds it twice.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 
 from ..projection import quat_to_rotmat
-from .optim import carry_moments
+from .optim import carry_moments, zero_moments
 from .pool import Pool, rows
 
 N_MAX = 51  # largest share count of `relocation` (gsplat's binomial table is 51 x 51)
+COPY_CHUNK = 16_384  # rows a step of `copy_rows` copies
 
 
 def allocate(want, free, priority=None):
@@ -94,7 +103,7 @@ def prune(pool: Pool, opt_state, mask):
     """Free the active slots in `mask`, zeroing their moments. Returns (pool, opt_state)."""
     gone = mask & pool.active
     return (Pool(pool.params, pool.active & ~gone),
-            carry_moments(opt_state, jnp.arange(pool.size), gone))
+            zero_moments(opt_state, gone))
 
 
 def reset_opacity(pool: Pool, opt_state, value: float):
@@ -104,8 +113,7 @@ def reset_opacity(pool: Pool, opt_state, value: float):
     v = jnp.asarray(value, lo.dtype)
     params = dict(pool.params, logit_opacities=jnp.minimum(lo, jnp.log(v / (1 - v))))
     fresh = jnp.ones(pool.size, bool)
-    return (Pool(params, pool.active),
-            carry_moments(opt_state, jnp.arange(pool.size), fresh, groups=("logit_opacities",)))
+    return Pool(params, pool.active), zero_moments(opt_state, fresh, groups=("logit_opacities",))
 
 
 def _share_table() -> np.ndarray:
@@ -136,57 +144,140 @@ def relocation(opacities, scales, ratios):
     return new_o, scales * (opacities / denom)[:, None]
 
 
-def _share(params, sources, counts, min_opacity: float):
-    """params with each sampled source (counts > 0) given its relocated opacity and scale for
-    counts + 1 shares, opacity clamped to [min_opacity, 1 − float32 ε] (gsplat)."""
-    o = jax.nn.sigmoid(params["logit_opacities"])
-    new_o, new_s = relocation(o, jnp.exp(params["log_scales"]), counts + 1)
+def copy_rows(params: dict, takers, sources, chunk: int = COPY_CHUNK) -> dict:
+    """params with row j set to row sources[j] for every j in `takers` (no taker a source),
+    in a loop over chunks of `chunk` takers: the temporaries are one chunk's rows and the
+    params are written in place where they are donated (a gather of the whole pool would hold
+    a second copy of it). Takers are copied in slot order; each row is written once."""
+    n = takers.shape[0]
+    chunk = min(chunk, n)
+    count = jnp.sum(takers, dtype=jnp.int32)
+    padded = -(-n // chunk) * chunk
+    targets = jnp.nonzero(takers, size=padded, fill_value=n)[0].astype(jnp.int32)
+    froms = jnp.take(sources, jnp.minimum(targets, n - 1), axis=0)
+
+    def body(i, p):
+        at = lax.dynamic_slice(targets, (i * chunk,), (chunk,))
+        src = lax.dynamic_slice(froms, (i * chunk,), (chunk,))
+        return {k: v.at[at].set(jnp.take(v, src, axis=0), mode="drop") for k, v in p.items()}
+
+    return lax.fori_loop(0, (count + chunk - 1) // chunk, body, params)
+
+
+def _share(logit_opacities, log_scales, counts, min_opacity: float):
+    """The opacity and scale columns with each sampled source (counts > 0) given its relocated
+    opacity and scale for counts + 1 shares, opacity clamped to [min_opacity, 1 − float32 ε]
+    (gsplat)."""
+    o = jax.nn.sigmoid(logit_opacities)
+    new_o, new_s = relocation(o, jnp.exp(log_scales), counts + 1)
     new_o = jnp.clip(new_o, min_opacity, 1.0 - float(np.finfo(np.float32).eps))
     hit = counts > 0
-    return dict(params, logit_opacities=jnp.where(hit, jnp.log(new_o / (1 - new_o)),
-                                                  params["logit_opacities"]),
-                log_scales=jnp.where(hit[:, None], jnp.log(new_s), params["log_scales"]))
+    return (jnp.where(hit, jnp.log(new_o / (1 - new_o)), logit_opacities),
+            jnp.where(hit[:, None], jnp.log(new_s), log_scales))
 
 
-def _sample(key, pool: Pool, eligible, takers):
-    """(sources, counts, ok): for every slot in `takers` a Gaussian drawn from `eligible` with
-    probability ∝ opacity (sources[j] = j elsewhere), and how often each was drawn. ok is
-    False (and nothing drawn) when no eligible Gaussian has opacity > 0."""
-    o = jax.nn.sigmoid(pool.params["logit_opacities"])
+def _sample(key, logit_opacities, eligible, takers):
+    """(sources, counts, takers): for every slot in `takers` a Gaussian drawn from `eligible`
+    with probability ∝ opacity (sources[j] = j elsewhere), and how often each was drawn. None
+    is drawn (takers all False) when no eligible Gaussian has opacity > 0."""
+    n = logit_opacities.shape[0]
+    o = jax.nn.sigmoid(logit_opacities)
     eligible = eligible & (o > 0)
     ok = jnp.any(eligible)
     weights = jnp.where(eligible, o, 0.0)
     # Inverse CDF over the float32 running sum of the weights, as torch.multinomial (gsplat)
     # draws: O(N log N). (jax.random.categorical with shape (N,) draws N x N Gumbel variables.)
     # A zero weight is an empty interval of the running sum, so it is never drawn.
-    draws = jax.random.choice(key, pool.size, (pool.size,), p=jnp.where(ok, weights, 1.0))
+    draws = jax.random.choice(key, n, (n,), p=jnp.where(ok, weights, 1.0))
     takers = takers & ok
-    sources = jnp.where(takers, draws, jnp.arange(pool.size))
-    counts = jnp.zeros(pool.size, jnp.int32).at[sources].add(takers.astype(jnp.int32))
+    sources = jnp.where(takers, draws, jnp.arange(n))
+    counts = jnp.zeros(n, jnp.int32).at[sources].add(takers.astype(jnp.int32))
     return sources, counts, takers
+
+
+class _Moves(NamedTuple):
+    """A relocation's or addition's plan: each of `takers` gets a copy of row sources[j]; the
+    opacity and scale columns with the drawn sources' (`shared`) new values, the copies not yet
+    made; `fresh`: the rows whose moments become zero."""
+
+    sources: jax.Array
+    takers: jax.Array
+    logit_opacities: jax.Array
+    log_scales: jax.Array
+    shared: jax.Array
+    fresh: jax.Array
+
+    def finite(self):
+        """Whether the values it writes are finite: the shared rows' new columns (the takers
+        copy shared rows; the rest of a row is copied as it is)."""
+        return (jnp.all(jnp.isfinite(self.logit_opacities) | ~self.shared)
+                & jnp.all(jnp.isfinite(self.log_scales) | ~self.shared[:, None]))
+
+    def columns_after(self):
+        """The opacity and scale columns once the copies are made."""
+        src = self.sources
+        return (jnp.where(self.takers, self.logit_opacities[src], self.logit_opacities),
+                jnp.where(self.takers[:, None], self.log_scales[src], self.log_scales))
+
+
+def _plan(key, logit_opacities, log_scales, eligible, takers, min_opacity, fresh_sources):
+    sources, counts, takers = _sample(key, logit_opacities, eligible, takers)
+    lo, ls = _share(logit_opacities, log_scales, counts, min_opacity)
+    shared = counts > 0
+    return _Moves(sources, takers, lo, ls, shared, shared if fresh_sources else takers)
+
+
+def _apply(pool: Pool, opt_state, moves: _Moves, ok=True):
+    """The plan made (where ok): the columns written, the rows copied, the takers active."""
+    takers = moves.takers & ok
+    p = dict(pool.params, logit_opacities=jnp.where(ok, moves.logit_opacities,
+                                                      pool.params["logit_opacities"]),
+             log_scales=jnp.where(ok, moves.log_scales, pool.params["log_scales"]))
+    return (Pool(copy_rows(p, takers, moves.sources), pool.active | takers),
+            zero_moments(opt_state, moves.fresh & ok))
+
+
+def _relocation_plan(pool: Pool, dead, key, min_opacity, lo=None, ls=None) -> _Moves:
+    lo = pool.params["logit_opacities"] if lo is None else lo
+    ls = pool.params["log_scales"] if ls is None else ls
+    dead = dead & pool.active
+    return _plan(key, lo, ls, pool.active & ~dead, dead, min_opacity, True)
+
+
+def _addition_plan(pool: Pool, n, key, min_opacity, lo=None, ls=None) -> _Moves:
+    lo = pool.params["logit_opacities"] if lo is None else lo
+    ls = pool.params["log_scales"] if ls is None else ls
+    free = ~pool.active
+    return _plan(key, lo, ls, pool.active, free & (jnp.cumsum(free) <= n), min_opacity, False)
 
 
 def relocate(pool: Pool, opt_state, dead, key, min_opacity: float = 0.005):
     """Move the `dead` active Gaussians onto alive ones (module docstring). Returns (pool,
     opt_state, moved): moved marks the dead slots that were relocated (none if none is alive)."""
-    dead = dead & pool.active
-    sources, counts, moved = _sample(key, pool, pool.active & ~dead, dead)
-    shared = _share(pool.params, sources, counts, min_opacity)
-    params = {k: jnp.where(rows(moved, v), v[sources], v) for k, v in shared.items()}
-    opt_state = carry_moments(opt_state, jnp.arange(pool.size), counts > 0)
-    return Pool(params, pool.active), opt_state, moved
+    moves = _relocation_plan(pool, dead, key, min_opacity)
+    return *_apply(pool, opt_state, moves), moves.takers
 
 
 def sample_add(pool: Pool, opt_state, n, key, min_opacity: float = 0.005):
     """Add `n` Gaussians (at most the free slots) copied from active ones sampled ∝ opacity
     (module docstring). Returns (pool, opt_state, added mask)."""
-    free = ~pool.active
-    takers = free & (jnp.cumsum(free) <= n)
-    sources, counts, added = _sample(key, pool, pool.active, takers)
-    shared = _share(pool.params, sources, counts, min_opacity)
-    params = {k: jnp.where(rows(added, v), v[sources], v) for k, v in shared.items()}
-    opt_state = carry_moments(opt_state, jnp.arange(pool.size), added)
-    return Pool(params, pool.active | added), opt_state, added
+    moves = _addition_plan(pool, n, key, min_opacity)
+    return *_apply(pool, opt_state, moves), moves.takers
+
+
+def relocate_and_add(pool: Pool, opt_state, dead, n, keys, min_opacity: float = 0.005):
+    """`relocate` then `sample_add` (keys: theirs), the same bits, applied only where every
+    value they write is finite, and in place: both are planned on the opacity and scale columns
+    before a row is written (the addition draws from the columns the relocation leaves), then
+    written (`copy_rows`). `n` is counted before the relocation (which changes no slot's
+    activity). Returns (pool, opt_state, moved, added, ok)."""
+    first = _relocation_plan(pool, dead, keys[0], min_opacity)
+    lo, ls = first.columns_after()
+    second = _addition_plan(pool, n, keys[1], min_opacity, lo, ls)
+    ok = first.finite() & second.finite()
+    pool, opt_state = _apply(pool, opt_state, first, ok)
+    pool, opt_state = _apply(pool, opt_state, second, ok)
+    return pool, opt_state, first.takers & ok, second.takers & ok, ok
 
 
 def inject_noise(pool: Pool, key, scaler, slots=None):

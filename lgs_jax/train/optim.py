@@ -83,6 +83,16 @@ def map_moments(opt_state, fn):
     return jax.tree.map(f, opt_state, is_leaf=_is_moments)
 
 
+def zero_moments(opt_state, fresh, groups=None):
+    """Moments of the rows in `fresh` zeroed, in `groups` (None: every group): elementwise, so
+    that a donated state is written in place (`carry_moments` gathers every row)."""
+    def f(group, m):
+        if groups is not None and group not in groups:
+            return m
+        return jnp.where(rows(fresh, m), jnp.zeros((), m.dtype), m)
+    return map_moments(opt_state, f)
+
+
 def carry_moments(opt_state, src, fresh, groups=None):
     """Moments of row i become those of row src[i], or zero where fresh[i], in `groups` (None:
     every group)."""

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 
 from . import ops
 from .options import check, option
-from .pool import Pool
+from .pool import Pool, finite
 
 
 @jax.tree_util.register_dataclass
@@ -95,10 +95,12 @@ class Strategy:
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
         """The densification (traced): (state, pool, opt_state, report), the report a dict of
         int32 counts holding at least `needed` (new slots it wanted) and `free` (free slots it
-        found): when needed > free and the pool is below `cap`, `fit` grows the pool and calls
-        it again with the same inputs."""
+        found), and `ok`: False where the refinement would have made an active parameter
+        non-finite and so changed nothing (`guarded`). When needed > free and the pool is below
+        `cap`, `fit` grows the pool and calls it again with the same inputs. `fit` donates the
+        state: a refinement that writes its rows in place holds the state once."""
         zero = jnp.int32(0)
-        return state, pool, opt_state, dict(needed=zero, free=zero)
+        return state, pool, opt_state, dict(needed=zero, free=zero, ok=jnp.bool_(True))
 
 
 def _count(mask):
@@ -107,6 +109,13 @@ def _count(mask):
 
 def _select(flag, new, old):
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
+
+
+def guarded(new, old):
+    """(new, True) where every active parameter of new's pool is finite, else (old, False):
+    for a refinement's (state, pool, opt_state) computed beside the old one (it holds both)."""
+    ok = finite(new[1].params, new[1].active)
+    return _select(ok, new, old), ok
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,6 +217,7 @@ class DefaultStrategy(Strategy):
         return pool, opt_state, report
 
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
+        old = state, pool, opt_state
         grows, resets = self._grows(step), self._resets(step)
         new_pool, new_opt, report = self._grow_and_prune(state, pool, opt_state, step, key)
         pool, opt_state = _select(grows, (new_pool, new_opt), (pool, opt_state))
@@ -216,7 +226,8 @@ class DefaultStrategy(Strategy):
         state = _select(grows, dict(state, grad2d=zero, count=zero), state)
         reset_pool, reset_opt = ops.reset_opacity(pool, opt_state, 2.0 * self.prune_opa)
         pool, opt_state = _select(resets, (reset_pool, reset_opt), (pool, opt_state))
-        return state, pool, opt_state, dict(report, reset=resets)
+        (state, pool, opt_state), ok = guarded((state, pool, opt_state), old)
+        return state, pool, opt_state, dict(report, reset=resets, ok=ok)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -273,14 +284,13 @@ class MCMCStrategy(Strategy):
         return n
 
     def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
-        k_move, k_add = jax.random.split(key)
         o = jax.nn.sigmoid(pool.params["logit_opacities"])
-        pool, opt_state, moved = ops.relocate(pool, opt_state, o <= self.min_opacity, k_move,
-                                              self.min_opacity)
         n = _count(pool.active)
         want = jnp.maximum(jnp.minimum(min(self.cap_max, cap), n + n // 20) - n, 0)
         free = _count(~pool.active)
-        pool, opt_state, added = ops.sample_add(pool, opt_state, want, k_add, self.min_opacity)
+        pool, opt_state, moved, added, ok = ops.relocate_and_add(
+            pool, opt_state, o <= self.min_opacity, want, jax.random.split(key),
+            self.min_opacity)
         return state, pool, opt_state, dict(relocated=_count(moved), added=_count(added),
-                                            needed=want, free=free)
+                                            needed=want, free=free, ok=ok)
 

@@ -302,7 +302,7 @@ def test_default_refine_clones_splits_prunes_and_zeroes_stats():
     opt = _opt_state(pool)
     state2, new, new_opt, rep = s.refine(state, pool, opt, 600, jax.random.key(0), 8)
     rep = {k: int(v) for k, v in rep.items()}
-    assert rep == dict(cloned=1, split=1, pruned=1, needed=2, free=4, reset=0)
+    assert rep == dict(cloned=1, split=1, pruned=1, needed=2, free=4, reset=0, ok=1)
     assert np.asarray(new.active).tolist() == [1, 1, 0, 1, 1, 1, 0, 0]
     np.testing.assert_array_equal(_p(new, "means")[4], _p(pool, "means")[0])  # the clone
     np.testing.assert_allclose(np.exp(_p(new, "log_scales")[[1, 5]]), 0.5 / 1.6, rtol=1e-6)
@@ -319,11 +319,66 @@ def test_mcmc_refine_relocates_and_adds_five_percent():
     s = MCMCStrategy()
     _, new, _, rep = s.refine({}, pool, _opt_state(pool), 600, jax.random.key(0), 64)
     rep = {k: int(v) for k, v in rep.items()}
-    assert rep == dict(relocated=2, added=2, needed=2, free=24)  # 40 + 40 // 20 = 42
+    assert rep == dict(relocated=2, added=2, needed=2, free=24, ok=1)  # 40 + 40 // 20 = 42
     assert int(np.asarray(new.active).sum()) == 42
     assert float(jnp.min(jax.nn.sigmoid(new.params["logit_opacities"])[new.active])) > 0.005
     capped = s.refine({}, pool, _opt_state(pool), 600, jax.random.key(0), 41)[3]
     assert int(capped["needed"]) == 1  # the run's cap
+
+
+def test_copy_rows_in_chunks_equals_a_gather():
+    """`ops.copy_rows` in chunks of 3 (a partial last chunk, one chunk, none) writes each taker
+    its source's row, the other rows as they were: the bits of where(takers, x[sources], x)."""
+    rng = np.random.default_rng(0)
+    params = dict(a=jnp.asarray(rng.normal(size=(20, 3)), jnp.float32),
+                  b=jnp.asarray(rng.normal(size=(20, 2, 3)), jnp.float32))
+    for taken in ([1, 4, 6, 7, 11, 12, 19], [2, 3], []):
+        takers = np.isin(np.arange(20), taken)
+        sources = np.where(takers, rng.choice(np.flatnonzero(~takers), 20), np.arange(20))
+        got = jax.jit(ops.copy_rows, static_argnames="chunk")(
+            params, jnp.asarray(takers), jnp.asarray(sources), chunk=3)
+        for k, x in params.items():
+            want = np.where(P.rows(takers, x), np.asarray(x)[sources], x)
+            np.testing.assert_array_equal(got[k], want)
+
+
+def test_relocate_and_add_is_relocate_then_sample_add_applied_only_where_finite():
+    """MCMC's refinement in one (`ops.relocate_and_add`, its rows written in place) gives the
+    bits of `relocate` then `sample_add`; where a share would make a scale infinite, nothing is
+    applied (ok False) and the state keeps its bits."""
+    o = np.full(64, 0.5)
+    o[[0, 5, 7]] = 0.001
+    pool, keys = _pool(40, 64, opacities=o), jax.random.split(jax.random.key(2))
+    dead = jax.nn.sigmoid(pool.params["logit_opacities"]) <= 0.005
+    def apart(pool, opt_state):
+        p1, o1, moved = ops.relocate(pool, opt_state, dead, keys[0])
+        p2, o2, added = ops.sample_add(p1, o1, 5, keys[1])
+        return p2, o2, moved, added
+    p2, o2, moved, added = jax.jit(apart)(pool, _opt_state(pool))
+    got = jax.jit(ops.relocate_and_add)(pool, _opt_state(pool), dead, 5, keys)
+    for a, b in zip(jax.tree.leaves((p2, o2, moved, added)), jax.tree.leaves(got[:4])):
+        np.testing.assert_array_equal(a, b)
+    assert bool(got[4]) and int(moved.sum()) == 3 and int(added.sum()) == 5
+    scales = np.asarray(pool.params["log_scales"]).copy()
+    scales[:40] = 100.0  # finite, but exp(100) is not in float32: a share's scale is infinite
+    bad = P.Pool(dict(pool.params, log_scales=jnp.asarray(scales)), pool.active)
+    got = jax.jit(ops.relocate_and_add)(bad, _opt_state(bad), dead, 5, keys)
+    assert not bool(got[4]) and not np.asarray(got[2]).any() and not np.asarray(got[3]).any()
+    for a, b in zip(jax.tree.leaves((bad, _opt_state(bad))), jax.tree.leaves(got[:2])):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_refinement_in_place_holds_no_second_copy_of_the_pool():
+    """MCMC's refinement with the state donated (`fit`'s), SH degree 3: XLA's temporaries are
+    under the parameters' bytes (gathering the whole pool, as it once did, took twice them: the
+    peak of a run's memory)."""
+    n = 2**16
+    pool = _pool(n // 3, n)
+    pool = P.Pool(dict(pool.params, sh_rest=jnp.zeros((n, 15, 3), jnp.float32)), pool.active)
+    compiled = S._refine_in_place.lower({}, pool, _opt_state(pool), 600, jax.random.key(0),
+                                        strategy=MCMCStrategy(), cap=n).compile()
+    params = sum(x.nbytes for x in jax.tree.leaves(pool.params))
+    assert compiled.memory_analysis().temp_size_in_bytes < params
 
 
 def test_refine_grows_the_pool_by_doubling_until_it_fits():
