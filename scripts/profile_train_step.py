@@ -21,7 +21,8 @@ alternating rounds, one training view):
   render+bwd    grad of Σ image·w w.r.t. the Gaussian parameters
   loss+bwd      the training loss (L1 + SSIM + MCMC regulariser) and its gradients
   ssim+bwd      the loss's image part alone (gradient w.r.t. the image of one render: the
-                render not included), as training computes it (the fused kernels on a GPU)
+                render not included), as training computes it (on a GPU the fused kernels
+                for images over `losses.SMALL_IMAGE` pixels, XLA's at or below)
   ssim+bwd xla  the same through the XLA SSIM (`losses.xla_ssim`)
   adam          the optimizer update of the whole pool
   noise         MCMC's per-step noise on the means

@@ -17,7 +17,9 @@ SSIM by default (3DGS's; gsplat's simple_trainer uses "valid": Recipe.ssim_paddi
 
 On a GPU `ssim` runs two fused Pallas Triton kernels (`ssim_kernel`: the five blurred maps,
 the SSIM map and its per-pixel partial derivatives in one, their blur into the gradients in
-the other, as fused-ssim does). Elsewhere it is XLA's (`xla_ssim`), with its gradient written
+the other, as fused-ssim does) on images of more than SMALL_IMAGE pixels; on smaller ones,
+where the kernels' row sweeps leave the GPU idle, and on other platforms it is XLA's
+(`xla_ssim`), with its gradient written
 out (a custom VJP, the kernels' equations): with A = 2 μ_a μ_b + C1, B = 2 σ_ab + C2,
 C = μ_a² + μ_b² + C1, D = σ_a² + σ_b² + C2 and g the mean's weight of each pixel (1/N inside
 the counted pixels, 0 outside),
@@ -44,6 +46,9 @@ from . import ssim_kernel
 LAMBDA_DSSIM = 0.2
 PADDINGS = ("same", "valid")  # `ssim` boundary rules (module docstring)
 RADIUS = 5  # an 11-pixel window
+SMALL_IMAGE = 200 * 200  # pixels: at or below, XLA's SSIM is the faster on a GPU (H100: one
+# 200x200 view 0.23 ms against the kernels' 0.31; 533x951, 0.63 against 0.33 for two views;
+# benchmarks/ssim_sizes.py, scripts/profile_train_step.py)
 
 
 def gaussian_window(sigma: float = 1.5, radius: int = RADIUS) -> np.ndarray:
@@ -99,9 +104,9 @@ def ssim_reference(a, b, data_range: float = 1.0, padding: str = "valid"):
 
 def ssim(a, b, data_range: float = 1.0, padding: str = "valid"):
     """Mean SSIM of two (H, W, C) images (module docstring: "same" or "valid" padding), with
-    its gradient written out: the fused kernels when JAX's default backend is a GPU, else
-    `xla_ssim`."""
-    if jax.default_backend() != "gpu":
+    its gradient written out: the fused kernels when JAX's default backend is a GPU and the
+    images have more than SMALL_IMAGE pixels, else `xla_ssim`."""
+    if jax.default_backend() != "gpu" or a.shape[-3] * a.shape[-2] <= SMALL_IMAGE:
         return xla_ssim(a, b, data_range, padding)
     _check(padding, a.shape)
     return ssim_kernel.ssim(a, b, tuple(gaussian_window()), float(data_range), padding,

@@ -152,13 +152,16 @@ def test_kernels_lower_for_the_gpu(dtype, monkeypatch):
 
 def test_training_loss_runs_the_kernels_on_a_gpu(monkeypatch):
     """`loss_fn` (the training step's loss) differentiated: on a GPU backend `losses.ssim`
-    lowers to the two kernels; on another, to XLA alone."""
+    lowers to the two kernels for an image of more than `losses.SMALL_IMAGE` pixels, to XLA
+    alone for a smaller one; on another backend, to XLA alone."""
     _fake_h100(monkeypatch)
-    x = jax.ShapeDtypeStruct(SHAPES["64x48"], jnp.float32)
-    lower = lambda: jax.jit(jax.grad(lambda a, b: train.loss_fn(a, b, padding="valid"))).trace(
+    large = jax.ShapeDtypeStruct((201, 200, 3), jnp.float32)
+    small = jax.ShapeDtypeStruct((200, 200, 3), jnp.float32)
+    lower = lambda x: jax.jit(jax.grad(lambda a, b: train.loss_fn(a, b, padding="valid"))).trace(
         x, x).lower(lowering_platforms=("cuda",)).as_text()  # traced afresh on each call
     if not ON_GPU:
-        assert "__gpu$xla.gpu.triton" not in lower()
+        assert "__gpu$xla.gpu.triton" not in lower(large)
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
-    text = lower()
+    text = lower(large)
     assert "ssim_forward" in text and "ssim_backward" in text
+    assert "__gpu$xla.gpu.triton" not in lower(small)
