@@ -25,11 +25,12 @@ Where gsplat appends new Gaussians, these fill free slots in ascending slot orde
 are taken in `priority` order (highest first) when the free slots run short (at the cap).
 Random numbers come from a JAX key (gsplat uses torch's generator, so draws differ).
 
-In place: `relocate_and_add` (MCMC's refinement) plans both moves on the opacity and scale
-columns, checks that what they would write is finite, then writes: the shared columns
-elementwise, the copies row by row in chunks (`copy_rows`), the moments elementwise
+In place: `relocate_and_add` (MCMC's refinement) and `clone_and_split` (3DGS's growth) plan
+their moves first (the slots; the new opacity and scale columns, or the split children's
+columns from their parents'), check that what they would write is finite, then write: the
+copies row by row in chunks (`copy_rows`), the new columns and the moments elementwise
 (`optim.zero_moments`). With the state donated, XLA then holds the pool once; a gather of
-every row (x[sources] over the pool, as `duplicate` and `split` do) holds it twice.
+every row (x[sources] over the pool) would hold it twice.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ import numpy as np
 from jax import lax
 
 from ..projection import quat_to_rotmat
-from .optim import carry_moments, zero_moments
+from .optim import zero_moments
 from .pool import Pool, rows
 
 N_MAX = 51  # largest share count of `relocation` (gsplat's binomial table is 51 x 51)
@@ -72,8 +73,8 @@ def allocate(want, free, priority=None):
 def duplicate(pool: Pool, opt_state, mask, priority=None):
     """Clone the active Gaussians in `mask` into free slots. Returns (pool, opt_state, granted)."""
     src, filled, granted = allocate(mask & pool.active, ~pool.active, priority)
-    params = {k: v[src] for k, v in pool.params.items()}
-    return Pool(params, pool.active | filled), carry_moments(opt_state, src, filled), granted
+    return (Pool(copy_rows(pool.params, filled, src), pool.active | filled),
+            zero_moments(opt_state, filled), granted)
 
 
 def _covariance_factor(params):
@@ -81,22 +82,60 @@ def _covariance_factor(params):
     return quat_to_rotmat(params["quats"]), jnp.exp(params["log_scales"])
 
 
-def split(pool: Pool, opt_state, mask, key, priority=None, revised_opacity: bool = False):
-    """Split the active Gaussians in `mask` in two (module docstring). Returns (pool, opt_state,
-    granted)."""
-    src, filled, granted = allocate(mask & pool.active, ~pool.active, priority)
-    p = {k: v[src] for k, v in pool.params.items()}  # child 2's slots hold their parent
-    child = granted | filled
+SPLIT_COLUMNS = ("means", "quats", "log_scales", "logit_opacities")  # what a child's values read
+
+
+def _split_values(params, src, filled, key, revised_opacity: bool) -> dict:
+    """The split children's new columns, every row as if it held its parent (row src[i]; the
+    columns a child's values read, gathered alone): means, log_scales (and logit_opacities)."""
+    p = {k: params[k][src] for k in SPLIT_COLUMNS}  # child 2's slots hold their parent
     r, s = _covariance_factor(p)
     eps = jax.random.normal(key, (2,) + p["means"].shape, p["means"].dtype)
     eps = jnp.where(filled[:, None], eps[1][src], eps[0])  # child k of Gaussian i: ε_k[i]
     offset = jnp.sum(r * (s * eps)[:, None, :], -1)  # R·diag(s)·ε as multiply-adds
-    new = dict(p, means=p["means"] + offset, log_scales=jnp.log(s / 1.6))
+    new = dict(means=p["means"] + offset, log_scales=jnp.log(s / 1.6))
     if revised_opacity:
         o = 1.0 - jnp.sqrt(1.0 - jax.nn.sigmoid(p["logit_opacities"]))
         new["logit_opacities"] = jnp.log(o / (1.0 - o))
-    params = {k: jnp.where(rows(child, v), new[k], v) for k, v in p.items()}
-    return (Pool(params, pool.active | filled), carry_moments(opt_state, src, child), granted)
+    return new
+
+
+def _write_split(pool: Pool, opt_state, src, filled, child, new, ok=True):
+    """The split made (where ok): parents copied into their second child's slot, the children's
+    new columns written, their moments zeroed."""
+    filled, child = filled & ok, child & ok
+    params = copy_rows(pool.params, filled, src)
+    params = {k: jnp.where(rows(child, v), new[k], v) if k in new else v
+              for k, v in params.items()}
+    return Pool(params, pool.active | filled), zero_moments(opt_state, child)
+
+
+def split(pool: Pool, opt_state, mask, key, priority=None, revised_opacity: bool = False):
+    """Split the active Gaussians in `mask` in two (module docstring). Returns (pool, opt_state,
+    granted)."""
+    src, filled, granted = allocate(mask & pool.active, ~pool.active, priority)
+    new = _split_values(pool.params, src, filled, key, revised_opacity)
+    return *_write_split(pool, opt_state, src, filled, granted | filled, new), granted
+
+
+def clone_and_split(pool: Pool, opt_state, clone, split_mask, key, priority=None,
+                    revised_opacity: bool = False):
+    """`duplicate` of `clone` then `split` of `split_mask` (clones are not split), the same
+    bits, applied only where every value the split writes is finite, and in place: the split is
+    planned (its slots, and its children's columns from their parents') before a row is
+    written, then both are written row by row (`copy_rows`). Returns (pool, opt_state, cloned,
+    split, ok)."""
+    active = pool.active
+    c_src, c_filled, cloned = allocate(clone & active, ~active, priority)
+    s_src, s_filled, split_ = allocate(split_mask & active, ~(active | c_filled), priority)
+    new = _split_values(pool.params, s_src, s_filled, key, revised_opacity)
+    child = split_ | s_filled
+    ok = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x) | rows(~child, x)) for x in new.values()]))
+    c_filled = c_filled & ok
+    pool = Pool(copy_rows(pool.params, c_filled, c_src), active | c_filled)
+    opt_state = zero_moments(opt_state, c_filled)
+    pool, opt_state = _write_split(pool, opt_state, s_src, s_filled, child, new, ok)
+    return pool, opt_state, cloned & ok, split_ & ok, ok
 
 
 def prune(pool: Pool, opt_state, mask):

@@ -7,11 +7,11 @@ ExponentialLR with γ = 0.01^(1 / steps)), quats 1e-3, log-scales 5e-3, logit op
 SH band 0 2.5e-3, higher bands 2.5e-3 / 20, appearance features (`appearance`, where the pool
 has them) 2.5e-3. It is one `optax.scale_by_adam` over the whole
 parameter dict followed by a per-group rate, so the Adam moments `mu` and `nu` are dicts shaped
-like the parameters: `carry_moments` moves their rows with the Gaussians.
+like the parameters, and `zero_moments` starts rows afresh.
 
 Moments under densification (gsplat 1.5.3's strategy ops, `ops.py`): a row that receives a new
-Gaussian has its moments zeroed or copied as gsplat does; Adam's step count is shared and never
-reset (torch keeps the per-parameter `step` too).
+Gaussian has its moments zeroed or kept as gsplat does (none is copied to another row); Adam's
+step count is shared and never reset (torch keeps the per-parameter `step` too).
 """
 
 from __future__ import annotations
@@ -85,19 +85,10 @@ def map_moments(opt_state, fn):
 
 def zero_moments(opt_state, fresh, groups=None):
     """Moments of the rows in `fresh` zeroed, in `groups` (None: every group): elementwise, so
-    that a donated state is written in place (`carry_moments` gathers every row)."""
+    that a donated state is written in place."""
     def f(group, m):
         if groups is not None and group not in groups:
             return m
         return jnp.where(rows(fresh, m), jnp.zeros((), m.dtype), m)
     return map_moments(opt_state, f)
 
-
-def carry_moments(opt_state, src, fresh, groups=None):
-    """Moments of row i become those of row src[i], or zero where fresh[i], in `groups` (None:
-    every group)."""
-    def f(group, m):
-        if groups is not None and group not in groups:
-            return m
-        return jnp.where(rows(fresh, m), jnp.zeros((), m.dtype), m[src])
-    return map_moments(opt_state, f)

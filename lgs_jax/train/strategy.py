@@ -28,7 +28,7 @@ import jax.numpy as jnp
 
 from . import ops
 from .options import check, option
-from .pool import Pool, finite
+from .pool import Pool
 
 
 @jax.tree_util.register_dataclass
@@ -96,7 +96,7 @@ class Strategy:
         """The densification (traced): (state, pool, opt_state, report), the report a dict of
         int32 counts holding at least `needed` (new slots it wanted) and `free` (free slots it
         found), and `ok`: False where the refinement would have made an active parameter
-        non-finite and so changed nothing (`guarded`). When needed > free and the pool is below
+        non-finite and so changed nothing. When needed > free and the pool is below
         `cap`, `fit` grows the pool and calls it again with the same inputs. `fit` donates the
         state: a refinement that writes its rows in place holds the state once."""
         zero = jnp.int32(0)
@@ -110,12 +110,6 @@ def _count(mask):
 def _select(flag, new, old):
     return jax.tree.map(lambda a, b: jnp.where(flag, a, b), new, old)
 
-
-def guarded(new, old):
-    """(new, True) where every active parameter of new's pool is finite, else (old, False):
-    for a refinement's (state, pool, opt_state) computed beside the old one (it holds both)."""
-    ok = finite(new[1].params, new[1].active)
-    return _select(ok, new, old), ok
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,37 +190,29 @@ class DefaultStrategy(Strategy):
         """None: clones and splits depend on the gradients (the pool doubles as needed)."""
         return None
 
-    def _grow_and_prune(self, state, pool: Pool, opt_state, step, key):
-        """Clone, split, prune (class docstring); returns (pool, opt_state, report)."""
+    def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
+        """Clone, split, prune (class docstring), in place (`ops.clone_and_split`): nothing
+        applied where a split child's value would not be finite (ok False)."""
+        grows, resets = self._grows(step), self._resets(step)
         p = pool.params
         grads = state["grad2d"] / jnp.maximum(state["count"], 1.0)
-        high = (grads > self.grow_grad2d) & pool.active
+        high = (grads > self.grow_grad2d) & pool.active & grows
         small = jnp.max(jnp.exp(p["log_scales"]), -1) <= self.grow_scale3d * state["scene_scale"]
-        needed = _count(high)
-        free = _count(~pool.active)
-        pool, opt_state, cloned = ops.duplicate(pool, opt_state, high & small, priority=grads)
-        pool, opt_state, split = ops.split(pool, opt_state, high & ~small, key, priority=grads,
-                                           revised_opacity=self.revised_opacity)
+        needed, free = _count(high), jnp.where(grows, _count(~pool.active), 0)
+        pool, opt_state, cloned, split, ok = ops.clone_and_split(
+            pool, opt_state, high & small, high & ~small, key, priority=grads,
+            revised_opacity=self.revised_opacity)
         p = pool.params
         doomed = jax.nn.sigmoid(p["logit_opacities"]) < self.prune_opa
         too_big = jnp.max(jnp.exp(p["log_scales"]), -1) > self.prune_scale3d * state["scene_scale"]
-        doomed = (doomed | ((step > self.reset_every) & too_big)) & pool.active
+        doomed = (doomed | ((step > self.reset_every) & too_big)) & pool.active & grows & ok
         pool, opt_state = ops.prune(pool, opt_state, doomed)
+        zero = jnp.zeros_like(state["grad2d"])
+        state = _select(grows & ok, dict(state, grad2d=zero, count=zero), state)
+        reset_pool, reset_opt = ops.reset_opacity(pool, opt_state, 2.0 * self.prune_opa)
+        pool, opt_state = _select(resets & ok, (reset_pool, reset_opt), (pool, opt_state))
         report = dict(cloned=_count(cloned), split=_count(split), pruned=_count(doomed),
                       needed=needed, free=free)
-        return pool, opt_state, report
-
-    def refine(self, state, pool: Pool, opt_state, step, key, cap: int):
-        old = state, pool, opt_state
-        grows, resets = self._grows(step), self._resets(step)
-        new_pool, new_opt, report = self._grow_and_prune(state, pool, opt_state, step, key)
-        pool, opt_state = _select(grows, (new_pool, new_opt), (pool, opt_state))
-        report = {k: jnp.where(grows, v, 0) for k, v in report.items()}
-        zero = jnp.zeros_like(state["grad2d"])
-        state = _select(grows, dict(state, grad2d=zero, count=zero), state)
-        reset_pool, reset_opt = ops.reset_opacity(pool, opt_state, 2.0 * self.prune_opa)
-        pool, opt_state = _select(resets, (reset_pool, reset_opt), (pool, opt_state))
-        (state, pool, opt_state), ok = guarded((state, pool, opt_state), old)
         return state, pool, opt_state, dict(report, reset=resets, ok=ok)
 
 

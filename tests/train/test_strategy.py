@@ -368,15 +368,48 @@ def test_relocate_and_add_is_relocate_then_sample_add_applied_only_where_finite(
         np.testing.assert_array_equal(a, b)
 
 
-def test_a_refinement_in_place_holds_no_second_copy_of_the_pool():
-    """MCMC's refinement with the state donated (`fit`'s), SH degree 3: XLA's temporaries are
-    under the parameters' bytes (gathering the whole pool, as it once did, took twice them: the
+def test_clone_and_split_is_duplicate_then_split_applied_only_where_finite():
+    """3DGS's growth in one (`ops.clone_and_split`, its rows written in place) gives the bits
+    of `duplicate` then `split`, clones not split; where a child's scale would be infinite,
+    nothing is applied (ok False) and the state keeps its bits."""
+    pool = _pool(6, 16)
+    clone = jnp.arange(16) < 2
+    grow = jnp.arange(16) < 4
+    priority = jnp.arange(16, dtype=jnp.float32)
+
+    def apart(pool, opt_state):
+        p1, o1, cloned = ops.duplicate(pool, opt_state, clone, priority)
+        p2, o2, split = ops.split(p1, o1, grow & ~clone, jax.random.key(1), priority)
+        return p2, o2, cloned, split
+    want = jax.jit(apart)(pool, _opt_state(pool))
+    got = jax.jit(lambda p, o: ops.clone_and_split(p, o, clone, grow & ~clone,
+                                                   jax.random.key(1), priority))(
+        pool, _opt_state(pool))
+    for a, b in zip(jax.tree.leaves(want), jax.tree.leaves(got[:4])):
+        np.testing.assert_array_equal(a, b)
+    assert bool(got[4]) and int(got[2].sum()) == 2 and int(got[3].sum()) == 2
+    assert int(got[0].active.sum()) == 10
+    scales = np.asarray(pool.params["log_scales"]).copy()
+    scales[3] = 100.0  # a parent whose scale exp(100) is not a float32
+    bad = P.Pool(dict(pool.params, log_scales=jnp.asarray(scales)), pool.active)
+    got = ops.clone_and_split(bad, _opt_state(bad), clone, grow & ~clone, jax.random.key(1),
+                              priority)
+    assert not bool(got[4]) and not np.asarray(got[2]).any() and not np.asarray(got[3]).any()
+    for a, b in zip(jax.tree.leaves((bad, _opt_state(bad))), jax.tree.leaves(got[:2])):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("strategy", [MCMCStrategy(), DefaultStrategy()],
+                         ids=["mcmc", "default"])
+def test_a_refinement_in_place_holds_no_second_copy_of_the_pool(strategy):
+    """A refinement with the state donated (`fit`'s), SH degree 3: XLA's temporaries are under
+    the parameters' bytes (gathering the whole pool, as both once did, took twice them: the
     peak of a run's memory)."""
     n = 2**16
     pool = _pool(n // 3, n)
     pool = P.Pool(dict(pool.params, sh_rest=jnp.zeros((n, 15, 3), jnp.float32)), pool.active)
-    compiled = S._refine_in_place.lower({}, pool, _opt_state(pool), 600, jax.random.key(0),
-                                        strategy=MCMCStrategy(), cap=n).compile()
+    compiled = S._refine_in_place.lower(strategy.init(pool, 10.0), pool, _opt_state(pool), 600,
+                                        jax.random.key(0), strategy=strategy, cap=n).compile()
     params = sum(x.nbytes for x in jax.tree.leaves(pool.params))
     assert compiled.memory_analysis().temp_size_in_bytes < params
 
