@@ -130,7 +130,7 @@ def clone_and_split(pool: Pool, opt_state, clone, split_mask, key, priority=None
     s_src, s_filled, split_ = allocate(split_mask & active, ~(active | c_filled), priority)
     new = _split_values(pool.params, s_src, s_filled, key, revised_opacity)
     child = split_ | s_filled
-    ok = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x) | rows(~child, x)) for x in new.values()]))
+    ok = _finite_on(child, *new.values())
     c_filled = c_filled & ok
     pool = Pool(copy_rows(pool.params, c_filled, c_src), active | c_filled)
     opt_state = zero_moments(opt_state, c_filled)
@@ -234,6 +234,15 @@ def _sample(key, logit_opacities, eligible, takers):
     return sources, counts, takers
 
 
+def _finite_on(mask, *columns):
+    """Whether the per-Gaussian `columns` are finite on the rows in `mask`."""
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x) | rows(~mask, x)) for x in columns]))
+
+
+def _columns(pool: Pool):
+    return pool.params["logit_opacities"], pool.params["log_scales"]
+
+
 class _Moves(NamedTuple):
     """A relocation's or addition's plan: each of `takers` gets a copy of row sources[j]; the
     opacity and scale columns with the drawn sources' (`shared`) new values, the copies not yet
@@ -249,8 +258,7 @@ class _Moves(NamedTuple):
     def finite(self):
         """Whether the values it writes are finite: the shared rows' new columns (the takers
         copy shared rows; the rest of a row is copied as it is)."""
-        return (jnp.all(jnp.isfinite(self.logit_opacities) | ~self.shared)
-                & jnp.all(jnp.isfinite(self.log_scales) | ~self.shared[:, None]))
+        return _finite_on(self.shared, self.logit_opacities, self.log_scales)
 
     def columns_after(self):
         """The opacity and scale columns once the copies are made."""
@@ -276,18 +284,18 @@ def _apply(pool: Pool, opt_state, moves: _Moves, ok=True):
             zero_moments(opt_state, moves.fresh & ok))
 
 
-def _relocation_plan(pool: Pool, dead, key, min_opacity, lo=None, ls=None) -> _Moves:
-    lo = pool.params["logit_opacities"] if lo is None else lo
-    ls = pool.params["log_scales"] if ls is None else ls
+def _relocation_plan(pool: Pool, dead, key, min_opacity, columns=None) -> _Moves:
+    """`relocate`'s plan, on the pool's opacity and scale columns or on `columns`."""
     dead = dead & pool.active
-    return _plan(key, lo, ls, pool.active & ~dead, dead, min_opacity, True)
+    return _plan(key, *(columns or _columns(pool)), pool.active & ~dead, dead, min_opacity,
+                 True)
 
 
-def _addition_plan(pool: Pool, n, key, min_opacity, lo=None, ls=None) -> _Moves:
-    lo = pool.params["logit_opacities"] if lo is None else lo
-    ls = pool.params["log_scales"] if ls is None else ls
+def _addition_plan(pool: Pool, n, key, min_opacity, columns=None) -> _Moves:
+    """`sample_add`'s plan, on the pool's opacity and scale columns or on `columns`."""
     free = ~pool.active
-    return _plan(key, lo, ls, pool.active, free & (jnp.cumsum(free) <= n), min_opacity, False)
+    return _plan(key, *(columns or _columns(pool)), pool.active,
+                 free & (jnp.cumsum(free) <= n), min_opacity, False)
 
 
 def relocate(pool: Pool, opt_state, dead, key, min_opacity: float = 0.005):
@@ -311,8 +319,7 @@ def relocate_and_add(pool: Pool, opt_state, dead, n, keys, min_opacity: float = 
     written (`copy_rows`). `n` is counted before the relocation (which changes no slot's
     activity). Returns (pool, opt_state, moved, added, ok)."""
     first = _relocation_plan(pool, dead, keys[0], min_opacity)
-    lo, ls = first.columns_after()
-    second = _addition_plan(pool, n, keys[1], min_opacity, lo, ls)
+    second = _addition_plan(pool, n, keys[1], min_opacity, first.columns_after())
     ok = first.finite() & second.finite()
     pool, opt_state = _apply(pool, opt_state, first, ok)
     pool, opt_state = _apply(pool, opt_state, second, ok)

@@ -44,18 +44,6 @@ class Pool:
         return int(np.shape(self.active)[0])
 
 
-def finite(tree, active) -> jax.Array:
-    """Whether every per-Gaussian leaf of `tree` is finite on the active rows (inactive rows
-    are never read); other leaves wholly."""
-    ok = jnp.bool_(True)
-    for x in jax.tree.leaves(tree):
-        fin = jnp.isfinite(x)
-        if x.ndim >= 1 and x.shape[0] == active.shape[0]:
-            fin = fin | jnp.reshape(~active, active.shape + (1,) * (x.ndim - 1))
-        ok = ok & jnp.all(fin)
-    return ok
-
-
 def rows(mask, x):
     """A per-Gaussian (N,) mask reshaped to broadcast against x (N, ...)."""
     return jnp.reshape(mask, jnp.shape(mask) + (1,) * (jnp.ndim(x) - 1))

@@ -45,7 +45,7 @@ from ..render import next_pow2, render, render_growing
 from . import appearance, camera_opt, exports, sharded, view_params
 from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
-from .pool import Pool, finite, grow, render_gaussians, sh_mask
+from .pool import Pool, grow, render_gaussians, sh_mask
 from .config import Setup
 from .strategy import StepInfo
 
@@ -61,6 +61,17 @@ def lowering() -> exports.Lowering | None:
         return None
     return exports.Lowering(exports.directory(), donate=(0, 1, 2, 3),
                             compiler_options=dict(COMPILER_OPTIONS))
+
+
+def _finite(tree, active) -> jax.Array:
+    """All per-Gaussian leaves finite on the active rows (inactive rows are never read)."""
+    ok = jnp.bool_(True)
+    for x in jax.tree.leaves(tree):
+        fin = jnp.isfinite(x)
+        if x.ndim >= 1 and x.shape[0] == active.shape[0]:
+            fin = fin | jnp.reshape(~active, active.shape + (1,) * (x.ndim - 1))
+        ok = ok & jnp.all(fin)
+    return ok
 
 
 def _select(flag, new, old):
@@ -247,9 +258,9 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     info = StepInfo(grads2d, visible, lr, cams.width, cams.height, slots)
     new_state, new_pool, new_opt = setup.strategy.step(strategy_state, new_pool, new_opt, info,
                                                        step, step_keys(key, step)[0])
-    ok = jnp.isfinite(loss) & finite(grads, pool.active)
+    ok = jnp.isfinite(loss) & _finite(grads, pool.active)
     if grads2d is not None:
-        ok = ok & finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
+        ok = ok & _finite(jnp.swapaxes(grads2d, 0, 1), pool.active)
     new_views = views
     if views is not None:
         new_views = view_params.update(setup.recipe, setup.steps, views, grads_views)
@@ -284,8 +295,9 @@ def _refined(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap:
 _refine = jax.jit(_refined, static_argnames=("strategy", "cap"),
                   compiler_options=COMPILER_OPTIONS)
 # the same with the state donated: its outputs take the arguments' buffers, so a refinement
-# holds the state once (and the new values a strategy computes beside it: none for MCMC's,
-# written in place by `ops.relocate_and_add`), not twice
+# holds the state once (and the new values a strategy computes beside it: none for the
+# built-in strategies, which write their rows in place: `ops.relocate_and_add`,
+# `ops.clone_and_split`), not twice
 _refine_in_place = jax.jit(_refined, static_argnames=("strategy", "cap"),
                            donate_argnames=("strategy_state", "pool", "opt_state"),
                            compiler_options=COMPILER_OPTIONS)
