@@ -185,6 +185,7 @@ class Stepper:
         self.failure = None  # why the last growth's compile ahead failed (None: it did not)
         self.took_kept = False  # whether the last growth took a kept size (`kept`)
         self._waited = 0.0  # seconds `run` waited for compiles ahead since `take_waited`
+        self._last_executable = None  # the executable of the last `run` (`temporaries`)
 
     def run(self, args, size: tuple, sig: tuple):
         """One call at `size`; `sig` = signature(args)."""
@@ -195,12 +196,27 @@ class Stepper:
             self._waited += self._take(sig, self._jobs.pop(sig))[0]
         ready = self._ready.get(sig)
         if ready is not None and ready[0] == size:
+            self._last_executable = ready[1]
             return ready[1](*args)
         if self._lowering is None:
+            self._last_executable = None
             return self._fn(*args, **self._static(size))
         executable = self._lowering.compiled(self._fn, _abstract(args), self._static(size))
         self._ready[sig] = (size, executable)
+        self._last_executable = executable
         return executable(*args)
+
+    def temporaries(self) -> float | None:
+        """The MiB of XLA temporaries the executable of the last `run` holds while it runs
+        (its `memory_analysis`), or None where `run` called `fn` itself or the backend does
+        not say."""
+        if self._last_executable is None:
+            return None
+        try:
+            analysis = self._last_executable.memory_analysis()
+        except Exception:  # noqa: BLE001 - a backend without the analysis
+            return None
+        return None if analysis is None else analysis.temp_size_in_bytes / 2**20
 
     @property
     def compiles_ahead(self) -> bool:

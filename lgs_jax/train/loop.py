@@ -18,10 +18,11 @@ s + 1 gets step s's `fits` as its `go`, so where s overflowed, s + 1 changes not
 run again in order: the same bits as one step after another.
 
 The run folder (`rundir`) is checked and locked before any work. OUT/metrics.jsonl gets a row
-per step (loss, training-view PSNR, active Gaussians, seconds), per refinement (its counts),
-per growth of a step's buffers (their new sizes) and per evaluation (held-out PSNR/SSIM:
-`heldout.Evaluations`, scored on the device), the last three with the device's memory in use
-and its peak so far (`report.device_memory`, on a GPU); a checkpoint
+per step (loss, training-view PSNR, active Gaussians, seconds; the peak where it rose,
+`report.PeakRise`; the first step's the memory by part, `report.memory_parts`), per
+refinement (its counts), per growth of a step's buffers (their new sizes) and per evaluation
+(held-out PSNR/SSIM: `heldout.Evaluations`, scored on the device), the last three with the
+device's memory in use and its peak so far (`report.device_memory`, on a GPU); a checkpoint
 (`checkpoint`, `state.save`; bit-identical resume) every config.checkpoint_every steps, at the
 end, and at Ctrl-C (`interrupt`: the run stops at the next step boundary and raises
 `Interrupted`); the outputs at the end (`outputs.finish`), which with `Recipe.early_stop` may
@@ -30,9 +31,7 @@ come before config.steps (`early_stop`: when the training loss stops falling).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import json
 import os
 import time
 
@@ -354,14 +353,6 @@ def _ahead(run: _Run, feed: LevelFeed, early: EarlyStop, watch: Watch, stop: Sto
             and not watch.due() and not stop.requested)
 
 
-def _metrics(out: str):
-    """OUT/metrics.jsonl open to append lines, line-buffered; None (a null context) on a process
-    that does not write the run folder (`processes.writer`)."""
-    if processes.writer():
-        return open(os.path.join(out, "metrics.jsonl"), "a", buffering=1)
-    return contextlib.nullcontext()
-
-
 def _loop(run: _Run, clock, watch: Watch, stop: StopRequest, data: dict) -> float:
     """Steps st.step .. config.steps (module docstring), until `stop` is requested or the early
     stop ends the run; returns the seconds spent in steps (their compilation, timed by `clock`,
@@ -370,6 +361,7 @@ def _loop(run: _Run, clock, watch: Watch, stop: StopRequest, data: dict) -> floa
     progress = report.Progress(st.step, config.steps)
     run.say = lambda message: progress.write(run.log, message)
     steps, feed, busy, start = stepper(config, run.setup), _feed(run), 0.0, st.step
+    peak = report.PeakRise()
     early = _early_stop(run, feed)
     if run.rd.test_cams:
         kind = (sharded_state.Evaluations if run.setup.gaussian_devices > 1
@@ -380,8 +372,7 @@ def _loop(run: _Run, clock, watch: Watch, stop: StopRequest, data: dict) -> floa
     _place(run.setup, st)
     watch(st, dict(gaussians=state.active_count(st.pool)), force=True)
     try:
-        with _metrics(config.out) as f:
-            run.record = lambda **row: f and f.write(json.dumps(row) + "\n")
+        with report.metrics_rows(config.out) as run.record:
             # a stop requested while a step was dispatched ahead ends after that step
             while st.step < config.steps and (not stop.requested or run.pending is not None):
                 if _stops_early(run, early):
@@ -397,8 +388,11 @@ def _loop(run: _Run, clock, watch: Watch, stop: StopRequest, data: dict) -> floa
                     run.say(f"step {st.step + 1}: skipped (loss or gradients not finite)")
                 st.step += 1
                 busy += time.perf_counter() - t0
+                first = st.step == start + 1  # its row: the device memory by part
                 run.record(step=st.step, loss=m["loss"], psnr=m["psnr"], gaussians=m["count"],
-                           seconds=busy, **({} if m["ok"] else dict(skipped=True)))
+                           seconds=busy, **({} if m["ok"] else dict(skipped=True)), **peak(),
+                           **(dict(memory=report.memory_parts(
+                               state.parts(st), steps.temporaries())) if first else {}))
                 progress.step(m["loss"], m["psnr"], m["count"],
                               (st.step - start) / max(busy - clock.seconds, 1e-9))
                 early.record(st.step, m["loss"])
@@ -435,8 +429,9 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     (`report.CompileClock.result`), the parts of `seconds` (load_seconds: data and the start
     or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
     the run; finish_seconds: the final evaluation and the output files; logged in one line at
-    the end), peak_mib (the device's peak memory in the process, MiB; None on the CPU) and
-    stopped_early_at (the step the early stop ended the run at, or None).
+    the end), peak_mib (the device's peak memory in the process, MiB; None on the CPU), memory
+    (the device memory by part at the end, `report.memory_parts`) and stopped_early_at (the
+    step the early stop ended the run at, or None).
 
     Several processes (`jax.distributed.initialize`, docs/multi-gpu.md "Several hosts"): every
     process makes the same call, with gaussian_devices = `jax.device_count()` and the same

@@ -29,7 +29,7 @@ from .config import Setup
 from .feed import RunData
 from ..files import written
 from .pool import active_gaussians
-from .state import RunState, active_count, scene
+from .state import RunState, active_count, parts, scene
 from .step import render_views
 
 
@@ -136,6 +136,7 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log,
     run = dict(run, finish_seconds=time.perf_counter() - t0)
     run["seconds"] += run["finish_seconds"]
     run["peak_mib"] = report.device_memory().get("peak_mib")
+    run["memory"] = report.memory_parts(parts(st))
     log(time_parts(run))
     result = dict(steps=st.step, heldout_psnr=psnr, heldout_ssim=ssim,
                   gaussians=active_count(st.pool), pool_size=st.pool.size,

@@ -14,6 +14,7 @@ import numpy as np
 import tqdm
 
 from ..files import written
+from . import processes
 
 
 class _Bar(tqdm.tqdm):
@@ -193,6 +194,55 @@ def device_memory() -> dict:
                 peak_mib=round(max(s.get("peak_bytes_in_use", 0) for s in stats) / 2**20, 1))
 
 
+class PeakRise:
+    """The device's peak memory for a run's step rows: a call gives {peak_mib} where the peak
+    (`device_memory`) rose by `least` MiB or more since the last it gave, else {} (always {}
+    where the backend keeps no statistics: the CPU); the rows so mark the steps that raised
+    it."""
+
+    def __init__(self, least: float = 1.0):
+        self.least, self.last = least, 0.0
+
+    def __call__(self) -> dict:
+        peak = device_memory().get("peak_mib")
+        if peak is None or peak < self.last + self.least:
+            return {}
+        self.last = peak
+        return dict(peak_mib=peak)
+
+
+def _bytes_on(device, arrays) -> int:
+    """The bytes `arrays` (jax.Arrays; other leaves ignored) hold on `device`: one shard
+    (`Sharding.shard_shape`) of each array placed there."""
+    total = 0
+    for x in arrays:
+        if isinstance(x, jax.Array) and not x.is_deleted() and device in x.sharding.device_set:
+            shard = x.sharding.shard_shape(x.shape)
+            total += int(np.prod(shard)) * (x.nbytes // max(x.size, 1))
+    return total
+
+
+def memory_parts(parts: dict, temporaries: float | None = None) -> dict:
+    """Device memory by part, MiB to the KiB, on this process's first device: each tree of
+    `parts` (its arrays' shards there), other_arrays (the live arrays in none of them: training
+    views in flight, held-out targets, ...) with the largest three ([shape and dtype, MiB]),
+    the step program's XLA `temporaries` where given, and `device_memory`'s in use and peak
+    (in use beyond the arrays: executables' constants, buffers freed late)."""
+    device = jax.local_devices()[0]
+    mib = lambda n: round(n / 2**20, 3)
+    held = {id(x) for tree in parts.values() for x in jax.tree.leaves(tree)}
+    others = [x for x in jax.live_arrays() if id(x) not in held]
+    sizes = sorted(((_bytes_on(device, [x]), f"{x.shape} {x.dtype}") for x in others),
+                   reverse=True)
+    out = {f"{name}_mib": mib(_bytes_on(device, jax.tree.leaves(tree)))
+           for name, tree in parts.items()}
+    out.update(other_arrays_mib=mib(sum(n for n, _ in sizes)),
+               largest_other=[[what, mib(n)] for n, what in sizes[:3] if n])
+    if temporaries is not None:
+        out["step_temporaries_mib"] = round(temporaries, 3)
+    return dict(out, **device_memory())
+
+
 def _threads(fn, *lists) -> list:
     """[fn(*items) for items in zip(*lists)] on a few threads (numpy, scikit-image and PNG
     compression release Python's lock in their loops), in order."""
@@ -228,6 +278,18 @@ def save_renders(out: str, images, targets, names, prefix: str = "heldout") -> N
             Image.fromarray(np.rint(side * 255).astype(np.uint8)).save(tmp, format="PNG",
                                                                        compress_level=1)
     _threads(one, images, targets, names)
+
+
+@contextlib.contextmanager
+def metrics_rows(out: str):
+    """A function that writes its keyword arguments as a row of OUT/metrics.jsonl (a JSON line,
+    appended, line-buffered); one that writes nothing on a process that does not write the
+    run folder (`processes.writer`)."""
+    if not processes.writer():
+        yield lambda **row: None
+        return
+    with open(os.path.join(out, "metrics.jsonl"), "a", buffering=1) as f:
+        yield lambda **row: f.write(json.dumps(row) + "\n")
 
 
 def read_metrics(path: str) -> list[dict]:

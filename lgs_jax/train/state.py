@@ -49,6 +49,12 @@ class RunState:
         return self.pool, self.opt_state, self.strategy_state, self.views
 
 
+def parts(st: RunState) -> dict:
+    """The state's parts by name, as `report.memory_parts` reports them."""
+    return dict(pool=st.pool, optimizer=st.opt_state, strategy=st.strategy_state,
+                views=st.views)
+
+
 def templates(setup: Setup, size: int, rd: RunData, seed: int, g=None):
     """(pool, opt_state, strategy_state, views) at `size` slots: from Gaussians g, or
     zeros; with app_opt the pool's features and the appearance head drawn from `seed`; the

@@ -25,7 +25,7 @@ from skimage.metrics import structural_similarity
 import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
-from lgs_jax.train import ahead, init, loop, report
+from lgs_jax.train import ahead, appearance, init, loop, report
 from lgs_jax.train import feed as train_data
 
 from .captures import tiny_capture
@@ -267,6 +267,18 @@ def test_fit_densifies_and_the_loss_falls(skull, uninterrupted, tmp_path):
     assert min(parts) >= 0 and result["eval_seconds"] > 0 and result["checkpoint_seconds"] > 0
     assert abs(result["step_seconds"] - busy) < 1e-6 * busy
     assert sum(parts) <= result["seconds"]  # the rest: the watch, the bar, the metrics file
+    # device memory by part: the first step's row (with its program's temporaries) and the
+    # result; no peak on the CPU (no allocator statistics)
+    first = steps[0]["memory"]
+    assert all("memory" not in r for r in steps[1:]) and "peak_mib" not in steps[0]
+    assert first["step_temporaries_mib"] > 0 and "mib_in_use" not in first
+    mem = result["memory"]
+    assert [k for k in mem if k.endswith("_mib")] == [
+        "pool_mib", "optimizer_mib", "strategy_mib", "views_mib", "other_arrays_mib"]
+    floats = 3 + 4 + 3 + 1 + 3 + appearance.FEATURES  # a slot's parameters (SH degree 0)
+    slots = result["pool_size"]
+    assert mem["pool_mib"] == pytest.approx(slots * (4 * floats + 1) / 2**20, abs=1e-3)
+    assert mem["optimizer_mib"] == pytest.approx(slots * 8 * floats / 2**20, abs=2e-3)
 
 
 class _Stop(Exception):
