@@ -97,6 +97,7 @@ class _Run:
     next_level: tuple | None = None  # (level, pair capacity) compiled ahead (`_level_ahead`)
     eval_seconds: float = 0.0  # held-out evaluations during the run
     checkpoint_seconds: float = 0.0  # checkpoints during the run
+    device_wait_seconds: float = 0.0  # the loop blocked reading steps' metrics (`_one_step`)
 
     def __post_init__(self):
         self.key = jax.random.key(self.config.seed)
@@ -217,7 +218,9 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
         if then_next:
             run.pending = _dispatch(run, feed, steps, st.step + 1, size, metrics["fits"])
         clock.waited(steps.take_waited())
+        t0 = time.perf_counter()
         m = {k: v.item() for k, v in to_host(metrics).items()}
+        run.device_wait_seconds += time.perf_counter() - t0
         if not (m["overflow"] or m[flag]):
             return m
         run.pending = None  # it changed nothing: the state is this step's inputs again
@@ -427,11 +430,13 @@ def fit(config: FitConfig, dataset=None, *, watch=None, watch_every: float = 1.0
     evaluations and checkpoints not; None when no step ran), compile_seconds (of that, the
     time spent compiling or waiting for a compile ahead) with its parts and programs
     (`report.CompileClock.result`), the parts of `seconds` (load_seconds: data and the start
-    or resume; step_seconds: steps and refinements; eval_seconds and checkpoint_seconds during
-    the run; finish_seconds: the final evaluation and the output files; logged in one line at
-    the end), peak_mib (the device's peak memory in the process, MiB; None on the CPU), memory
-    (the device memory by part at the end, `report.memory_parts`) and stopped_early_at (the
-    step the early stop ended the run at, or None).
+    or resume; step_seconds: steps and refinements, of which device_wait_seconds the loop
+    blocked reading their metrics while the device computed; eval_seconds and
+    checkpoint_seconds during the run; finish_seconds: the final evaluation and the output
+    files; logged in one line at the end), peak_mib (the device's peak memory in the process,
+    MiB; None on the CPU), memory (the device memory by part at the end,
+    `report.memory_parts`) and stopped_early_at (the step the early stop ended the run at, or
+    None).
 
     Several processes (`jax.distributed.initialize`, docs/multi-gpu.md "Several hosts"): every
     process makes the same call, with gaussian_devices = `jax.device_count()` and the same
@@ -486,7 +491,8 @@ def _run(config: FitConfig, dataset, data_path: str, watch: Watch, log, resuming
         times = dict(seconds=time.perf_counter() - t0,
                      ms_per_step=1e3 * busy / ran if ran else None,
                      **clock.result(), load_seconds=loaded, step_seconds=busy,
-                     eval_seconds=run.eval_seconds, checkpoint_seconds=run.checkpoint_seconds,
+                     device_wait_seconds=run.device_wait_seconds, eval_seconds=run.eval_seconds,
+                     checkpoint_seconds=run.checkpoint_seconds,
                      stopped_early_at=st.step if run.stopped_early else None)
         return outputs.finish(out, setup, st, rd, times, log, run.evaluations)
     finally:  # the held-out evaluations' compiles ahead end with the run

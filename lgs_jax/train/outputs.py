@@ -94,14 +94,23 @@ def _compiling(run: dict) -> str:
     return said
 
 
+def _waiting(run: dict) -> str:
+    """The steps' wait for the device in words, where `run` has it: the loop thread blocked
+    reading steps' metrics while the device computed (about the steps' time less compiling:
+    the device is the bound; near zero: the host's Python is)."""
+    if run.get("device_wait_seconds") is None:
+        return ""
+    return f"; waiting for the device {run['device_wait_seconds']:.1f} s"
+
+
 def time_parts(run: dict) -> str:
     """The run's wall time in parts, in words (`fit`'s result: load_seconds, step_seconds and
     the compile_seconds within them, eval_seconds, checkpoint_seconds, finish_seconds)."""
     parts = [("loading and starting", "load_seconds"), ("steps", "step_seconds"),
              ("held-out evaluations", "eval_seconds"), ("checkpoints", "checkpoint_seconds"),
              ("final evaluation and outputs", "finish_seconds")]
-    said = [f"{name} {run[key]:.1f} s" + (f" ({_compiling(run)})" if key == "step_seconds"
-                                          else "")
+    said = [f"{name} {run[key]:.1f} s" + (f" ({_compiling(run)}{_waiting(run)})"
+                                          if key == "step_seconds" else "")
             for name, key in parts if run.get(key) is not None]
     return f"{run['seconds']:.1f} s in all: " + ", ".join(said)
 

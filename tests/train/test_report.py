@@ -1,5 +1,5 @@
-"""What a run reports of the device's memory: the steps that raised the peak (`PeakRise`) and
-the memory by part (`memory_parts`)."""
+"""What a run reports of the device: the steps that raised its peak memory (`PeakRise`), its
+memory by part (`memory_parts`), and how long the steps waited for it (`outputs.time_parts`)."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -20,7 +20,8 @@ def test_a_step_row_carries_the_peak_where_it_rose_by_a_mib(monkeypatch):
 
 def test_memory_by_part_counts_each_part_and_names_the_largest_other_arrays():
     pool = dict(means=jnp.zeros((1024, 3), jnp.float32), active=jnp.zeros(1024, bool))
-    opt = (jnp.zeros((1024, 3), jnp.float32), jnp.zeros((1024, 3), jnp.float32), jnp.zeros((), jnp.int32))
+    opt = (jnp.zeros((1024, 3), jnp.float32), jnp.zeros((1024, 3), jnp.float32),
+           jnp.zeros((), jnp.int32))
     other = jnp.ones((512, 512, 3), jnp.uint8)  # held by no part
     deleted = jnp.ones((2048, 3), jnp.float32)
     deleted.delete()
@@ -31,3 +32,15 @@ def test_memory_by_part_counts_each_part_and_names_the_largest_other_arrays():
     assert parts["largest_other"][0] == ["(512, 512, 3) uint8", mib(other.nbytes)]
     assert parts["other_arrays_mib"] >= mib(other.nbytes)
     assert np.asarray(other).sum() > 0  # alive until here
+
+
+def test_the_closing_line_says_how_long_the_steps_waited_for_the_device():
+    from lgs_jax.train.outputs import time_parts
+
+    run = dict(seconds=10.0, load_seconds=1.0, step_seconds=8.0, compile_seconds=2.0,
+               device_wait_seconds=5.0, eval_seconds=0.5, checkpoint_seconds=0.1,
+               finish_seconds=0.4)
+    assert time_parts(run) == ("10.0 s in all: loading and starting 1.0 s, steps 8.0 s "
+                               "(compiling 2.0 s; waiting for the device 5.0 s), held-out "
+                               "evaluations 0.5 s, checkpoints 0.1 s, final evaluation and "
+                               "outputs 0.4 s")

@@ -266,6 +266,7 @@ def test_fit_densifies_and_the_loss_falls(skull, uninterrupted, tmp_path):
                                  "checkpoint_seconds", "finish_seconds")]
     assert min(parts) >= 0 and result["eval_seconds"] > 0 and result["checkpoint_seconds"] > 0
     assert abs(result["step_seconds"] - busy) < 1e-6 * busy
+    assert 0 < result["device_wait_seconds"] < result["step_seconds"]
     assert sum(parts) <= result["seconds"]  # the rest: the watch, the bar, the metrics file
     # device memory by part: the first step's row (with its program's temporaries) and the
     # result; no peak on the CPU (no allocator statistics)
