@@ -99,8 +99,13 @@ def to_host(x):
     blocks on this process's devices) is `np.asarray`; one whole on every device (replicated)
     is read from a device of this process; one split over devices of several processes is
     gathered (`multihost_utils.process_allgather`: a collective, so every process must make
-    the same reads in the same order)."""
-    return jax.tree.map(_to_host, x)
+    the same reads in the same order). The copies of the arrays held whole are all started
+    before the first is awaited."""
+    leaves, tree = jax.tree.flatten(x)
+    for leaf in leaves:
+        if isinstance(leaf, jax.Array) and leaf.is_fully_addressable:
+            leaf.copy_to_host_async()
+    return jax.tree.unflatten(tree, [_to_host(leaf) for leaf in leaves])
 
 
 def _to_host(x) -> np.ndarray:

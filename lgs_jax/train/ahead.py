@@ -76,9 +76,10 @@ def mode_of(compile_ahead: str | None) -> str | None:
 
 def signature(args) -> tuple:
     """What an executable compiled for `args` requires of later arguments: their tree and
-    abstract values (shape, dtype, weak type)."""
+    abstract values (shape, dtype, weak type; `jax.typeof`, a jax.Array's own `aval` read
+    directly: the loop takes a signature every step)."""
     leaves, tree = jax.tree.flatten(args)
-    return tree, tuple(jax.typeof(x) for x in leaves)
+    return tree, tuple(x.aval if isinstance(x, jax.Array) else jax.typeof(x) for x in leaves)
 
 
 def _abstract_of(sig: tuple):
