@@ -1,8 +1,19 @@
-"""XLA's memory for a `benchmarks.scale` row on an NVIDIA H200, compiled on a machine without a GPU.
+"""XLA's memory for a `benchmarks.scale` row on an NVIDIA H200, or for `fit`'s training step,
+compiled on a machine without a GPU.
 
     build/gpu-offline/bin/python scripts/gpu_memory_offline.py SCENE [--grad] [--row localgs]
-        [--capacity C] [--rows R|none] [--data DIR] [--dump DIR [--top 30]]
+        [--capacity C] [--rows R|none] [--data DIR] [--dump DIR] [--top 30]
         [--tuning NAME=VALUE ...]
+    build/gpu-offline/bin/python scripts/gpu_memory_offline.py --train-step DATA_DIR
+        --gaussians N --pool P --capacity C --rows R [--top 30]
+
+The training step (`--train-step`): `train.step.train_step` as `fit` runs it with MCMC and one
+view a step, on DATA_DIR's first training view, with N Gaussians in a pool of P slots
+(`profile_train_step.densified_pool`), at pair capacity C and R backward rows; JAX's default
+backend reads as "gpu" to the package, so that it takes its GPU paths (compiled kernels, the
+fused SSIM). Its temporaries plus the state in use between steps (`fit`'s `mib_in_use`) give
+a run's peak at that capacity: fox at 6.8M slots, 366.2 + 480.6 = 846.8 MiB, the H100's
+measured peak to the tenth.
 
 JAX compiles for a GPU it does not have ("deviceless" compilation:
 `jax.experimental.topologies.get_topology_desc(platform="cuda", target_config=...)`), given a
@@ -27,9 +38,9 @@ ordinal"), so the memory is summed from the dump's buffer assignment (temporarie
 what `compiled.memory_analysis()` reports where it works). Pallas' Triton lowering asks JAX's
 default device for its kind, so that is patched to the target's.
 
-Prints the memory (temporaries + outputs, as `benchmarks.scale`'s "mem") and, with `--dump`,
-hlo_peak's live values at the peak (with `--temp`: of the temporary allocation alone, which is
-what sets its size).
+Prints the memory (temporaries + outputs, as `benchmarks.scale`'s "mem") and the `--top`
+largest values of the temporary allocation (each with its offset there: values at overlapping
+offsets are never live together).
 """
 
 from __future__ import annotations
@@ -39,9 +50,9 @@ import ast
 import dataclasses
 import glob
 import os
-import subprocess
 import sys
 import time
+import types
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CUB_DEVICE = "NVIDIA H100 80GB HBM3"  # in XLA's deviceless CUB table; the H200 is not
@@ -111,6 +122,48 @@ def program(args, sharding):
     return jax.jit(jax.value_and_grad(loss)), (abstract, w)
 
 
+def train_step_program(args, sharding):
+    """(jitted function, abstract arguments): `fit`'s training step (module docstring)."""
+    import jax
+    import jax.numpy as jnp
+
+    sys.path.insert(0, os.path.join(ROOT, "scripts"))
+    from profile_train_step import densified_pool
+    from lgs_jax.train import MCMCStrategy, Recipe, Setup
+    from lgs_jax.train.feed import as_float, prepare
+    from lgs_jax.train.step import train_step
+
+    rd = prepare(args.train_step, 1, dtype="auto")
+    setup = Setup(Recipe(), MCMCStrategy(cap_max=args.pool), 7000, rd.scene_scale, "pallas")
+    _, (pool, opt, strategy) = densified_pool(rd, setup, args.gaussians, args.pool)
+    jax.default_backend = lambda: "gpu"  # the package's GPU paths (module docstring)
+    rows = None if args.rows == "none" else int(args.rows)
+    print(f"{args.train_step}: {args.gaussians} Gaussians in {args.pool} slots, capacity "
+          f"{args.capacity}, rows {rows}", flush=True)
+    shaped = lambda tree: jax.tree.map(
+        lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), tree)
+    targets = jnp.asarray(as_float(rd.train_images[:1]))
+    abstract = shaped((pool, opt, strategy, None, rd.train_cams, targets, jnp.array([0]),
+                       jnp.asarray(rd.background), jnp.int32(6000), jax.random.key(0)))
+    static = dict(setup=setup, capacity=args.capacity, rows=rows)  # jitted as fit's, donating
+    return types.SimpleNamespace(lower=lambda *a: train_step.lower(*a, **static)), abstract
+
+
+def largest(prefix: str, top: int) -> list[tuple[int, int, str]]:
+    """(bytes, offset, value and shape) of the `top` largest values in the dump's temporary
+    allocation."""
+    values, inside = [], False
+    for line in open(prefix + "-buffer-assignment.txt"):
+        if line.startswith("allocation "):
+            inside = "preallocated-temp" in line
+        elif inside and line.lstrip().startswith("value:"):
+            name = line.split("<")[1].split(">")[0].split()[1]
+            size = int(line.split("size=")[1].split(",")[0])
+            offset = int(line.split("offset=")[1].split(")")[0])
+            values.append((size, offset, f"{name} {line.rsplit(': ', 1)[1].strip()}"))
+    return sorted(values, reverse=True)[:top]
+
+
 def assigned_mib(prefix: str) -> tuple[float, float]:
     """(temporaries, outputs) in MiB: the allocations of a buffer-assignment dump, parameters
     and constants left out."""
@@ -126,28 +179,37 @@ def assigned_mib(prefix: str) -> tuple[float, float]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("scene", help="a benchmarks.common.SCENES name, e.g. guitar_x110_4k")
+    ap.add_argument("scene", nargs="?", help="a benchmarks.common.SCENES name, e.g. "
+                    "guitar_x110_4k")
+    ap.add_argument("--train-step", metavar="DATA_DIR", help="fit's training step instead")
+    ap.add_argument("--gaussians", type=int, default=100_000)
+    ap.add_argument("--pool", type=int, default=300_000)
     ap.add_argument("--grad", action="store_true", help="forward + backward (else the forward)")
     ap.add_argument("--row", default="localgs", help="a benchmarks.scale.ROWS key")
     ap.add_argument("--capacity", type=int, help="pair capacity (default: counted on the CPU)")
     ap.add_argument("--rows", default="none", help="render's row_capacity, or none")
     ap.add_argument("--data", default=os.path.join(ROOT, "..", "shared", "data"))
     ap.add_argument("--device-name", default=CUB_DEVICE)
-    ap.add_argument("--dump", help="XLA dump folder: then hlo_peak.py's peak is printed too")
-    ap.add_argument("--top", type=int, default=30)
-    ap.add_argument("--temp", action="store_true", help="hlo_peak.py --temp")
+    ap.add_argument("--dump", help="XLA dump folder (default build/gpu-offline-dump)")
+    ap.add_argument("--top", type=int, default=0, help="list the largest temporaries")
     ap.add_argument("--tuning", action="append", default=[], metavar="NAME=VALUE",
                     help="a KernelConfig field for the row, e.g. backward_segment=2048")
     args = ap.parse_args(argv)
+    if (args.scene is None) == (args.train_step is None):
+        ap.error("give a SCENE or --train-step DATA_DIR")
+    if args.train_step and args.capacity is None:
+        ap.error("--train-step: give --capacity (and --rows)")
     os.environ.setdefault("CUDA_VISIBLE_DEVICES", "-1")
     dump = os.path.abspath(args.dump or os.path.join(ROOT, "build", "gpu-offline-dump"))
     os.environ["XLA_FLAGS"] = (f"{os.environ.get('XLA_FLAGS', '')} --xla_dump_to={dump} "
-                               "--xla_dump_hlo_as_text --xla_dump_hlo_module_re=.*(loss|image).*")
+                               "--xla_dump_hlo_as_text "
+                               "--xla_dump_hlo_module_re=.*(loss|image|step).*")
     sys.path.insert(0, ROOT)
     import jax
 
     jax.config.update("jax_platforms", "cpu")  # the GPU is only a compilation target
-    f, abstract = program(args, target_device(args.device_name))
+    make = train_step_program if args.train_step else program
+    f, abstract = make(args, target_device(args.device_name))
     start = time.time()
     try:
         f.lower(*abstract).compile()
@@ -161,10 +223,8 @@ def main(argv=None) -> int:
     prefix = max(new, key=os.path.getmtime).removesuffix("-buffer-assignment.txt")
     temp, out = assigned_mib(prefix)
     print(f"memory: temporaries {temp:.1f} + outputs {out:.1f} = {temp + out:.1f} MiB", flush=True)
-    if args.dump:
-        extra = ["--temp"] if args.temp else []
-        subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "hlo_peak.py"), prefix,
-                        "--top", str(args.top), *extra], check=False)
+    for size, offset, what in largest(prefix, args.top):
+        print(f"  {size / 2**20:8.1f} MiB at {offset / 2**20:8.1f}  {what}")
     return 0
 
 
