@@ -109,10 +109,13 @@ def _camera_covariance(rot, scales, w):
     return dot(0, 0), dot(0, 1), dot(0, 2), dot(1, 1), dot(1, 2), dot(2, 2)
 
 
-def project(g: Gaussians, cam: Camera, antialiased: bool = False, colors=None) -> Projected:
+def project(g: Gaussians, cam: Camera, antialiased: bool = False, colors=None,
+            sh_bands=None) -> Projected:
     """Project Gaussians `g` through camera `cam` (all arithmetic in g's dtype); `antialiased`
     scales each opacity by ρ (module docstring). `colors`: optional (N, C) values that take
-    the SH colour's place (`rgb` is then (N, C), `g.sh` is not read).
+    the SH colour's place (`rgb` is then (N, C), `g.sh` is not read). `sh_bands`: optional
+    (K,) factors of the SH coefficients (`render`'s), applied inside the checkpoint: the
+    backward keeps `g.sh` as given, not a scaled copy.
 
     Written on per-Gaussian (N,) columns, every step elementwise (no stacked 3x3 matrices, no
     reductions over small axes), so that XLA fuses the projection and its autodiff backward
@@ -136,13 +139,17 @@ def project(g: Gaussians, cam: Camera, antialiased: bool = False, colors=None) -
     fusions) then reads the stored columns, and no stacked copy is written unless a consumer
     needs one whole. Behind the barrier the stacks were three XLA concatenates written and read
     back, and in the backward the cotangents arrived stacked too."""
-    return _stacked(lax.optimization_barrier(_project(g, cam, bool(antialiased), colors)))
+    return _stacked(lax.optimization_barrier(_project(g, cam, bool(antialiased), colors,
+                                                      sh_bands)))
 
 
 @functools.partial(jax.checkpoint, static_argnums=(2,))
-def _project(g: Gaussians, cam: Camera, antialiased: bool, colors=None) -> dict:
+def _project(g: Gaussians, cam: Camera, antialiased: bool, colors=None, sh_bands=None) -> dict:
     columns = gaussian_columns(g.means, g.quats, g.log_scales, g.logit_opacities)
-    return _projected_columns(*columns, g.sh, cam, antialiased, colors)
+    sh = g.sh
+    if sh_bands is not None and colors is None:
+        sh = sh * jnp.asarray(sh_bands)[None, :, None].astype(sh.dtype)
+    return _projected_columns(*columns, sh, cam, antialiased, colors)
 
 
 def _stacked(cols: dict) -> Projected:

@@ -172,8 +172,8 @@ def _stats(p: Projected, backend: str, capacity: int, bins: binning.TileBins | N
 @functools.partial(jax.jit, static_argnames=("backend", "config", "capacity", "row_capacity"))
 def _render(g: Gaussians, cam: Camera, background, backend: str, config: RasterConfig,
             capacity: int, row_capacity: int | None, screen_offsets=None,
-            colors=None) -> RenderOutput:
-    p = project(g, cam, config.antialiased, colors)
+            colors=None, sh_bands=None) -> RenderOutput:
+    p = project(g, cam, config.antialiased, colors, sh_bands)
     if screen_offsets is not None:
         p = shifted(p, screen_offsets)
     return composite_projected(p, cam.width, cam.height, background, backend, config, capacity,
@@ -268,7 +268,8 @@ def _empty_render(cam: Camera, background, dtype, backend: str,
 
 def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: str | None = None,
            config: RasterConfig | None = None, capacity: int | None = None,
-           row_capacity: int | None = None, screen_offsets=None, colors=None) -> RenderOutput:
+           row_capacity: int | None = None, screen_offsets=None, colors=None,
+           sh_bands=None) -> RenderOutput:
     """Render `gaussians` through `camera` (docs/conventions.md is the contract every backend
     meets).
 
@@ -303,6 +304,10 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
         (zeros by default), differentiable w.r.t. `colors` too. Three channels are
         composited in one pass, other C in ceil(C/3) passes sharing the projection and the
         pairs (each pass blends again: about C/3 times the kernel's time; one compile).
+      sh_bands: optional (K,) factors of the K SH coefficients, 0 or 1 where a training
+        schedule enables bands one by one (gsplat's `sh_degree`, as a traced mask: no
+        recompile when a band is enabled); the colour is that of `gaussians.sh` scaled by them,
+        computed inside the projection, so a gradient's backward holds no scaled copy.
 
     Raises:
       ValueError: a bad argument (the message names it).
@@ -330,8 +335,11 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None, backend: st
                          f"{np.shape(screen_offsets)}")
     rows = (int(row_capacity) if row_capacity is not None and REGISTRY[backend].row_capacity
             else None)
+    if sh_bands is not None and np.shape(sh_bands) != (gaussians.sh.shape[1],):
+        raise ValueError(f"sh_bands: expected shape ({gaussians.sh.shape[1]},), got "
+                         f"{np.shape(sh_bands)}")
     out = _render(gaussians, camera, background, backend, config, int(capacity), rows,
-                  screen_offsets, colors)
+                  screen_offsets, colors, sh_bands)
     if not _is_traced(out.stats.overflow) and bool(out.stats.overflow):
         raise CapacityError(int(out.stats.pairs_required), int(capacity))
     return out

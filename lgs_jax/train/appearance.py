@@ -100,21 +100,29 @@ def colour_change(head: dict, embedding, features):
 
 
 def dc_change(head: dict, embedding, features):
-    """The change of band 0 a view sees, h(e, f_i) / C0, shaped as the pool's sh_dc (N, 1, 3)."""
+    """The change of band 0 a view sees, h(e, f_i) / C0, shaped as band 0 of the pool's sh
+    (N, 1, 3)."""
     return (colour_change(head, embedding, features) / C0)[:, None, :]
 
 
 def seen(params: dict, head: dict, embedding) -> dict:
-    """The pool's parameters as a view of embedding e (EMBED,) sees them: sh_dc moved by
+    """The pool's parameters as a view of embedding e (EMBED,) sees them: SH band 0 moved by
     `dc_change` (module docstring); the other groups as they are."""
-    return dict(params, sh_dc=params["sh_dc"] + dc_change(head, embedding, params["features"]))
+    return dict(params, sh=band0_moved(params["sh"], dc_change(head, embedding,
+                                                               params["features"])))
+
+
+def band0_moved(sh, change):
+    """SH coefficients (N, K, 3) with band 0 moved by `change` (N, 1, 3): sh[:, 0] + change,
+    the other bands as they are."""
+    sh = jnp.asarray(sh)
+    return jnp.concatenate([sh[:, :1] + change, sh[:, 1:]], 1)
 
 
 def with_dc_change(g: Gaussians, change) -> Gaussians:
     """`g` with its band 0 moved by `change` (N, 1, 3): sh[:, 0] + change, the other bands
     as they are."""
-    sh = jnp.asarray(g.sh)
-    return dataclasses.replace(g, sh=jnp.concatenate([sh[:, :1] + change, sh[:, 1:]], 1))
+    return dataclasses.replace(g, sh=band0_moved(g.sh, change))
 
 
 def mean_dc_change(head: dict, embeddings, features):
@@ -130,8 +138,8 @@ def mean_dc_change(head: dict, embeddings, features):
 def baked(params: dict, head: dict, embeddings) -> dict:
     """The pool's parameters at the training views' average appearance (module docstring),
     without the features: a plain scene (held-out views, scene.ply)."""
-    out = dict(params, sh_dc=params["sh_dc"] + mean_dc_change(head, embeddings,
-                                                              params["features"]))
+    out = dict(params, sh=band0_moved(params["sh"], mean_dc_change(head, embeddings,
+                                                                   params["features"])))
     del out["features"]
     return out
 

@@ -4,8 +4,9 @@
 0.999, ε = 1e-15) on every group, learning rates means 1.6e-4 · scene_scale decaying
 exponentially to 1% of that over the run (lr_s = lr_0 · 0.01^(s / steps) at update s, torch's
 ExponentialLR with γ = 0.01^(1 / steps)), quats 1e-3, log-scales 5e-3, logit opacities 5e-2,
-SH band 0 2.5e-3, higher bands 2.5e-3 / 20, appearance features (`appearance`, where the pool
-has them) 2.5e-3. It is one `optax.scale_by_adam` over the whole
+SH band 0 2.5e-3, higher bands 2.5e-3 / 20 (one group, `sh`, its rate a pair: band 0's and
+the others'), appearance features (`appearance`, where the pool has them) 2.5e-3. It is one
+`optax.scale_by_adam` over the whole
 parameter dict followed by a per-group rate, so the Adam moments `mu` and `nu` are dicts shaped
 like the parameters, and `zero_moments` starts rows afresh.
 
@@ -20,6 +21,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 
 from .pool import GROUPS, OPTIONAL_GROUPS, rows
@@ -30,8 +32,9 @@ class GroupRateState(NamedTuple):
 
 
 def scale_by_group_rates(rates: dict) -> optax.GradientTransformation:
-    """updates[g] ← −rate_g(count) · updates[g] per parameter group g; a rate is a float or an
-    optax schedule of the update count."""
+    """updates[g] ← −rate_g(count) · updates[g] per parameter group g; a rate is a float, an
+    optax schedule of the update count, or a pair of floats (band 0's, the other bands') for
+    SH coefficients (N, K, 3), which scales their axis 1."""
     def init(params):
         del params
         return GroupRateState(jnp.zeros([], jnp.int32))
@@ -39,10 +42,19 @@ def scale_by_group_rates(rates: dict) -> optax.GradientTransformation:
     def update(updates, state, params=None):
         del params
         lr = {k: r(state.count) if callable(r) else r for k, r in rates.items()}
-        updates = {k: (-lr[k] * u).astype(u.dtype) for k, u in updates.items()}
+        updates = {k: (-_per_band(lr[k], u) * u).astype(u.dtype) for k, u in updates.items()}
         return updates, GroupRateState(optax.safe_increment(state.count))
 
     return optax.GradientTransformation(init, update)
+
+
+def _per_band(rate, u):
+    """`rate`, or for a pair (band 0's, the other bands') the rate of each of u's K bands
+    (1, K, 1), in u's dtype (as a float multiplying u would be rounded)."""
+    if not isinstance(rate, tuple):
+        return rate
+    k = u.shape[1]
+    return np.where(np.arange(k) == 0, rate[0], rate[1]).reshape(1, k, 1).astype(u.dtype)
 
 
 def means_schedule(recipe, steps: int, scene_scale: float):
@@ -55,8 +67,8 @@ def optimizer(recipe, steps: int, scene_scale: float) -> optax.GradientTransform
     """Adam per group with the recipe's rates (module docstring)."""
     rates = dict(means=means_schedule(recipe, steps, scene_scale), quats=recipe.lr_quats,
                  log_scales=recipe.lr_log_scales,
-                 logit_opacities=recipe.lr_logit_opacities, sh_dc=recipe.lr_sh_dc,
-                 sh_rest=recipe.lr_sh_rest, features=recipe.lr_features)
+                 logit_opacities=recipe.lr_logit_opacities,
+                 sh=(recipe.lr_sh_dc, recipe.lr_sh_rest), features=recipe.lr_features)
     return optax.chain(optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-15),
                        scale_by_group_rates(rates))
 

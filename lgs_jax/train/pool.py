@@ -3,14 +3,20 @@
 Densification changes the number of Gaussians; JAX programs need static shapes. So the scene
 lives in a pool of `size` slots, `active` marking those in use:
   - an inactive slot is rendered as a placeholder Gaussian (mean 0, quaternion (1, 0, 0, 0),
-    log-scales 0, logit opacity −inf, SH 0): opacity 0 < 1/255, so projection culls it and it
-    makes no tile pairs; `jnp.where` selects the placeholder, so its stored values get exactly
-    zero gradient (and their Adam moments, zero when freed, stay zero: Adam then leaves it still);
-  - an inactive slot's stored values are never read: strategies overwrite them when they take
-    the slot (`ops.allocate`);
+    log-scales 0, logit opacity −inf) with its stored SH coefficients: opacity 0 < 1/255, so
+    projection culls it and it makes no tile pairs; `jnp.where` selects the placeholder, so its
+    stored values get exactly zero gradient, its SH coefficients too (a culled Gaussian's colour
+    reaches no pixel), and their Adam moments, zero when freed, stay zero: Adam then leaves it
+    still. The SH coefficients go to the projection as stored, not masked: its checkpoint keeps
+    its inputs for the backward, so a masked copy would be held through the whole backward (the
+    largest temporary of a step beside the backward's rows; the inactive slots' coefficients
+    are finite, as every stored value);
+  - an inactive slot's stored values are not otherwise read: strategies overwrite them when
+    they take the slot (`ops.allocate`);
   - the pool grows by doubling (`grow`), outside jit: a rare recompile, which `fit` logs.
 Parameters are stored pre-activation, as in INRIA PLY files, in the optimizer's groups
-(`GROUPS`: SH band 0 and the higher bands are separate groups with their own learning rates).
+(`GROUPS`; the SH coefficients one group, band 0 and the higher bands at their own learning
+rates, `optim.optimizer`).
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ import numpy as np
 from ..parallel.shards import to_host
 from ..scene import Gaussians
 
-GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")
+GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh")
 OPTIONAL_GROUPS = ("features",)  # `appearance`'s per-Gaussian features, with Recipe.app_opt
 
 
@@ -33,7 +39,7 @@ OPTIONAL_GROUPS = ("features",)  # `appearance`'s per-Gaussian features, with Re
 @dataclasses.dataclass(frozen=True)
 class Pool:
     """params: dict GROUPS -> (size, ...) arrays (means (N, 3), quats (N, 4) w x y z,
-    log_scales (N, 3), logit_opacities (N,), sh_dc (N, 1, 3), sh_rest (N, K − 1, 3); with
+    log_scales (N, 3), logit_opacities (N,), sh (N, K, 3); with
     appearance embeddings also features (N, appearance.FEATURES)); active: (size,) bool."""
 
     params: dict
@@ -56,7 +62,7 @@ def from_gaussians(g: Gaussians, size: int | None = None) -> Pool:
     if size < n:
         raise ValueError(f"size: {size} slots cannot hold {n} Gaussians")
     params = dict(means=g.means, quats=g.quats, log_scales=g.log_scales,
-                  logit_opacities=g.logit_opacities, sh_dc=g.sh[:, :1], sh_rest=g.sh[:, 1:])
+                  logit_opacities=g.logit_opacities, sh=g.sh)
     params = {k: jnp.asarray(v) for k, v in params.items()}
     pool = Pool(params, jnp.ones(n, bool))
     return pad(pool, size)
@@ -78,27 +84,24 @@ def sh_mask(step, num_bases: int, every: int):
     return (band <= degree).astype(jnp.float32)
 
 
-def render_gaussians(params: dict, active, bands=None) -> Gaussians:
-    """The Gaussians `render` sees: active slots as stored (SH bands beyond `bands`, a mask
-    from `sh_mask`, zeroed), inactive slots as the culled placeholder (module docstring)."""
+def render_gaussians(params: dict, active) -> Gaussians:
+    """The Gaussians `render` sees: active slots as stored, inactive slots as the culled
+    placeholder with their stored SH coefficients (module docstring; the SH bands a schedule
+    has not enabled are `render`'s `sh_bands`, `sh_mask`)."""
     def pick(x, placeholder):
         return jnp.where(rows(active, x), x, jnp.asarray(placeholder, x.dtype))
 
-    sh = jnp.concatenate([params["sh_dc"], params["sh_rest"]], 1)
-    if bands is not None:
-        sh = sh * bands[None, :, None].astype(sh.dtype)
     return Gaussians(pick(params["means"], 0.0),
                      pick(params["quats"], jnp.array([1.0, 0.0, 0.0, 0.0])),
                      pick(params["log_scales"], 0.0), pick(params["logit_opacities"], -jnp.inf),
-                     pick(sh, 0.0))
+                     params["sh"])
 
 
 def active_gaussians(pool: Pool) -> Gaussians:
     """The active Gaussians (host numpy arrays, in slot order): what a PLY file holds."""
     active, params = to_host((pool.active, pool.params))  # `parallel.to_host`: any process
     p = {k: v[active] for k, v in params.items()}
-    return Gaussians(p["means"], p["quats"], p["log_scales"], p["logit_opacities"],
-                     np.concatenate([p["sh_dc"], p["sh_rest"]], 1))
+    return Gaussians(p["means"], p["quats"], p["log_scales"], p["logit_opacities"], p["sh"])
 
 
 def per_gaussian(tree, size: int, fn):

@@ -64,7 +64,7 @@ def templates(setup: Setup, size: int, rd: RunData, seed: int, g=None):
     z = lambda *shape: jnp.zeros((size,) + shape, setup.dtype)
     if g is None:
         params = dict(means=z(3), quats=z(4), log_scales=z(3), logit_opacities=z(),
-                      sh_dc=z(1, 3), sh_rest=z(bases - 1, 3))
+                      sh=z(bases, 3))
         pool = Pool(params, jnp.zeros(size, bool))
     else:
         pool = from_gaussians(jax.tree.map(jnp.asarray, g), size)

@@ -168,12 +168,11 @@ def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, ca
     `setup.devices` > 1 too, the views split over the rows of a mesh of `setup.devices` x
     `setup.gaussian_devices`), the loss taken on the whole images."""
     s = setup
-    num_bases = pool.params["sh_dc"].shape[1] + pool.params["sh_rest"].shape[1]
-    bands = sh_mask(step, num_bases, s.recipe.sh_every)
+    bands = sh_mask(step, pool.params["sh"].shape[1], s.recipe.sh_every)
     need2d = s.strategy.needs_screen_grads
 
     def loss_of(params, offsets, per_view):
-        g = render_gaussians(params, pool.active, bands)
+        g = render_gaussians(params, pool.active)
         own = view_params.rows(per_view, idx) or {}
         views = cams if "pose" not in own else camera_opt.adjusted(cams, own["pose"])
         look = {k: v for k, v in own.items() if k in view_params.APPEARANCE}
@@ -187,10 +186,11 @@ def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, ca
                 g = appearance.with_dc_change(g, look["dc"])
             o = render(g, cam, background=background, backend=s.backend, capacity=capacity,
                        config=s.recipe.raster, screen_offsets=off,
-                       row_capacity=rows)
+                       row_capacity=rows, sh_bands=bands)
             return (*score(s.recipe, o.image, target, look), o.stats, o.visible)
 
         if s.gaussian_devices > 1:
+            g = dataclasses.replace(g, sh=g.sh * bands[None, :, None].astype(g.sh.dtype))
             images, stats, visible = sharded.render_views(s, capacity, exchange, g, views,
                                                           background, offsets)
             losses, mse = over_batch(functools.partial(score, s.recipe))(images, targets, look)

@@ -31,7 +31,7 @@ def _params(n=40, seed=1):
     f = lambda *shape: jnp.asarray(rng.normal(size=(n,) + shape), jnp.float32)
     return dict(means=f(3) * 0.5 + jnp.asarray([0.0, 0.0, 4.0]), quats=f(4),
                 log_scales=f(3) * 0.2 - 2.5, logit_opacities=f() + 2.0,
-                sh_dc=f(1, 3) * 0.3 + 1.5, sh_rest=f(3, 3) * 0.05,
+                sh=jnp.concatenate([f(1, 3) * 0.3 + 1.5, f(3, 3) * 0.05], 1),
                 features=appearance.init_features(jax.random.key(seed), n))
 
 
@@ -70,16 +70,17 @@ def test_the_start_and_the_views_average_are_plain_scenes():
     params = _params()
     start = appearance.init_head(jax.random.key(0))
     e = jnp.ones(appearance.EMBED, jnp.float32)
-    assert np.asarray(appearance.seen(params, start, e)["sh_dc"]).tobytes() == np.asarray(
-        params["sh_dc"]).tobytes()
+    assert np.asarray(appearance.seen(params, start, e)["sh"]).tobytes() == np.asarray(
+        params["sh"]).tobytes()
     head = _head()
     embeddings = jnp.asarray(np.random.default_rng(7).normal(size=(3, appearance.EMBED)),
                              jnp.float32)
     baked = appearance.baked(params, head, embeddings)
     assert "features" not in baked and set(baked) == set(params) - {"features"}
-    views = [appearance.seen(params, head, e)["sh_dc"] for e in embeddings]
-    np.testing.assert_allclose(np.asarray(baked["sh_dc"]), np.mean(np.asarray(views), 0),
+    views = [appearance.seen(params, head, e)["sh"][:, :1] for e in embeddings]
+    np.testing.assert_allclose(np.asarray(baked["sh"][:, :1]), np.mean(np.asarray(views), 0),
                                atol=1e-5)
+    assert np.asarray(baked["sh"][:, 1:]).tobytes() == np.asarray(params["sh"][:, 1:]).tobytes()
     assert np.abs(np.asarray(views[0]) - np.asarray(views[1])).max() > 0.1
 
 
@@ -124,10 +125,9 @@ def test_a_runs_scene_as_a_training_photo_shows_it(tmp_path):
     appearance.save(path, params["features"], embeddings, head, ["a", "b"])
     baked = appearance.baked(params, head, jnp.asarray(embeddings))
     scene = Gaussians(baked["means"], baked["quats"], baked["log_scales"],
-                      baked["logit_opacities"],
-                      jnp.concatenate([baked["sh_dc"], baked["sh_rest"]], 1))
+                      baked["logit_opacities"], baked["sh"])
     for k, name in enumerate(["a", "b"]):
-        want = appearance.seen(params, head, jnp.asarray(embeddings[k]))["sh_dc"]
+        want = appearance.seen(params, head, jnp.asarray(embeddings[k]))["sh"][:, :1]
         got = appearance.as_photo(scene, path, name).sh[:, :1]
         np.testing.assert_allclose(np.asarray(got), np.asarray(want), atol=1e-5)
     with pytest.raises(ValueError, match="name: 'c'"):

@@ -69,8 +69,8 @@ CORRUPTIONS = {
     "no arrays": (lambda out: os.remove(os.path.join(out, "checkpoint.npz")),
                   "checkpoint.npz: missing"),
     "array missing": (lambda out: _arrays(out, lambda a: a.pop("opt_3")),
-                      "checkpoint.npz: holds 13 arrays of the opt state, this run's "
-                      "configuration has 14 (missing: opt_3)"),
+                      "checkpoint.npz: holds 11 arrays of the opt state, this run's "
+                      "configuration has 12 (missing: opt_3)"),
     "array shape": (lambda out: _arrays(out, lambda a: a.update(pool_0=a["pool_0"][:3])),
                     "checkpoint.npz: pool_0 is float32[3, 3], this run's is float32[64, 3]"),
     "other step": (lambda out: _arrays(out, lambda a: a.update(step=np.int64(4))),

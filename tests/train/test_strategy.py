@@ -25,8 +25,8 @@ def _pool(n_active=4, size=8, opacities=None, log_scales=None):
                   log_scales=np.tile(np.log(np.array([0.1, 0.2, 0.3], F32)), (size, 1))
                   if log_scales is None else np.asarray(log_scales, F32),
                   logit_opacities=np.log(o / (1 - o)),
-                  sh_dc=i[:, None, None] * np.ones((size, 1, 3), F32),
-                  sh_rest=np.zeros((size, 3, 3), F32))
+                  sh=np.concatenate([i[:, None, None] * np.ones((size, 1, 3), F32),
+                                     np.zeros((size, 3, 3), F32)], 1))
     params = {k: jnp.asarray(v, jnp.float32) for k, v in params.items()}
     return P.Pool(params, jnp.arange(size) < n_active)
 
@@ -77,7 +77,7 @@ def test_duplicate_copies_parameters_with_zero_moments():
         np.testing.assert_array_equal(_p(new, k)[[4, 5]], _p(pool, k)[[1, 3]])
         np.testing.assert_array_equal(_p(new, k)[:4], _p(pool, k)[:4])
     assert _mu(new_opt).tolist() == [1000, 1001, 1002, 1003, 0, 0, 1006, 1007]
-    assert _nu(new_opt, "sh_dc").tolist() == [2000, 2001, 2002, 2003, 0, 0, 2006, 2007]
+    assert _nu(new_opt, "sh").tolist() == [2000, 2001, 2002, 2003, 0, 0, 2006, 2007]
     assert int(new_opt[0].count) == int(opt[0].count)  # Adam's step count is shared, kept
     assert np.asarray(granted).sum() == 2
 
@@ -96,7 +96,7 @@ def test_split_places_two_children_and_zeroes_their_moments():
         np.testing.assert_allclose(_p(new, "means")[slot], [2, 20, 200] + r @ (s * eps[k, 2]),
                                    rtol=1e-6)
         np.testing.assert_allclose(_p(new, "log_scales")[slot], np.log(s / 1.6), rtol=1e-6)
-        for name in ("quats", "logit_opacities", "sh_dc"):
+        for name in ("quats", "logit_opacities", "sh"):
             np.testing.assert_array_equal(_p(new, name)[slot], _p(pool, name)[2])
     for name in pool.params:
         np.testing.assert_array_equal(_p(new, name)[[0, 1, 3]], _p(pool, name)[[0, 1, 3]])
@@ -206,7 +206,7 @@ def test_sample_add_copies_sampled_sources_into_free_slots():
     want_o, factor = _gsplat_relocation(0.7, 3)
     _assert_relocated(new, (0, 1, 2), want_o, factor)
     for slot in (0, 1, 2):
-        np.testing.assert_array_equal(_p(new, "sh_dc")[slot], _p(pool, "sh_dc")[0])
+        np.testing.assert_array_equal(_p(new, "sh")[slot], _p(pool, "sh")[0])
     # the new slots start with zero moments; the source keeps its own (gsplat)
     assert _mu(new_opt, "means").tolist() == [1000, 0, 0, 1003, 1004, 1005, 1006, 1007]
 
@@ -234,7 +234,7 @@ def test_grow_keeps_everything_and_pads_with_inactive_zeros():
     for k in pool.params:
         np.testing.assert_array_equal(_p(big, k)[:4], _p(pool, k))
         assert not _p(big, k)[4:].any()
-    assert _mu(big_opt, "sh_rest").tolist() == [1000, 1001, 1002, 1003, 0, 0, 0, 0]
+    assert _mu(big_opt, "sh").tolist() == [1000, 1001, 1002, 1003, 0, 0, 0, 0]
     assert np.asarray(big_state["grad2d"]).tolist() == [3.0] * 4 + [0.0] * 4
     assert float(big_state["scene_scale"]) == 2.0 and int(big_opt[0].count) == int(opt[0].count)
     with pytest.raises(ValueError, match="not larger"):
@@ -407,7 +407,7 @@ def test_a_refinement_in_place_holds_no_second_copy_of_the_pool(strategy):
     peak of a run's memory)."""
     n = 2**16
     pool = _pool(n // 3, n)
-    pool = P.Pool(dict(pool.params, sh_rest=jnp.zeros((n, 15, 3), jnp.float32)), pool.active)
+    pool = P.Pool(dict(pool.params, sh=jnp.zeros((n, 16, 3), jnp.float32)), pool.active)
     compiled = S._refine_in_place.lower(strategy.init(pool, 10.0), pool, _opt_state(pool), 600,
                                         jax.random.key(0), strategy=strategy, cap=n).compile()
     params = sum(x.nbytes for x in jax.tree.leaves(pool.params))

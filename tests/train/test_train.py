@@ -89,14 +89,15 @@ def test_sh_schedule_adds_one_band_every_period():
 def test_learning_rates_are_the_recipe():
     """Adam's first update moves each parameter by its group's rate (m̂/√v̂ = ±1); the means'
     rate at update s is 1.6e-4 · scene_scale · 0.01^(s / steps)."""
-    params = {k: jnp.zeros((1, 3)) for k in train.pool.GROUPS}
+    params = {k: jnp.zeros((1, 4, 3) if k == "sh" else (1, 3)) for k in train.pool.GROUPS}
     opt = train.optimizer(train.Recipe(), 1000, 2.0)
-    grads = {k: jnp.ones((1, 3)) for k in params}
+    grads = {k: jnp.ones_like(v) for k, v in params.items()}
     updates, state = opt.update(grads, opt.init(params), params)
     want = dict(means=1.6e-4 * 2.0, quats=1e-3, log_scales=5e-3, logit_opacities=5e-2,
-                sh_dc=2.5e-3, sh_rest=2.5e-3 / 20)
+                sh=np.array([2.5e-3] + [2.5e-3 / 20] * 3)[None, :, None])  # band 0, the others
     for k, v in want.items():
-        np.testing.assert_allclose(np.asarray(updates[k]), -v, rtol=1e-6)
+        np.testing.assert_allclose(np.asarray(updates[k]), -v + 0 * np.asarray(params[k]),
+                                   rtol=1e-6)
     sched = train.optim.means_schedule(train.Recipe(), 1000, 2.0)
     np.testing.assert_allclose(float(sched(500)), 3.2e-4 * 0.1, rtol=1e-6)
     np.testing.assert_allclose(float(sched(1000)), 3.2e-6, rtol=1e-6)
