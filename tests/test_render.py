@@ -256,3 +256,27 @@ def test_default_backend_is_the_fastest_exact_one_for_the_platform(scene32):
     assert lgs_jax.render(scene32, scenes.camera(), capacity=scenes.CAPACITY).stats.backend == want
     out = lgs_jax.render(scene32, scenes.camera(), backend="reference", capacity=scenes.CAPACITY)
     assert out.stats.backend == "reference"
+
+
+def test_sh_bands_colour_as_the_masked_coefficients_and_differentiate_alike(scene32):
+    """`sh_bands` (applied inside the projection) renders and differentiates as the
+    coefficients multiplied by the mask before the render: the same bits, every backend's
+    projection being one; a mask of the wrong length is refused by name."""
+    cam, cap = scenes.camera(), scenes.CAPACITY
+    k = scene32.sh.shape[1]
+    mask = jnp.asarray([1.0] + [0.0] * (k - 1), jnp.float32)
+    w = jnp.asarray(np.random.default_rng(0).normal(size=(scenes.H, scenes.W, 3)), jnp.float32)
+
+    def loss(sh, bands):
+        g = dataclasses.replace(scene32, sh=sh if bands else sh * mask[None, :, None])
+        out = lgs_jax.render(g, cam, capacity=cap, sh_bands=mask if bands else None)
+        return jnp.sum(out.image * w), out.image
+
+    f = jax.jit(jax.value_and_grad(loss, has_aux=True), static_argnums=1)
+    (_, inside), d_inside = f(scene32.sh, True)
+    (_, before), d_before = f(scene32.sh, False)
+    assert np.asarray(inside).tobytes() == np.asarray(before).tobytes()
+    assert np.asarray(d_inside).tobytes() == np.asarray(d_before).tobytes()
+    assert not np.asarray(d_inside)[:, 1:].any() and np.asarray(d_inside)[:, 0].any()
+    with pytest.raises(ValueError, match=r"sh_bands: expected shape \(%d,\)" % k):
+        lgs_jax.render(scene32, cam, capacity=cap, sh_bands=mask[:1])
