@@ -149,9 +149,9 @@ def _over_sources(x):
         rows.shape[:-1])
 
 
-def _one_view(g, cam, background, offsets, **static):
+def _one_view(g, cam, background, offsets, sh_bands, **static):
     """`_composite_band` of this device's Gaussians `g` projected through `cam` (step 1)."""
-    p = project(g, cam, static["config"].antialiased)
+    p = project(g, cam, static["config"].antialiased, None, sh_bands)
     if offsets is not None:
         p = shifted(p, offsets)
     return _composite_band(p, background, width=cam.width, height=cam.height, **static)
@@ -181,24 +181,24 @@ def _assembled(out: dict, height: int, padding: int, backend: str, capacity: int
 
 
 def _over_views(one):
-    """`one(g, cam, background, offsets)` over a batch of cameras (and offsets), one view after
-    another (`lax.map`): each view is the program of one view, so its bits are those of
-    `render` of that view alone (`jax.vmap` would compile batched fusions, which may round
-    differently)."""
-    def view(g, background, v):
+    """`one(g, cam, background, offsets, sh_bands)` over a batch of cameras (and offsets),
+    one view after another (`lax.map`): each view is the program of one view, so its bits are
+    those of `render` of that view alone (`jax.vmap` would compile batched fusions, which may
+    round differently)."""
+    def view(g, background, sh_bands, v):
         # With the view's camera behind one barrier, no part of the projection is invariant in
         # the loop: XLA hoisted those parts out of it, compiled apart and rounded differently.
         g, cam, offsets = lax.optimization_barrier((g, v[0], v[1]))
-        return one(g, cam, background, offsets)
+        return one(g, cam, background, offsets, sh_bands)
 
-    def over(g, cams, background, offsets):
-        return lax.map(functools.partial(view, g, background), (cams, offsets))
+    def over(g, cams, background, offsets, sh_bands):
+        return lax.map(functools.partial(view, g, background, sh_bands), (cams, offsets))
     return over
 
 
 @functools.partial(jax.jit, static_argnames=("num", "mesh", "batched", "backend", "config",
                                              "capacity", "exchange_capacity"))
-def _render_sharded(g, cam, background, offsets, *, num: int, mesh, batched: bool,
+def _render_sharded(g, cam, background, offsets, sh_bands, *, num: int, mesh, batched: bool,
                     backend: str, config: RasterConfig, capacity: int, exchange_capacity: int):
     devices = shard_count(mesh)
     one = functools.partial(_one_view, devices=devices, backend=backend, config=config,
@@ -208,10 +208,12 @@ def _render_sharded(g, cam, background, offsets, *, num: int, mesh, batched: boo
     lead = ((VIEWS,) if VIEWS in mesh.axis_names else (None,)) if batched else ()
     split = P(*lead, GAUSSIANS)
     off_spec = None if offsets is None else split
-    body = jax.shard_map(one, mesh=mesh, in_specs=(P(GAUSSIANS), P(*lead), P(), off_spec),
+    bands_spec = None if sh_bands is None else P()
+    body = jax.shard_map(one, mesh=mesh,
+                         in_specs=(P(GAUSSIANS), P(*lead), P(), off_spec, bands_spec),
                          out_specs=split, check_vma=False)
-    return _assembled(body(g, cam, background, offsets), cam.height, g.num - num, backend,
-                      capacity, exchange_capacity)
+    return _assembled(body(g, cam, background, offsets, sh_bands), cam.height, g.num - num,
+                      backend, capacity, exchange_capacity)
 
 
 @functools.partial(jax.jit, static_argnames=("width", "height", "mesh", "backend", "config",
@@ -290,7 +292,7 @@ def _checked_capacity(name: str, value) -> int:
 def render_sharded(shards: GaussianShards, camera: Camera, mesh, *, capacity: int | None = None,
                    exchange_capacity: int | None = None, background=None,
                    backend: str | None = None, config: RasterConfig | None = None,
-                   screen_offsets=None) -> ShardedOutput:
+                   screen_offsets=None, sh_bands=None) -> ShardedOutput:
     """Render the scene split over `mesh`'s "gaussians" axis through `camera` (module
     docstring): the image `render` gives for the whole scene, composited band by band.
 
@@ -311,6 +313,7 @@ def render_sharded(shards: GaussianShards, camera: Camera, mesh, *, capacity: in
       config: as `render`'s.
       screen_offsets: optional (D·n, 2) (or (views, D·n, 2)) added to the projected means, as
         `render`'s, sharded as the Gaussians.
+      sh_bands: as `render`'s (K,), on every device.
 
     Raises:
       ValueError: a bad argument. CapacityError / ExchangeCapacityError: an eager call whose
@@ -340,7 +343,10 @@ def render_sharded(shards: GaussianShards, camera: Camera, mesh, *, capacity: in
         capacity = pair_capacity(need_p) if capacity is None else capacity
         exchange_capacity = (pair_capacity(need_x) if exchange_capacity is None
                              else exchange_capacity)
-    out = _render_sharded(g, camera, jnp.asarray(background, g.dtype), screen_offsets,
+    if sh_bands is not None and np.shape(sh_bands) != (g.sh.shape[1],):
+        raise ValueError(f"sh_bands: expected shape ({g.sh.shape[1]},), got "
+                         f"{np.shape(sh_bands)}")
+    out = _render_sharded(g, camera, jnp.asarray(background, g.dtype), screen_offsets, sh_bands,
                           num=shards.num, mesh=mesh, batched=batch is not None, backend=backend,
                           config=config, capacity=_checked_capacity("capacity", capacity),
                           exchange_capacity=_checked_capacity("exchange_capacity",

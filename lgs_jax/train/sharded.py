@@ -100,9 +100,11 @@ def constrained(m: jax.sharding.Mesh, parts: tuple, size: int, views=None):
             jax.lax.with_sharding_constraint(views, everywhere))
 
 
-def render_views(setup, capacity: int, exchange: int, g, cams, background, offsets):
+def render_views(setup, capacity: int, exchange: int, g, cams, background, offsets,
+                 sh_bands=None):
     """The training render of a batch of views `cams` (stacked) of the rows `g` (split over
-    `mesh_of(setup)`'s "gaussians"), with screen `offsets` (B, rows, 2) or None: (images
+    `mesh_of(setup)`'s "gaussians"), with screen `offsets` (B, rows, 2) or None and the SH
+    bands in use `sh_bands` (`render`'s): (images
     (B, H, W, 3) whole on every device, `parallel.ShardedStats`, visible (B, rows)). On a
     mesh with "views" the batch is split over its rows, each row rendering its share
     Gaussian-parallel (`parallel.render_sharded`)."""
@@ -110,7 +112,8 @@ def render_views(setup, capacity: int, exchange: int, g, cams, background, offse
     out = parallel.render_sharded(parallel.GaussianShards(g, g.num), cams, m,
                                   capacity=capacity, exchange_capacity=exchange,
                                   background=background, backend=setup.backend,
-                                  config=setup.recipe.raster, screen_offsets=offsets)
+                                  config=setup.recipe.raster, screen_offsets=offsets,
+                                  sh_bands=sh_bands)
     images = jax.lax.with_sharding_constraint(out.image, whole(m))
     return images, out.stats, out.visible
 

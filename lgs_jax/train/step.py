@@ -190,9 +190,8 @@ def loss_and_grads(setup: Setup, capacity: int, rows: int | None, pool: Pool, ca
             return (*score(s.recipe, o.image, target, look), o.stats, o.visible)
 
         if s.gaussian_devices > 1:
-            g = dataclasses.replace(g, sh=g.sh * bands[None, :, None].astype(g.sh.dtype))
             images, stats, visible = sharded.render_views(s, capacity, exchange, g, views,
-                                                          background, offsets)
+                                                          background, offsets, bands)
             losses, mse = over_batch(functools.partial(score, s.recipe))(images, targets, look)
         else:
             losses, mse, stats, visible = over_views(one, s.devices, s.backend.startswith(

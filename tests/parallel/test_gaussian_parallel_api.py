@@ -81,3 +81,12 @@ def test_gaussian_parallel_traffic_counts_off_device_records():
     assert (t.forward, t.backward) == (5 * 48, 5 * 48)
     assert t.buffer == 2 * 2 * 1 * 8 * 48  # both directions, 2 devices x 1 peer x 8 rows
     assert parallel.record_width(3) == 12 and parallel.record_width(1) == 10
+
+
+def test_gaussian_parallel_refuses_a_band_mask_of_another_length():
+    shards = _shards()
+    k = shards.gaussians.sh.shape[1]
+    with pytest.raises(ValueError, match=rf"sh_bands: expected shape \({k},\), got \({k + 1},\)"):
+        parallel.render_sharded(shards, scenes.camera(dtype=np.float32),
+                                AbstractMesh((2,), ("gaussians",)), capacity=8,
+                                exchange_capacity=8, sh_bands=np.ones(k + 1, np.float32))
