@@ -127,10 +127,8 @@ def finish(out: str, setup: Setup, st: RunState, rd: RunData, run: dict, log,
     if psnr is None:
         log(f"step {st.step}: no held-out views to evaluate (trained on every view)")
     else:
-        if writes:
-            with open(os.path.join(out, "metrics.jsonl"), "a") as f:
-                f.write(json.dumps(dict(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim))
-                        + "\n")
+        with report.metrics_rows(out) as record:  # writes nothing on the other processes
+            record(step=st.step, heldout_psnr=psnr, heldout_ssim=ssim)
         log(f"step {st.step}: held-out PSNR {psnr:.2f} dB, SSIM {ssim:.4f}")
     g, cams = active_gaussians(scene(st)), _cameras(st, rd)
     if writes:

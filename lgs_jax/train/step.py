@@ -64,7 +64,8 @@ def lowering() -> exports.Lowering | None:
 
 
 def _finite(tree, active) -> jax.Array:
-    """All per-Gaussian leaves finite on the active rows (inactive rows are never read)."""
+    """All per-Gaussian leaves finite on the active rows (an inactive row reaches no pixel,
+    and keeps the finite values it had when active, or zeros)."""
     ok = jnp.bool_(True)
     for x in jax.tree.leaves(tree):
         fin = jnp.isfinite(x)
