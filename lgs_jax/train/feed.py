@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
 
@@ -149,10 +150,18 @@ def views_for_step(step: int, batch: int, n_train: int, seed: int,
     pos = step * batch + np.arange(batch)
     out = np.empty(batch, np.int64)
     for epoch in np.unique(pos // n_train):
-        order = np.random.default_rng([seed, int(epoch)]).permutation(n_train)
         here = pos // n_train == epoch
-        out[here] = order[pos[here] % n_train]
+        out[here] = epoch_order(seed, int(epoch), n_train)[pos[here] % n_train]
     return out
+
+
+@functools.lru_cache(maxsize=4)
+def epoch_order(seed: int, epoch: int, n_train: int) -> np.ndarray:
+    """The random order of the `n_train` training views in `epoch` (read-only; kept for the
+    epoch's steps: one generator an epoch rather than one a step)."""
+    order = np.random.default_rng([seed, epoch]).permutation(n_train)
+    order.flags.writeable = False
+    return order
 
 
 def _one_size_batches(step: int, batch: int, groups: np.ndarray, seed: int) -> np.ndarray:
