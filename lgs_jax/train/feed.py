@@ -199,22 +199,23 @@ def streams(nbytes: int, setting: bool | None, device=None) -> bool:
 
 class TrainViews:
     """The training views of each step, as `step.train_step`'s (targets, idx) arguments: idx
-    the step's views (`views_for_step`), targets their images (B, H, W, 3) of `dtype` (float32
-    or float64, the training arithmetic's) on the device (uint8 images converted there,
-    `_float`), taken from the whole capture kept on the device, or streamed: each view copied
-    from the host by a worker thread, the next step's copies started while a step runs
-    (`prefetch`), so that device memory holds two batches instead of the capture and the
-    host's copying (a staging copy of each image) runs beside the loop's dispatch instead of
-    before it. The same values, and the same compiled step,
+    the step's views (`views_for_step`), targets their images (B, H, W, 3) on the device as
+    the capture stores them (8-bit or float; the step converts them, `to_float`), taken from
+    the whole capture kept on the device, or streamed: the views copied from the host by a
+    worker thread, the next step's copies started while a step runs (`prefetch`), so that
+    device memory holds two batches instead of the capture and the host's copying (a staging
+    copy of each image) runs beside the loop's dispatch instead of before it; the worker
+    dispatches no program (one view: its image as it lies in the capture, a view of the
+    array; several: stacked on the host). The same values, and the same compiled step,
     either way: the same results to the bit. `close` ends the worker.
 
     `images` is (T, H, W, 3), or a list of views of several sizes (`RunData.train_images`;
     `groups` their sizes, `RunData.groups`), kept whole on the device as one array per view."""
 
     def __init__(self, images, batch: int, seed: int, stream: bool,
-                 groups: np.ndarray | None = None, dtype: str = "float32"):
+                 groups: np.ndarray | None = None):
         self.images, self.batch, self.seed, self.stream = images, batch, seed, stream
-        self.groups, self.dtype = groups, str(np.dtype(dtype))
+        self.groups = groups
         self._whole = None
         if not stream:
             self._whole = (jnp.asarray(images) if isinstance(images, np.ndarray)
@@ -244,16 +245,16 @@ class TrainViews:
             return
         idx, done = jnp.asarray(views), Future()
         if isinstance(self._whole, list):
-            done.set_result((_stack(self.dtype, *(self._whole[v] for v in views)), idx))
+            done.set_result((_stack(*(self._whole[v] for v in views)), idx))
         else:
-            done.set_result((_take(self._whole, idx, self.dtype), idx))
+            done.set_result((_take(self._whole, idx), idx))
         self._copies[step] = done
 
     def _copy(self, views):
-        """(targets, idx) of `views` from the host: each view's image as it lies in the capture
-        (a view of the array, no gather on the host), stacked on the device."""
-        return (_stack(self.dtype, *(jax.device_put(self.images[v]) for v in views)),
-                jnp.asarray(views))
+        """(targets, idx) of `views` from the host (class docstring)."""
+        batch = (self.images[views[0]][None] if len(views) == 1
+                 else np.stack([self.images[v] for v in views]))
+        return jax.device_put(batch), jax.device_put(views)
 
     def close(self) -> None:
         """End the streaming worker (the copies it made stay valid)."""
@@ -269,13 +270,14 @@ into a multiplication by its reciprocal, which rounds some values differently.""
 LEVELS64 = np.arange(256, dtype=np.float64) / 255.0  # the same in float64
 
 
-def _float(images, dtype: str = "float32"):
+def to_float(images, dtype: str = "float32"):
     """`io.datasets.as_float` on the device (a lookup of `LEVELS`: the same bits), in `dtype`
-    (float64: 8-bit values from `LEVELS64`, float32 images widened)."""
+    (float64: 8-bit values from `LEVELS64`, float32 images widened); float images of `dtype`
+    as they are. `step.train_step` applies it to its targets."""
     if images.dtype == jnp.uint8:
         return jnp.asarray(LEVELS64 if dtype == "float64" else LEVELS)[images]
     return images.astype(dtype)
 
 
-_take = jax.jit(lambda images, idx, dtype: _float(images[idx], dtype), static_argnums=2)
-_stack = jax.jit(lambda dtype, *views: _float(jnp.stack(views), dtype), static_argnums=0)
+_take = jax.jit(lambda images, idx: images[idx])
+_stack = jax.jit(lambda *views: jnp.stack(views))

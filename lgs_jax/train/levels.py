@@ -117,8 +117,8 @@ class LevelFeed:
     the device from the level's first step; those of the levels before it are released)."""
 
     def __init__(self, rd: RunData, batch: int, seed: int, stream: bool, levels: int = 1,
-                 steps: int = 0, full_resolution_at: float = 0.5, dtype: str = "float32"):
-        self.batch, self.seed, self.stream, self.dtype = batch, seed, stream, dtype
+                 steps: int = 0, full_resolution_at: float = 0.5):
+        self.batch, self.seed, self.stream = batch, seed, stream
         self.starts = starts(levels, steps, full_resolution_at)
         self.levels = [Level.of(rd, k) for k in factors(levels)]
         self._feeds: dict[int, TrainViews] = {}
@@ -131,7 +131,7 @@ class LevelFeed:
         if level not in self._feeds:
             lv = self.levels[level]
             self._feeds[level] = TrainViews(lv.images, self.batch, self.seed, self.stream,
-                                            lv.groups(), self.dtype)
+                                            lv.groups())
         return self._feeds[level]
 
     def args(self, step: int):

@@ -287,7 +287,7 @@ def _feed(run: _Run) -> LevelFeed:
     rd, config, recipe = run.rd, run.config, run.config.recipe
     size = nbytes(rd.train_images)
     feed = LevelFeed(rd, recipe.batch, config.seed, streams(size, config.stream_images),
-                     recipe.levels, config.steps, recipe.full_resolution_at, config.precision)
+                     recipe.levels, config.steps, recipe.full_resolution_at)
     if recipe.levels > 1:
         run.say(feed.describe())
     if feed.stream:

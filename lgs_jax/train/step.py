@@ -47,6 +47,7 @@ from .losses import loss_fn, psnr
 from .optim import means_schedule, optimizer
 from .pool import Pool, grow, render_gaussians, sh_mask
 from .config import Setup
+from .feed import to_float
 from .strategy import StepInfo
 
 # module docstring; no effect on a CPU; read-only (jit keeps a reference)
@@ -229,7 +230,8 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
                background, step, key, slots=None, go=True, *, setup: Setup, capacity: int,
                rows: int | None = None, exchange: int | None = None):
     """One step at 0-based index `step` on the training views `idx` (B,) of `all_cams`
-    (stacked, `data.stack_any`), whose images are `targets` (B, H, W, 3) (`data.TrainViews`:
+    (stacked, `data.stack_any`), whose images are `targets` (B, H, W, 3), 8-bit or float,
+    converted here to the training arithmetic's dtype (`feed.to_float`; `feed.TrainViews`:
     the same program whether the capture's images live on the device or are streamed), which
     set the size the views are rendered at (a capture of several sizes: a compile per size);
     `views`: the training views' own parameters and their optimizer states (`view_params`:
@@ -246,6 +248,7 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     fits, so that a step dispatched before the previous one's metrics were read changes
     nothing where that one must be redone); else it returns its state unchanged. The state
     arguments are donated: use the returned state, never the arguments, after a call."""
+    targets = to_float(targets, setup.precision)
     cams = dataclasses.replace(jax.tree.map(lambda x: x[idx], all_cams),
                                width=targets.shape[2], height=targets.shape[1])
     (loss, (mse, stats, visible)), (grads, grads2d, grads_views) = loss_and_grads(
