@@ -9,7 +9,7 @@ question), then seed 1 is timed, its loop's functions wrapped (`PARTS`): for eac
 microseconds per call and milliseconds per step. `_one_step` is a whole step on the host (the
 dispatch of the next, the read of this one's metrics); `stepper.run`, the call of the step's
 executable, in which XLA enqueues the step's kernels (the held-out evaluations' programs
-run through it too); `to_host`, the read of the metrics,
+run through it too); `read_metrics`, the read of the metrics,
 which includes the wait for the device (result.json's `device_wait_seconds`, printed beside).
 A part under the others (`signature` under `_dispatch`) counts in both. Nothing here changes a
 bit of the run. The parts are private functions of `lgs_jax.train.loop` and its collaborators,
@@ -33,7 +33,7 @@ sys.path.insert(0, ROOT)
 PARTS = (
     ("lgs_jax.train.loop", "_one_step", "_one_step"),
     ("lgs_jax.train.loop", "_dispatch", "_dispatch"),
-    ("lgs_jax.train.loop", "to_host", "to_host (incl. the wait)"),
+    ("lgs_jax.train.loop", "read_metrics", "read_metrics (incl. the wait)"),
     ("lgs_jax.train.loop", "signature", "signature"),
     ("lgs_jax.train.loop", "_after_step", "_after_step"),
     ("lgs_jax.train.loop", "_refine", "_refine"),

@@ -169,7 +169,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
         "adam": lambda: jax.block_until_ready(adam(grads, opt_state, pool.params)),
         "noise": lambda: jax.block_until_ready(noise(pool, key)),
         "train_step": lambda: jax.block_until_ready(call()),
-        "train_loop": lambda: {k: v.item() for k, v in jax.device_get(call()[4]).items()},
+        "train_loop": lambda: st.read_metrics(call()[4]),
         "refine": lambda: st.refine(setup.strategy, sstate, pool, opt_state, 6100, key,
                                     pool.size),
     }

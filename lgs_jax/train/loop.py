@@ -38,7 +38,6 @@ import time
 import jax
 import jax.numpy as jnp
 
-from ..parallel import to_host
 from ..render import default_backend, pair_capacity
 from . import heldout, outputs, processes, recipes, report, rundir, sharded_state, state
 from .ahead import Sizes, Stepper, mode_of, signature
@@ -52,7 +51,7 @@ from .levels import LevelFeed, check as check_levels
 from .sharded import mesh_of
 from .watch import Watch, check_hooks
 from .state import RunState
-from .step import distinct, lowering, refine, replicated, train_step
+from .step import distinct, lowering, read_metrics, refine, replicated, train_step
 
 
 # A step's second buffer beside the pairs (`ahead.Sizes`' second size): the RunState field
@@ -219,7 +218,7 @@ def _one_step(run: _Run, feed: LevelFeed, steps: Stepper, clock, then_next: bool
             run.pending = _dispatch(run, feed, steps, st.step + 1, size, metrics["fits"])
         clock.waited(steps.take_waited())
         t0 = time.perf_counter()
-        m = {k: v.item() for k, v in to_host(metrics).items()}
+        m = read_metrics(metrics)
         run.device_wait_seconds += time.perf_counter() - t0
         if not (m["overflow"] or m[flag]):
             return m

@@ -239,7 +239,8 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
     buffer (`render`'s row_capacity). Returns (pool, opt_state, strategy_state, views,
     metrics): loss, psnr (training views), ok (finite), overflow, pairs (largest
     per-view pair count), row_overflow, walked (largest per-view count of walked pairs), fits
-    (no buffer overflowed), count (active Gaussians). With `setup.gaussian_devices` > 1
+    (no buffer overflowed), count (active Gaussians), and all of them in `packed`, the one
+    array `fit` reads back (`read_metrics`). With `setup.gaussian_devices` > 1
     (`sharded`): the state's rows split over that many devices, `slots` the slot each row
     holds, `exchange` the records each device can send another; pairs are per device, and
     row_overflow and walked give way to exchange_overflow and exchange_required
@@ -288,7 +289,40 @@ def train_step(pool: Pool, opt_state, strategy_state, views, all_cams, targets, 
             (pool, opt_state, strategy_state, views), replicated(setup))
     metrics = dict(loss=loss, psnr=psnr(mse), ok=ok, **buffers, fits=fits,
                    count=jnp.sum(pool.active, dtype=jnp.int32))
-    return pool, opt_state, strategy_state, views, metrics
+    return pool, opt_state, strategy_state, views, dict(metrics, packed=packed(metrics))
+
+
+def packed(metrics: dict) -> jax.Array:
+    """The values of `metrics` (arrays) in one int32 vector, by sorted key, bit for bit: a
+    bool as 0 or 1, a 4-byte value as one word, an 8-byte value (float64, int64) as two. The
+    one array `fit` copies to the host after a step (`read_metrics`), instead of one copy per
+    value."""
+    words = []
+    for name in sorted(metrics):
+        x = jnp.asarray(metrics[name])
+        if x.dtype == jnp.bool_:
+            words.append(x.astype(jnp.int32).reshape(-1))
+        else:
+            words.append(jax.lax.bitcast_convert_type(x, jnp.int32).reshape(-1))
+    return jnp.concatenate(words)
+
+
+def read_metrics(metrics: dict) -> dict:
+    """A step's metrics (`train_step`'s, on the device) on the host as Python scalars, read
+    through their `packed` vector: one copy from the device; the layout from the arrays'
+    dtypes and shapes, which the host knows without reading them. An array of several values
+    comes back as a numpy array."""
+    words = np.asarray(to_host(metrics["packed"]))
+    out, at = {}, 0
+    for name in sorted(k for k in metrics if k != "packed"):
+        x = metrics[name]
+        dtype, size = np.dtype(x.dtype), int(np.prod(x.shape))
+        n = size * (1 if dtype == np.bool_ else dtype.itemsize // 4)
+        chunk = words[at:at + n]
+        at += n
+        values = chunk != 0 if dtype == np.bool_ else chunk.view(dtype)
+        out[name] = values.reshape(x.shape).item() if size == 1 else values.reshape(x.shape)
+    return out
 
 
 def _refined(strategy_state, pool: Pool, opt_state, step, key, *, strategy, cap: int):
