@@ -130,7 +130,7 @@ def train_step_program(args, sharding):
     sys.path.insert(0, os.path.join(ROOT, "scripts"))
     from profile_train_step import densified_pool
     from lgs_jax.train import MCMCStrategy, Recipe, Setup
-    from lgs_jax.train.feed import as_float, prepare
+    from lgs_jax.train.feed import prepare
     from lgs_jax.train.step import train_step
 
     rd = prepare(args.train_step, 1, dtype="auto")
@@ -142,7 +142,7 @@ def train_step_program(args, sharding):
           f"{args.capacity}, rows {rows}", flush=True)
     shaped = lambda tree: jax.tree.map(
         lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding), tree)
-    targets = jnp.asarray(as_float(rd.train_images[:1]))
+    targets = jnp.asarray(rd.train_images[:1])  # as stored: the step converts them
     abstract = shaped((pool, opt, strategy, None, rd.train_cams, targets, jnp.array([0]),
                        jnp.asarray(rd.background), jnp.int32(6000), jax.random.key(0)))
     static = dict(setup=setup, capacity=args.capacity, rows=rows)  # jitted as fit's, donating
