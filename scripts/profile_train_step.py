@@ -153,7 +153,7 @@ def rows(rd, setup, g, pool, opt_state, sstate, capacity: int, with_gsplat: bool
     idx = jnp.array([0])
     key = jax.random.key(0)
     step_fn = functools.partial(st.train_step, setup=setup, capacity=capacity)
-    targets = jnp.asarray(as_float(rd.train_images[:1]))  # view 0's, on the device as fit's
+    targets = jnp.asarray(rd.train_images[:1])  # view 0's as fit passes it (as stored)
     own = list(jax.tree.map(jnp.copy, (pool, opt_state, sstate)))  # the step donates its state
 
     def call():
@@ -231,7 +231,7 @@ def memory_parts(setup, pool, opt_state, sstate, rd, capacity: int) -> dict:
     from lgs_jax.train import step as st
 
     mib = lambda tree: sum(x.nbytes for x in jax.tree.leaves(tree)) / 2**20
-    targets = jnp.asarray(as_float(rd.train_images[:1]))
+    targets = jnp.asarray(rd.train_images[:1])  # as fit passes it (as stored)
     args = (pool, opt_state, sstate, None, rd.train_cams, targets, jnp.array([0]),
             jnp.asarray(rd.background), jnp.int32(6000), jax.random.key(0))
     analysis = lambda capacity, rows: st.train_step.lower(
