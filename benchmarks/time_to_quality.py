@@ -68,6 +68,8 @@ ABLATIONS = {  # variant -> the fit options that switch one technique off
     "no_early_stop": ["--no-early-stop"],
     "growth_mcmc": ["--growth", "mcmc"],
     "unseen_off": ["--unseen-after", "0"],
+    "sh_every_1000": ["--sh-every", "1000"],  # the default recipe's SH schedule: bands later
+    "sh_degree_0": ["--sh-degree", "0"],  # view-independent colours
 }
 DEFAULT_ABLATIONS = ["fast", "levels_1", "batch_1", "strategy_mcmc", "no_early_stop"]
 BIG = 10**9  # --eval-every / --checkpoint-every: never inside the run
