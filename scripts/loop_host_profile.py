@@ -1,7 +1,7 @@
 """Where the host's time goes in `fit`'s loop: each part of a step timed on the calling thread.
 
     python scripts/loop_host_profile.py [--data-root carry/data] [--scene lego] [--steps 2000]
-        [--eval-every N] [--stream | --no-stream] [--downscale K]
+        [--eval-every N] [--stream | --no-stream] [--downscale K] [--xla-flags="FLAGS"]
 
 Runs `benchmarks.train_vs_gsplat`'s run of SCENE (MCMC, its cap and start) for STEPS steps twice:
 seed 0 fills the persistent compilation cache and the export entries (its compiles are not the
@@ -11,6 +11,10 @@ dispatch of the next, the read of this one's metrics); `stepper.run`, the call o
 executable, in which XLA enqueues the step's kernels (the held-out evaluations' programs
 run through it too); `read_metrics`, the read of the metrics,
 which includes the wait for the device (result.json's `device_wait_seconds`, printed beside).
+--xla-flags adds XLA flags (to XLA_FLAGS, before JAX starts) for the question whether one
+changes the host's time, e.g. XLA's command buffers (CUDA graphs) off:
+`--xla-flags=--xla_gpu_enable_command_buffer=`; the persistent cache keys on them, so a
+variant's seed 0 compiles.
 A part under the others (`signature` under `_dispatch`) counts in both. Nothing here changes a
 bit of the run. The parts are private functions of `lgs_jax.train.loop` and its collaborators,
 wrapped by name: a renamed one fails here by name.
@@ -80,7 +84,10 @@ def main(argv=None) -> int:
     ap.add_argument("--downscale", type=int, help="image downscale (default: the scene's)")
     ap.add_argument("--stream", action=argparse.BooleanOptionalAction, default=None,
                     help="stream the training images (default: fit's: on a GPU)")
+    ap.add_argument("--xla-flags", default="", help="more XLA flags (module docstring)")
     args = ap.parse_args(argv)
+    if args.xla_flags:
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {args.xla_flags}".strip()
     from benchmarks import train_vs_gsplat as tv
     from lgs_jax import cli
     from lgs_jax.train import fit
@@ -98,6 +105,7 @@ def main(argv=None) -> int:
                      log=lambda *_: None)
     steps = max(calls["_one_step"], 1)
     waited, busy = result["device_wait_seconds"], result["step_seconds"]
+    print(f"XLA_FLAGS: {os.environ.get('XLA_FLAGS', '')!r}")
     print(f"{args.scene}, seed 1, {steps} steps: {1e3 * busy / steps:.3f} ms a step, "
           f"compiling {result['compile_seconds']:.1f} s, waiting for the device {waited:.2f} of "
           f"{busy:.2f} s")
