@@ -25,7 +25,7 @@ from skimage.metrics import structural_similarity
 import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
-from lgs_jax.train import ahead, appearance, init, loop, report
+from lgs_jax.train import ahead, appearance, init, loop, report, state
 from lgs_jax.train import feed as train_data
 
 from .captures import tiny_capture
@@ -399,14 +399,19 @@ def test_steps_dispatched_ahead_change_no_bit(skull, tmp_path, monkeypatch):
         order[every] = loop._dispatch.keywords["seen"]
         if every == 1:
             # the step compiled ahead at the size the first run grew to (its checkpoint's
-            # capacity), not at `Sizes.following`'s: that run's program, not another compile
-            grown = json.load(open(tmp_path / "3" / "checkpoint.json"))["capacity"]
+            # capacity and rows), not at `Sizes.following`'s: that run's program (the
+            # persistent cache's), not another compile. The run's sizes are `state.sizes`'
+            # (`loop.Sizes` sizes Gaussian-parallel runs only).
+            ckpt = json.load(open(tmp_path / "3" / "checkpoint.json"))
+            grown = ckpt["capacity"], ckpt["rows"]
 
-            class Sizes(loop.Sizes):
+            class Sizes(state.Sizes):
                 def following(self, size):
-                    return grown, size[1]
+                    return grown
 
-            monkeypatch.setattr(loop, "Sizes", Sizes)
+            sizes = state.sizes
+            monkeypatch.setattr(state, "sizes", lambda config: Sizes(
+                *dataclasses.astuple(sizes(config))))
         _fit(skull, tmp_path / str(every), checkpoint_every=every,  # growth taken from ahead:
              compile_ahead="thread" if every == 1 else None, log=logs.append)
     assert any("grown" in m and "(compiled ahead;" in m for m in logs), logs
