@@ -28,6 +28,9 @@ from lgs_jax.io.datasets import as_float
 from lgs_jax.train import ahead, appearance, init, loop, report, state
 from lgs_jax.train import feed as train_data
 
+from tests import oracle
+from tests.compare import ALPHA_CAP, F64_ATOL, STOP_INCLUSIVE
+
 from .captures import tiny_capture
 
 
@@ -659,7 +662,9 @@ def test_run_dir_rules(tmp_path):
 def test_training_renders_follow_the_settings():
     """Recipe.convention and .antialiased reach the renders: an opaque Gaussian over a white
     background leaves 1 − 0.99 of it under "3dgs" and 1 − 0.999 under "gsplat"; a Gaussian
-    smaller than a pixel in front of it is fainter antialiased."""
+    smaller than a pixel in front of it is fainter antialiased. Each image is the float64
+    oracle's of its settings, clipped; the default settings' is `render`'s, clipped, to the bit
+    (one `render` compile: the others' programs differ in constants only)."""
     from lgs_jax.train import pool as P, step as S
 
     g = lgs_jax.Gaussians(means=jnp.array([[0.0, 0.0, 4.0], [-0.825, -0.825, 3.0]]),
@@ -675,10 +680,13 @@ def test_training_renders_follow_the_settings():
                            ("gsplat", train.Recipe(convention="gsplat")),
                            ("antialiased", train.Recipe(antialiased=True))):
         (image,), _ = S.render_views(pool, [cam], jnp.ones(3), "tiles", 64, settings.raster)
-        want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64,
-                              config=lgs_jax.RasterConfig(settings.convention,
-                                                          antialiased=settings.antialiased))
-        np.testing.assert_array_equal(image, np.clip(np.asarray(want.image), 0, 1))
+        want, _, _ = oracle.composite(g, cam, np.ones(3), cap=ALPHA_CAP[settings.convention],
+                                      inclusive=STOP_INCLUSIVE[settings.convention],
+                                      antialiased=settings.antialiased)
+        np.testing.assert_allclose(image, np.clip(want, 0, 1), rtol=0, atol=F64_ATOL)
+        if name == "3dgs":
+            want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64)
+            np.testing.assert_array_equal(image, np.clip(np.asarray(want.image), 0, 1))
         images[name] = image
     # SH DC 0 is grey 0.5: 0.5·cap + 1·(1 − cap)
     np.testing.assert_allclose([images["3dgs"][8, 8, 0], images["gsplat"][8, 8, 0]],
