@@ -225,9 +225,12 @@ def test_render_runs_once_reports_compile_time_and_interpret_mode(tmp_path, caps
 
 
 def test_render_passes_the_convention_and_antialiasing(tmp_path, monkeypatch):
+    # the configuration the command passes is recorded; the render itself runs the default
+    # one (what each configuration renders is tests/backends' to check): the 32x18 `brute`
+    # program test_render_runs_once_reports_compile_time_and_interpret_mode compiled
     configs, real = [], lgs_jax.render
-    monkeypatch.setattr(lgs_jax, "render",
-                        lambda *a, **k: configs.append(k["config"]) or real(*a, **k))
+    monkeypatch.setattr(lgs_jax, "render", lambda *a, **k: configs.append(k["config"]) or real(
+        *a, **dict(k, config=lgs_jax.RasterConfig())))
     out = str(tmp_path / "x.png")
     for flags in ([], ["--convention", "gsplat", "--antialiased"]):
         assert main(["render", "--width", "32", "--out", out, "--backend", "brute"] + flags) == 0

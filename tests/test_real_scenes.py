@@ -13,6 +13,10 @@ from tests.devices import gpu_only
 
 WHITE = np.ones(3, np.float32)
 GSPLAT = lgs_jax.RasterConfig(convention="gsplat")
+# The pair buffer of every 200x200 view below: `pair_capacity` of the most pairs a view needs
+# (108662, view 30), so that the ten views run one program (counted per view, they need two
+# capacities, two compiles and a pair count's); a view needing more raises CapacityError.
+CAPACITY_200 = 114688
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +38,8 @@ def test_lego_matches_gsplat_renders_at_200(lego, backend):
     ref = np.load(os.path.join(root, "heldout", "gsplat_renders_200.npz"))
     scores = []
     for view, want in zip(ref["ids"], ref["images"]):
-        out = lgs_jax.render(g, cams[view], background=WHITE, config=GSPLAT, backend=backend)
+        out = lgs_jax.render(g, cams[view], background=WHITE, config=GSPLAT, backend=backend,
+                             capacity=CAPACITY_200)
         scores.append(psnr(out.image, want))
         assert int(out.stats.n_invalid) == 0
     print("PSNR vs gsplat per view:", np.round(scores, 1))

@@ -73,7 +73,9 @@ def test_a_coarse_level_renders_the_block_mean_of_the_full_render():
     g = random_scene(60, seed=3)
     g = dataclasses.replace(g, log_scales=g.log_scales + np.float32(1.5))  # smooth, no aliasing
     cam, k = synthetic_camera(96, 64), 4
-    render = lambda c: np.asarray(lgs_jax.render(g, c, backend="reference").image, np.float64)
+    # a pair buffer for every pair 60 Gaussians can have on 6 x 4 tiles: no pair count compiled
+    render = lambda c: np.asarray(lgs_jax.render(g, c, backend="reference", capacity=60 * 24)
+                                  .image, np.float64)
     block = levels.downscaled(render(cam), k)
     coarse = levels.scaled_cameras(cam, k)
     assert (coarse.width, coarse.height) == (24, 16)

@@ -83,7 +83,9 @@ def test_fit_cli_precision_float64_keeps_float64_throughout(data_dir, tmp_path):
     is float64, scene.ply holds doubles, result.json says so (trained on every view: no
     evaluation's programs to compile; SH degree 0: within 4 steps the higher bands are masked
     anyway, `Recipe.sh_every`, and their evaluation costs the compiles a fifth of this test's
-    CPU time)."""
+    CPU time; a pool of 128 slots, which the refinements never outgrow: one step compiled,
+    not a second for a doubled pool, whose padding keeps each array's dtype:
+    tests/train/test_strategy.py)."""
     path = os.path.join(data_dir, "lego_train")
     if not os.path.isdir(path):
         pytest.skip("lego_train not found")
@@ -91,9 +93,9 @@ def test_fit_cli_precision_float64_keeps_float64_throughout(data_dir, tmp_path):
     assert cli.main(["fit", "--data", path, "--crop", "80", "80", "16", "16", "--init-points",
                      "50", "--steps", "4", "--out", out, "--refine-start-iter", "1",
                      "--refine-every", "2", "--precision", "float64", "--train-on-all",
-                     "--sh-degree", "0"]) == 0
+                     "--sh-degree", "0", "--pool-size", "128"]) == 0
     result = json.load(open(os.path.join(out, "result.json")))
-    assert result["precision"] == "float64"
+    assert result["precision"] == "float64" and result["pool_size"] == 128
     ckpt = np.load(os.path.join(out, "checkpoint.npz"))
     floats = {k: ckpt[k].dtype for k in ckpt.files if ckpt[k].dtype.kind == "f"}
     assert floats and set(floats.values()) == {np.dtype(np.float64)}, floats

@@ -25,8 +25,11 @@ from skimage.metrics import structural_similarity
 import lgs_jax
 from lgs_jax import cli, train
 from lgs_jax.io.datasets import as_float
-from lgs_jax.train import ahead, appearance, init, loop, report
+from lgs_jax.train import ahead, appearance, init, loop, report, state
 from lgs_jax.train import feed as train_data
+
+from tests import oracle
+from tests.compare import ALPHA_CAP, F64_ATOL, STOP_INCLUSIVE
 
 from .captures import tiny_capture
 
@@ -399,14 +402,19 @@ def test_steps_dispatched_ahead_change_no_bit(skull, tmp_path, monkeypatch):
         order[every] = loop._dispatch.keywords["seen"]
         if every == 1:
             # the step compiled ahead at the size the first run grew to (its checkpoint's
-            # capacity), not at `Sizes.following`'s: that run's program, not another compile
-            grown = json.load(open(tmp_path / "3" / "checkpoint.json"))["capacity"]
+            # capacity and rows), not at `Sizes.following`'s: that run's program (the
+            # persistent cache's), not another compile. The run's sizes are `state.sizes`'
+            # (`loop.Sizes` sizes Gaussian-parallel runs only).
+            ckpt = json.load(open(tmp_path / "3" / "checkpoint.json"))
+            grown = ckpt["capacity"], ckpt["rows"]
 
-            class Sizes(loop.Sizes):
+            class Sizes(state.Sizes):
                 def following(self, size):
-                    return grown, size[1]
+                    return grown
 
-            monkeypatch.setattr(loop, "Sizes", Sizes)
+            sizes = state.sizes
+            monkeypatch.setattr(state, "sizes", lambda config: Sizes(
+                *dataclasses.astuple(sizes(config))))
         _fit(skull, tmp_path / str(every), checkpoint_every=every,  # growth taken from ahead:
              compile_ahead="thread" if every == 1 else None, log=logs.append)
     assert any("grown" in m and "(compiled ahead;" in m for m in logs), logs
@@ -654,7 +662,9 @@ def test_run_dir_rules(tmp_path):
 def test_training_renders_follow_the_settings():
     """Recipe.convention and .antialiased reach the renders: an opaque Gaussian over a white
     background leaves 1 − 0.99 of it under "3dgs" and 1 − 0.999 under "gsplat"; a Gaussian
-    smaller than a pixel in front of it is fainter antialiased."""
+    smaller than a pixel in front of it is fainter antialiased. Each image is the float64
+    oracle's of its settings, clipped; the default settings' is `render`'s, clipped, to the bit
+    (one `render` compile: the others' programs differ in constants only)."""
     from lgs_jax.train import pool as P, step as S
 
     g = lgs_jax.Gaussians(means=jnp.array([[0.0, 0.0, 4.0], [-0.825, -0.825, 3.0]]),
@@ -670,10 +680,13 @@ def test_training_renders_follow_the_settings():
                            ("gsplat", train.Recipe(convention="gsplat")),
                            ("antialiased", train.Recipe(antialiased=True))):
         (image,), _ = S.render_views(pool, [cam], jnp.ones(3), "tiles", 64, settings.raster)
-        want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64,
-                              config=lgs_jax.RasterConfig(settings.convention,
-                                                          antialiased=settings.antialiased))
-        np.testing.assert_array_equal(image, np.clip(np.asarray(want.image), 0, 1))
+        want, _, _ = oracle.composite(g, cam, np.ones(3), cap=ALPHA_CAP[settings.convention],
+                                      inclusive=STOP_INCLUSIVE[settings.convention],
+                                      antialiased=settings.antialiased)
+        np.testing.assert_allclose(image, np.clip(want, 0, 1), rtol=0, atol=F64_ATOL)
+        if name == "3dgs":
+            want = lgs_jax.render(g, cam, background=jnp.ones(3), backend="tiles", capacity=64)
+            np.testing.assert_array_equal(image, np.clip(np.asarray(want.image), 0, 1))
         images[name] = image
     # SH DC 0 is grey 0.5: 0.5·cap + 1·(1 − cap)
     np.testing.assert_allclose([images["3dgs"][8, 8, 0], images["gsplat"][8, 8, 0]],
