@@ -16,7 +16,7 @@ GSPLAT = lgs_jax.RasterConfig(convention="gsplat")
 # The pair buffer of every 200x200 view below: `pair_capacity` of the most pairs a view needs
 # (108662, view 30), so that the ten views run one program (counted per view, they need two
 # capacities, two compiles and a pair count's); a view needing more raises CapacityError.
-CAPACITY_200 = 114688
+CAPACITY_200 = lgs_jax.pair_capacity(108662)
 
 
 @pytest.fixture(scope="module")
